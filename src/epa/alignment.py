@@ -1,0 +1,79 @@
+"""Step 3: world-frame alignment of matched positions (Umeyama se3 / sim3, posyaw, none)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from epa import geometry
+from epa.errors import EpaError
+from epa.trajectory import Trajectory
+
+METHODS = ("se3", "sim3", "posyaw", "none")
+
+
+@dataclass(frozen=True)
+class Similarity:
+    """x -> s R x + t."""
+
+    R: np.ndarray
+    t: np.ndarray
+    s: float = 1.0
+
+    def apply(self, traj: Trajectory) -> Trajectory:
+        r = self.R @ traj.r
+        p = self.s * traj.p @ self.R.T + self.t
+        return Trajectory.from_rp(traj.t, r, p)
+
+    def to_dict(self) -> dict:
+        return {"rotation": self.R.tolist(), "translation": self.t.tolist(), "scale": float(self.s),
+                "quaternion_xyzw": geometry.rot_to_quat(self.R).tolist(),
+                "yaw_deg": float(np.degrees(np.arctan2(self.R[1, 0], self.R[0, 0])))}
+
+    @staticmethod
+    def from_dict(d: dict) -> "Similarity":
+        return Similarity(np.asarray(d["rotation"], float), np.asarray(d["translation"], float), float(d["scale"]))
+
+
+IDENTITY = Similarity(np.eye(3), np.zeros(3), 1.0)
+
+
+def umeyama(src: np.ndarray, dst: np.ndarray, *, with_scale: bool = False) -> Similarity:
+    """Least-squares s, R, t with dst ≈ s·R·src + t (Umeyama 1991)."""
+    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    xs, xd = src - mu_s, dst - mu_d
+    cov = xd.T @ xs / len(src)
+    u, d, vt = np.linalg.svd(cov)
+    sign = np.eye(3)
+    if np.linalg.det(u) * np.linalg.det(vt) < 0:
+        sign[2, 2] = -1
+    r = u @ sign @ vt
+    s = float(np.trace(np.diag(d) @ sign) / (np.sum(xs * xs) / len(src))) if with_scale else 1.0
+    return Similarity(r, mu_d - s * r @ mu_s, s)
+
+
+def posyaw(src: np.ndarray, dst: np.ndarray) -> Similarity:
+    """Rotation about gravity (z) and translation only: the 4 DoF a VIO cannot observe."""
+    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    xs, xd = src - mu_s, dst - mu_d
+    num = np.sum(xs[:, 0] * xd[:, 1] - xs[:, 1] * xd[:, 0])
+    den = np.sum(xs[:, 0] * xd[:, 0] + xs[:, 1] * xd[:, 1])
+    r = geometry.rot_z(np.arctan2(num, den))
+    return Similarity(r, mu_d - r @ mu_s, 1.0)
+
+
+def fit(ref: Trajectory, est: Trajectory, *, method: str = "se3", first_n: int = -1) -> Similarity:
+    """The transform that maps the estimate onto the reference, from the first N matched poses (all if -1)."""
+    if method not in METHODS:
+        raise EpaError(f"unknown align method {method!r}; choose one of {', '.join(METHODS)}")
+    if method == "none":
+        return IDENTITY
+    n = len(ref) if first_n is None or first_n < 0 else min(first_n, len(ref))
+    need = 2 if method == "posyaw" else 3
+    if n < need:
+        raise EpaError(f"align {method} needs at least {need} matched poses, got {n}")
+    src, dst = est.p[:n], ref.p[:n]
+    if method == "posyaw":
+        return posyaw(src, dst)
+    return umeyama(src, dst, with_scale=method == "sim3")

@@ -1,0 +1,121 @@
+"""Vectorised rotation and pose helpers. Quaternions are (x, y, z, w), as in TUM files."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def normalize_quat(q: np.ndarray) -> np.ndarray:
+    q = np.asarray(q, dtype=float)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def quat_to_rot(q: np.ndarray) -> np.ndarray:
+    """(..., 4) unit quaternions (x, y, z, w) -> (..., 3, 3) rotation matrices."""
+    x, y, z, w = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    r = np.empty(np.shape(x) + (3, 3))
+    r[..., 0, 0] = 1 - 2 * (yy + zz)
+    r[..., 0, 1] = 2 * (xy - wz)
+    r[..., 0, 2] = 2 * (xz + wy)
+    r[..., 1, 0] = 2 * (xy + wz)
+    r[..., 1, 1] = 1 - 2 * (xx + zz)
+    r[..., 1, 2] = 2 * (yz - wx)
+    r[..., 2, 0] = 2 * (xz - wy)
+    r[..., 2, 1] = 2 * (yz + wx)
+    r[..., 2, 2] = 1 - 2 * (xx + yy)
+    return r
+
+
+def rot_to_quat(r: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation matrices -> (..., 4) unit quaternions (x, y, z, w), w >= 0.
+
+    Shepperd's method: pick the largest of the four squared components so no division is
+    ever by a small number (accurate for tiny and for 180-degree rotations alike).
+    """
+    r = np.asarray(r, dtype=float)
+    m00, m11, m22 = r[..., 0, 0], r[..., 1, 1], r[..., 2, 2]
+    trace = m00 + m11 + m22
+    cands = np.stack([trace, m00, m11, m22], axis=-1)
+    pick = np.argmax(cands, axis=-1)
+    q = np.empty(r.shape[:-2] + (4,))
+    # w largest
+    s = np.sqrt(np.maximum(1 + trace, 1e-300)) * 2
+    qw = np.stack([(r[..., 2, 1] - r[..., 1, 2]) / s, (r[..., 0, 2] - r[..., 2, 0]) / s,
+                   (r[..., 1, 0] - r[..., 0, 1]) / s, 0.25 * s], axis=-1)
+    s = np.sqrt(np.maximum(1 + m00 - m11 - m22, 1e-300)) * 2
+    qx = np.stack([0.25 * s, (r[..., 0, 1] + r[..., 1, 0]) / s, (r[..., 0, 2] + r[..., 2, 0]) / s,
+                   (r[..., 2, 1] - r[..., 1, 2]) / s], axis=-1)
+    s = np.sqrt(np.maximum(1 - m00 + m11 - m22, 1e-300)) * 2
+    qy = np.stack([(r[..., 0, 1] + r[..., 1, 0]) / s, 0.25 * s, (r[..., 1, 2] + r[..., 2, 1]) / s,
+                   (r[..., 0, 2] - r[..., 2, 0]) / s], axis=-1)
+    s = np.sqrt(np.maximum(1 - m00 - m11 + m22, 1e-300)) * 2
+    qz = np.stack([(r[..., 0, 2] + r[..., 2, 0]) / s, (r[..., 1, 2] + r[..., 2, 1]) / s, 0.25 * s,
+                   (r[..., 1, 0] - r[..., 0, 1]) / s], axis=-1)
+    for k, cand in enumerate((qw, qx, qy, qz)):
+        sel = pick == k
+        q[sel] = cand[sel]
+    q = normalize_quat(q)
+    return np.where(q[..., 3:4] < 0, -q, q)
+
+
+def rotation_angle(r: np.ndarray) -> np.ndarray:
+    """Angle (rad) of rotation matrices, computed via the quaternion (accurate near 0 and pi)."""
+    q = rot_to_quat(r)
+    return 2 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), np.abs(q[..., 3]))
+
+
+def so3_log(r: np.ndarray) -> np.ndarray:
+    """Rotation vectors (..., 3) of rotation matrices (..., 3, 3)."""
+    q = rot_to_quat(r)
+    v = q[..., :3]
+    n = np.linalg.norm(v, axis=-1)
+    angle = 2 * np.arctan2(n, q[..., 3])
+    # angle/sin(angle/2) -> 2 as angle -> 0
+    scale = np.where(n > 1e-12, angle / np.where(n > 1e-12, n, 1.0), 2.0)
+    return v * scale[..., None]
+
+
+def so3_exp(w: np.ndarray) -> np.ndarray:
+    """Rotation matrices of rotation vectors (..., 3) (Rodrigues)."""
+    w = np.asarray(w, dtype=float)
+    theta = np.linalg.norm(w, axis=-1)
+    half = 0.5 * theta
+    # sin(half)/theta -> 1/2 as theta -> 0
+    k = np.where(theta > 1e-12, np.sin(half) / np.where(theta > 1e-12, theta, 1.0), 0.5)
+    q = np.concatenate([w * k[..., None], np.cos(half)[..., None]], axis=-1)
+    return quat_to_rot(q)
+
+
+def rot_z(yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def relative_poses(r: np.ndarray, p: np.ndarray, i: np.ndarray, j: np.ndarray):
+    """Relative motions T_i^-1 T_j for index arrays i, j: (R_rel (M,3,3), t_rel (M,3))."""
+    ri_t = np.swapaxes(r[i], -1, -2)
+    return ri_t @ r[j], np.einsum("nab,nb->na", ri_t, p[j] - p[i])
+
+
+def relative_errors(r_ref, p_ref, r_est, p_est, i, j):
+    """Per-pair relative pose error E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j), as in evo and ov_eval.
+
+    Returns (rotation angle in degrees, translation norm in metres) for each pair.
+    """
+    rq, tq = relative_poses(r_ref, p_ref, i, j)
+    rp, tp = relative_poses(r_est, p_est, i, j)
+    rq_t = np.swapaxes(rq, -1, -2)
+    r_err = rq_t @ rp
+    t_err = np.einsum("nab,nb->na", rq_t, tp - tq)
+    return np.degrees(rotation_angle(r_err)), np.linalg.norm(t_err, axis=-1)
+
+
+def path_distances(p: np.ndarray) -> np.ndarray:
+    """Cumulative path length at every pose, starting at 0."""
+    if len(p) == 0:
+        return np.zeros(0)
+    steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    return np.concatenate([[0.0], np.cumsum(steps)])

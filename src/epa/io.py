@@ -1,0 +1,399 @@
+"""Trajectory readers and artifact writers.
+
+Every reader returns a :class:`~epa.trajectory.Trajectory` in seconds with unit quaternions, or
+raises :class:`~epa.errors.EpaError` naming the file, the line and what is wrong. A new format is
+one reader function registered in ``READERS``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from epa import geometry
+from epa.errors import EpaError
+from epa.trajectory import Trajectory
+
+log = logging.getLogger("epa")
+
+FORMATS = ("auto", "tum", "kitti", "euroc", "openvins", "csv")
+TIME_UNITS = ("auto", "s", "ns", "sec_nsec")
+# A stamp this large cannot be seconds (it would be ~30,000 years); it is nanoseconds.
+NS_THRESHOLD = 1e12
+
+
+# ----------------------------------------------------------------------------- text parsing
+class _Table:
+    """Numeric rows of a text file with the 1-based file line of each row."""
+
+    def __init__(self, path: Path, rows: np.ndarray, lines: np.ndarray, header: list[str] | None,
+                 first_tokens: list[str]):
+        self.path, self.rows, self.lines, self.header = path, rows, lines, header
+        self.first_tokens = first_tokens  # raw time tokens, for sec.nsec repair
+
+    def fail(self, row: int | None, message: str):
+        raise EpaError(message, path=str(self.path), line=None if row is None else int(self.lines[row]))
+
+
+def _split(line: str) -> list[str]:
+    return line.replace(",", " ").replace(";", " ").split()
+
+
+def _is_number(tok: str) -> bool:
+    try:
+        float(tok)
+        return True
+    except ValueError:
+        return False
+
+
+def _read_table(path: Path) -> _Table:
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except FileNotFoundError:
+        raise EpaError("file not found", path=str(path)) from None
+    except IsADirectoryError:
+        raise EpaError("is a directory, expected a trajectory file", path=str(path)) from None
+    except OSError as exc:
+        raise EpaError(f"cannot read: {exc.strerror}", path=str(path)) from None
+    raw = text.splitlines()
+    header: list[str] | None = None
+    data, numbers = [], []
+    for no, line in enumerate(raw, start=1):
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("#") or s.startswith("%"):
+            if not data:  # the last comment before the data may name the columns
+                header = [h.strip() for h in re.split(r"[,\s]\s*", s.lstrip("#%").strip()) if h.strip()] \
+                    if "," not in s else [h.strip() for h in s.lstrip("#%").split(",")]
+            continue
+        if not data and not numbers and not _is_number(_split(s)[0]):
+            header = [h.strip() for h in (s.split(",") if "," in s else s.split())]
+            continue
+        data.append(s)
+        numbers.append(no)
+    if not data:
+        raise EpaError("no data rows (the file is empty or holds only comments)", path=str(path))
+    lines = np.asarray(numbers)
+    first_tokens = [_split(s)[0] for s in data]
+    try:
+        rows = np.loadtxt([s.replace(",", " ").replace(";", " ") for s in data], ndmin=2, dtype=float)
+    except ValueError:
+        rows = None
+    if rows is None:
+        width = len(_split(data[0]))
+        for k, s in enumerate(data):
+            toks = _split(s)
+            if len(toks) != width:
+                raise EpaError(f"expected {width} columns like the first data row, found {len(toks)}",
+                               path=str(path), line=int(lines[k]))
+            for tok in toks:
+                if not _is_number(tok):
+                    raise EpaError(f"not a number: {tok!r}", path=str(path), line=int(lines[k]))
+        raise EpaError("could not parse the numeric rows", path=str(path))
+    bad = ~np.isfinite(rows)
+    if bad.any():
+        k = int(np.argmax(bad.any(axis=1)))
+        raise EpaError("non-finite value (nan or inf)", path=str(path), line=int(lines[k]))
+    return _Table(path, rows, lines, header, first_tokens)
+
+
+# ----------------------------------------------------------------------------- column naming
+def _norm_name(name: str) -> str:
+    name = re.sub(r"\[.*?\]|\(.*?\)", "", name.lower()).strip().lstrip("#").strip()
+    return name.replace(" ", "_")
+
+
+_TIME_NAMES = {"t", "time", "timestamp", "timestamps", "stamp", "timestamp_kf", "sec", "time_s", "timestamp_ns"}
+_POS_RE = re.compile(r"^(?:p_rs_r_|p_|pos_|position_|t|p)?([xyz])$")
+_QUAT_RE = re.compile(r"^(?:q_rs_|q_|q|quat_|orientation_|rot_)([xyzw])$")
+_COV_NAMES = {
+    "rot": (["pr11", "pr12", "pr13", "pr22", "pr23", "pr33"], ["qrr", "qrp", "qry", "qpp", "qpy", "qyy"]),
+    "pos": (["pt11", "pt12", "pt13", "pt22", "pt23", "pt33"], ["pxx", "pxy", "pxz", "pyy", "pyz", "pzz"]),
+}
+
+
+def _named_columns(header: list[str] | None, width: int) -> dict | None:
+    """Map a header to column indices, or None when it does not name a full pose."""
+    if not header or len(header) != width:
+        return None
+    names = [_norm_name(h) for h in header]
+    cols: dict = {}
+    for k, n in enumerate(names):
+        if "t" not in cols and (n in _TIME_NAMES or n.startswith("timestamp")):
+            cols["t"] = k
+            continue
+        m = _QUAT_RE.match(n)
+        if m and n not in ("x", "y", "z") and "q" + m.group(1) not in cols:
+            cols["q" + m.group(1)] = k
+            continue
+        m = _POS_RE.match(n)
+        if m and "p" + m.group(1) not in cols:
+            cols["p" + m.group(1)] = k
+    if not {"t", "px", "py", "pz", "qx", "qy", "qz", "qw"} <= cols.keys():
+        return None
+    cols["ns"] = any("[ns]" in h.lower() or h.lower().endswith("_ns") for h in header)
+    for kind, alternatives in _COV_NAMES.items():
+        for names6 in alternatives:
+            if all(c in names for c in names6):
+                cols["cov_" + kind] = [names.index(c) for c in names6]
+    return cols
+
+
+def _upper_to_full(u: np.ndarray) -> np.ndarray:
+    """(N, 6) upper triangles (11 12 13 22 23 33) -> (N, 3, 3) symmetric matrices."""
+    idx = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+    return u[:, idx]
+
+
+# ----------------------------------------------------------------------------- readers
+def _finish(tab: _Table, t: np.ndarray, p: np.ndarray, q_xyzw: np.ndarray, *, time_unit: str,
+            header_ns: bool = False, on_unsorted: str = "error", cov_rot=None, cov_pos=None) -> Trajectory:
+    if time_unit == "sec_nsec":
+        t = _sec_nsec(tab)
+    elif time_unit == "ns" or (time_unit == "auto" and (header_ns or np.median(np.abs(t)) > NS_THRESHOLD)):
+        t = t / 1e9
+    norms = np.linalg.norm(q_xyzw, axis=1)
+    zero = norms < 1e-6
+    if zero.any():
+        tab.fail(int(np.argmax(zero)), "zero quaternion")
+    q = q_xyzw / norms[:, None]
+    traj = Trajectory(t, p, q, cov_rot=cov_rot, cov_pos=cov_pos)
+    return _check_order(traj, tab, on_unsorted)
+
+
+def _sec_nsec(tab: _Table) -> np.ndarray:
+    """Stamps written as sec.nsec with nsec not zero-padded (e.g. OKVIS): sec + int(frac)/1e9."""
+    out = np.empty(len(tab.first_tokens))
+    for k, tok in enumerate(tab.first_tokens):
+        sec, _, frac = tok.partition(".")
+        if not sec.isdigit() or (frac and not frac.isdigit()):
+            tab.fail(k, f"timestamp {tok!r} is not of the form sec.nsec")
+        out[k] = int(sec) + (int(frac) / 1e9 if frac else 0.0)
+    return out
+
+
+def _check_order(traj: Trajectory, tab: _Table, on_unsorted: str) -> Trajectory:
+    dt = np.diff(traj.t)
+    bad = dt <= 0
+    if not bad.any():
+        return traj
+    k = int(np.argmax(bad)) + 1
+    what = "repeats" if dt[k - 1] == 0 else "goes backwards"
+    if on_unsorted != "sort":
+        tab.fail(k, f"timestamp {traj.t[k]:.9f} {what} (set load.unsorted: sort to sort and drop duplicates)")
+    order = np.argsort(traj.t, kind="stable")
+    t_sorted = traj.t[order]
+    keep = np.concatenate([[True], np.diff(t_sorted) > 0])
+    n_back = int((dt < 0).sum())
+    n_dup = int((~keep).sum())
+    log.warning("%s: %d backward and %d repeated timestamps: sorted, kept the first of each repeat",
+                tab.path, n_back, n_dup)
+    return traj.select(order[keep])
+
+
+def read_tum(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
+    rows = tab.rows
+    if rows.shape[1] != 8:
+        tab.fail(0, f"TUM needs 8 columns (t x y z qx qy qz qw), found {rows.shape[1]}")
+    return _finish(tab, rows[:, 0], rows[:, 1:4], rows[:, 4:8], time_unit=time_unit, on_unsorted=on_unsorted)
+
+
+def read_openvins(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
+    rows = tab.rows
+    if rows.shape[1] != 20:
+        tab.fail(0, f"OpenVINS needs 20 columns (TUM + 12 covariance), found {rows.shape[1]}")
+    return _finish(tab, rows[:, 0], rows[:, 1:4], rows[:, 4:8], time_unit=time_unit, on_unsorted=on_unsorted,
+                   cov_rot=_upper_to_full(rows[:, 8:14]), cov_pos=_upper_to_full(rows[:, 14:20]))
+
+
+def read_euroc(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
+    rows = tab.rows
+    if rows.shape[1] < 8:
+        tab.fail(0, f"EuRoC CSV needs at least 8 columns (t x y z qw qx qy qz), found {rows.shape[1]}")
+    q = rows[:, [5, 6, 7, 4]]
+    return _finish(tab, rows[:, 0], rows[:, 1:4], q, time_unit=time_unit, on_unsorted=on_unsorted)
+
+
+def read_named_csv(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
+    cols = _named_columns(tab.header, tab.rows.shape[1])
+    if cols is None:
+        raise EpaError("the header does not name time, x, y, z, qx, qy, qz, qw columns"
+                       f" (header: {', '.join(tab.header or ['none'])})", path=str(tab.path))
+    rows = tab.rows
+    cov = {k: _upper_to_full(rows[:, cols["cov_" + k]]) for k in ("rot", "pos") if "cov_" + k in cols}
+    return _finish(tab, rows[:, cols["t"]], rows[:, [cols["px"], cols["py"], cols["pz"]]],
+                   rows[:, [cols["qx"], cols["qy"], cols["qz"], cols["qw"]]], time_unit=time_unit,
+                   header_ns=cols["ns"], on_unsorted=on_unsorted,
+                   cov_rot=cov.get("rot"), cov_pos=cov.get("pos"))
+
+
+def read_kitti(tab: _Table, *, times: np.ndarray | None = None, rate: float = 10.0, **_) -> Trajectory:
+    rows = tab.rows
+    if rows.shape[1] != 12:
+        tab.fail(0, f"KITTI needs 12 columns (3x4 row-major pose), found {rows.shape[1]}")
+    n = len(rows)
+    if times is None:
+        t = np.arange(n) / float(rate)
+    else:
+        if len(times) != n:
+            raise EpaError(f"times file has {len(times)} stamps for {n} poses", path=str(tab.path))
+        t = np.asarray(times, float)
+    m = rows.reshape(n, 3, 4)
+    r = m[:, :, :3]
+    det = np.linalg.det(r)
+    bad = np.abs(det - 1) > 1e-2
+    if bad.any():
+        tab.fail(int(np.argmax(bad)), f"rotation block is not a rotation (det = {det[bad][0]:.4g})")
+    # Project onto SO(3): KITTI files print about 7 digits, so R^T R is only approximately I.
+    u, _, vt = np.linalg.svd(r)
+    r = u @ vt
+    traj = Trajectory(t, m[:, :, 3].copy(), geometry.rot_to_quat(r))
+    return _check_order(traj, tab, "error")
+
+
+READERS = {"tum": read_tum, "openvins": read_openvins, "euroc": read_euroc, "csv": read_named_csv,
+           "kitti": read_kitti}
+
+
+def detect_format(path: Path, tab: _Table) -> str:
+    width = tab.rows.shape[1]
+    if _named_columns(tab.header, width) is not None:
+        return "csv"
+    if path.suffix.lower() == ".csv" and width >= 8:
+        return "euroc"
+    by_width = {8: "tum", 12: "kitti", 20: "openvins"}
+    if width in by_width:
+        return by_width[width]
+    raise EpaError(f"cannot tell the format from {width} columns: expected 8 (TUM), 12 (KITTI),"
+                   " 20 (OpenVINS) or a CSV header naming the columns; set load.format", path=str(path))
+
+
+def kitti_times_for(path: Path) -> Path | None:
+    """evo's naming: ``X_times.txt`` beside ``X.txt``; else ``times.txt`` in the same folder."""
+    for cand in (path.with_name(path.stem + "_times.txt"), path.with_name("times.txt")):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def read_trajectory(path, fmt: str = "auto", *, time_unit: str = "auto", on_unsorted: str = "error",
+                    kitti_rate: float = 10.0, kitti_times=None) -> Trajectory:
+    """Read any supported trajectory file into seconds and unit quaternions."""
+    path = Path(path)
+    if fmt not in FORMATS:
+        raise EpaError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}", path=str(path))
+    tab = _read_table(path)
+    if fmt == "auto":
+        fmt = detect_format(path, tab)
+    times = None
+    if fmt == "kitti":
+        tpath = Path(kitti_times) if kitti_times else kitti_times_for(path)
+        if tpath is not None:
+            times = _read_table(tpath).rows[:, 0]
+    traj = READERS[fmt](tab, time_unit=time_unit, on_unsorted=on_unsorted, times=times, rate=kitti_rate)
+    if len(traj) < 2:
+        raise EpaError(f"only {len(traj)} pose(s); at least 2 are needed", path=str(path))
+    return traj
+
+
+# ----------------------------------------------------------------------------- artifacts
+def _atomic_write(path, write) -> None:
+    """Write via a temporary file and rename, so no half-written file is ever taken as done."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix="." + path.name + ".", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
+            write(fh)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def write_text(path, text: str) -> None:
+    _atomic_write(path, lambda fh: fh.write(text))
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if np.isfinite(obj) else None if np.isnan(obj) else str(float(obj))
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def write_json(path, data: dict) -> None:
+    """JSON with nan written as null, so every file parses with any JSON reader."""
+    _atomic_write(path, lambda fh: json.dump(_jsonable(data), fh, indent=2, sort_keys=False))
+
+
+def read_json(path) -> dict:
+    with open(path, encoding="utf-8") as fh:
+        return json.load(fh)
+
+
+TUM_HEADER = "# t x y z qx qy qz qw"
+
+
+def write_tum(path, traj: Trajectory) -> None:
+    data = np.column_stack([traj.t, traj.p, traj.q])
+    _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt="%.9f %.9f %.9f %.9f %.12f %.12f %.12f %.12f",
+                                              header=TUM_HEADER[2:]))
+
+
+def read_tum_file(path) -> Trajectory:
+    """Read a TUM artifact this project wrote (no detection, no repair)."""
+    rows = np.loadtxt(path, ndmin=2, comments="#")
+    return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8])
+
+
+_PAIR_COLS = ["t_ref", "x_ref", "y_ref", "z_ref", "qx_ref", "qy_ref", "qz_ref", "qw_ref",
+              "t_est", "x_est", "y_est", "z_est", "qx_est", "qy_est", "qz_est", "qw_est"]
+
+
+def write_pairs(path, ref: Trajectory, est: Trajectory) -> None:
+    """Matched pairs, one row each: the reference pose and the estimate pose it was matched to."""
+    data = np.column_stack([ref.t, ref.p, ref.q, est.t, est.p, est.q])
+    fmt = ",".join(["%.9f"] * 4 + ["%.12f"] * 4 + ["%.9f"] * 4 + ["%.12f"] * 4)
+    _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=fmt, delimiter=",", header=",".join(_PAIR_COLS),
+                                              comments=""))
+
+
+def read_pairs(path) -> tuple[Trajectory, Trajectory]:
+    rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    return (Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8]),
+            Trajectory(rows[:, 8], rows[:, 9:12], rows[:, 12:16]))
+
+
+def write_csv(path, columns: dict[str, np.ndarray], fmt: str = "%.9g") -> None:
+    names = list(columns)
+    data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names]) if names else np.zeros((0, 0))
+    _atomic_write(path, lambda fh: np.savetxt(fh, data.reshape(-1, len(names)), fmt=fmt, delimiter=",",
+                                              header=",".join(names), comments=""))
+
+
+def read_csv(path) -> dict[str, np.ndarray]:
+    with open(path, encoding="utf-8") as fh:
+        names = fh.readline().strip().split(",")
+    rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    if rows.size == 0:
+        rows = np.zeros((0, len(names)))
+    return {n: rows[:, k] for k, n in enumerate(names)}

@@ -1,0 +1,160 @@
+"""Error metrics on matched, aligned pose pairs: ATE, RPE (evo and ov_eval semantics), drift rate.
+
+Pair selection is explicit (index arrays), so the drift stage can re-use the very same pairs and
+errors when it keeps only the valid ones.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from epa import geometry
+from epa.errors import EpaError
+from epa.trajectory import Trajectory
+
+RPE_UNITS = ("frames", "m", "s")
+
+
+def stats(x: np.ndarray) -> dict:
+    x = np.asarray(x, float)
+    if x.size == 0:
+        return {"n": 0, "rmse": np.nan, "mean": np.nan, "median": np.nan, "std": np.nan, "min": np.nan,
+                "max": np.nan}
+    return {"n": int(x.size), "rmse": float(np.sqrt(np.mean(x * x))), "mean": float(np.mean(x)),
+            "median": float(np.median(x)), "std": float(np.std(x)), "min": float(np.min(x)),
+            "max": float(np.max(x))}
+
+
+# ----------------------------------------------------------------------------- pair selection
+def closest_pairs(d: np.ndarray, delta: float, tol: float, *, strict: bool, skip: int) -> tuple[np.ndarray, np.ndarray]:
+    """For every start i, the first j >= i + skip whose d[j] is closest to d[i] + delta.
+
+    ``d`` must be non-decreasing (cumulative path length or time). Kept when the gap is < tol
+    (strict, ov_eval) or <= tol (evo). Equivalent to the nested scans of ov_eval's
+    compute_comparison_indices_length and evo's filter_pairs_by_path(all_pairs=True), in O(N log N).
+    """
+    n = len(d)
+    i = np.arange(n)
+    target = d + delta
+    first = np.minimum(i + skip, n)
+    k = np.maximum(np.searchsorted(d, target, side="left"), first)  # first index with d >= target
+    has_up = k < n
+    up = np.minimum(k, n - 1)
+    lo = k - 1
+    has_lo = lo >= first
+    lo_c = np.maximum(lo, 0)
+    # the earliest index holding the same value as the lower candidate (scans keep the first best)
+    lo_first = np.minimum(np.maximum(np.searchsorted(d, d[lo_c], side="left"), first), n - 1)
+    err_up = np.where(has_up, np.abs(d[up] - target), np.inf)
+    err_lo = np.where(has_lo, np.abs(d[lo_first] - target), np.inf)
+    take_lo = err_lo <= err_up
+    j = np.where(take_lo, lo_first, up)
+    err = np.where(take_lo, err_lo, err_up)
+    ok = err < tol if strict else err <= tol
+    return i[ok], j[ok]
+
+
+def segment_pairs(d: np.ndarray, length: float, tol: float = 0.5):
+    """ov_eval's distance-segment pairs: end = pose whose path distance is closest to start + L, within tol."""
+    return closest_pairs(d, length, tol, strict=True, skip=0)
+
+
+def time_pairs(t: np.ndarray, delta: float = 1.0, rel_tol: float = 0.1):
+    """Pairs on the reference stamps: partner nearest t + delta, within ±rel_tol·delta."""
+    return closest_pairs(t - t[0], delta, rel_tol * delta, strict=False, skip=1)
+
+
+def consecutive_pairs(d: np.ndarray, delta: float):
+    """evo's consecutive mode: a new pair starts where the accumulated amount since the last reaches delta."""
+    ids = [0]
+    n = len(d)
+    while True:
+        k = int(np.searchsorted(d, d[ids[-1]] + delta, side="left"))
+        k = max(k, ids[-1] + 1)
+        if k >= n:
+            break
+        ids.append(k)
+    ids = np.asarray(ids)
+    return ids[:-1], ids[1:]
+
+
+def evo_pairs(traj: Trajectory, delta: float, unit: str, *, all_pairs: bool = False, rel_tol: float = 0.1):
+    """Pairs as evo's id_pairs_from_delta chooses them (frames, metres) plus seconds in the same manner."""
+    n = len(traj)
+    if unit == "frames":
+        delta = int(delta)
+        if delta < 1:
+            raise EpaError("rpe delta in frames must be a positive integer")
+        if all_pairs:
+            i = np.arange(max(n - delta, 0))
+            return i, i + delta
+        ids = np.arange(0, n, delta)
+        return ids[:-1], ids[1:]
+    if unit == "m":
+        d = geometry.path_distances(traj.p)
+    elif unit == "s":
+        d = traj.t - traj.t[0]
+    else:
+        raise EpaError(f"unknown rpe unit {unit!r}; choose one of {', '.join(RPE_UNITS)}")
+    if all_pairs:
+        return closest_pairs(d, delta, delta * rel_tol, strict=False, skip=1)
+    return consecutive_pairs(d, delta)
+
+
+# ----------------------------------------------------------------------------- errors
+def ape(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pose translation error (m) and rotation error (deg) of aligned, matched poses."""
+    trans = np.linalg.norm(est.p - ref.p, axis=1)
+    r_err = np.swapaxes(ref.r, -1, -2) @ est.r
+    return trans, np.degrees(geometry.rotation_angle(r_err))
+
+
+def relative_errors(ref: Trajectory, est: Trajectory, i: np.ndarray, j: np.ndarray):
+    """Rotation (deg) and translation (m) error of each pair (i, j)."""
+    if len(i) == 0:
+        return np.zeros(0), np.zeros(0)
+    return geometry.relative_errors(ref.r, ref.p, est.r, est.p, i, j)
+
+
+def evaluate(ref: Trajectory, est: Trajectory, *, segments=(8, 16, 24, 32, 40, 48), segment_tol: float = 0.5,
+             time_delta: float = 1.0, time_tol: float = 0.1, rpe=()) -> tuple[dict, dict]:
+    """All metrics of one case. Returns (summary dict for metrics.json, per-pose/per-pair tables)."""
+    if len(ref) != len(est):
+        raise EpaError("reference and estimate must be matched pose for pose")
+    r_ref, r_est = ref.r, est.r  # rotation matrices once, shared by every metric below
+    trans, rot = ape(ref, est)
+    dist = geometry.path_distances(ref.p)
+    summary = {"n_matched": len(ref), "ref_length_m": float(dist[-1]) if len(dist) else 0.0,
+               "duration_s": float(ref.t[-1] - ref.t[0]),
+               "ate": {"trans_m": stats(trans), "rot_deg": stats(rot)}}
+    tables = {"ape": {"t": ref.t, "dist_m": dist, "trans_m": trans, "rot_deg": rot}}
+
+    seg_rows = {k: [] for k in ("length_m", "i", "j", "rot_deg", "trans_m")}
+    summary["rpe_distance"], summary["drift_rate_pct"] = {}, {}
+    for length in segments:
+        i, j = segment_pairs(dist, float(length), segment_tol)
+        er, et = geometry.relative_errors(r_ref, ref.p, r_est, est.p, i, j) if len(i) else (np.zeros(0),) * 2
+        key = _seg_key(length)
+        summary["rpe_distance"][key] = {"trans_m": stats(et), "rot_deg": stats(er)}
+        summary["drift_rate_pct"][key] = float(np.mean(et / length) * 100) if len(et) else np.nan
+        for name, v in zip(seg_rows, (np.full(len(i), float(length)), i, j, er, et)):
+            seg_rows[name].append(v)
+    tables["rpe_segments"] = {k: np.concatenate(v) if v else np.zeros(0) for k, v in seg_rows.items()}
+
+    i, j = time_pairs(ref.t, time_delta, time_tol)
+    er, et = geometry.relative_errors(r_ref, ref.p, r_est, est.p, i, j) if len(i) else (np.zeros(0),) * 2
+    summary["rpe_time_1s"] = {"delta_s": time_delta, "trans_m": stats(et), "rot_deg": stats(er)}
+    tables["rpe_time"] = {"i": i, "j": j, "t": ref.t[i] if len(i) else np.zeros(0), "rot_deg": er, "trans_m": et}
+
+    summary["rpe"] = []
+    for spec in rpe:
+        pairs_from = ref if spec.get("pairs_from", "est") == "ref" else est
+        i, j = evo_pairs(pairs_from, spec["delta"], spec["unit"], all_pairs=spec.get("all_pairs", False),
+                         rel_tol=spec.get("rel_tol", 0.1))
+        er, et = geometry.relative_errors(r_ref, ref.p, r_est, est.p, i, j) if len(i) else (np.zeros(0),) * 2
+        summary["rpe"].append({**spec, "trans_m": stats(et), "rot_deg": stats(er)})
+    return summary, tables
+
+
+def _seg_key(length) -> str:
+    return f"{float(length):g}"

@@ -1,0 +1,51 @@
+"""Configuration: validated against the packaged schema, which is the one source of every default."""
+
+from __future__ import annotations
+
+import copy
+from functools import lru_cache
+from pathlib import Path
+
+from epa.errors import EpaError
+
+SCHEMA_PATH = Path(__file__).with_name("config.schema.yaml")
+
+
+@lru_cache(maxsize=1)
+def schema() -> dict:
+    import yaml
+
+    with open(SCHEMA_PATH, encoding="utf-8") as fh:
+        return yaml.safe_load(fh)
+
+
+def _fill(value, sch: dict):
+    if sch.get("type") == "object" or "properties" in sch:
+        value = {} if value is None else value
+        for key, sub in sch.get("properties", {}).items():
+            if key not in value and "default" in sub:
+                value[key] = copy.deepcopy(sub["default"])
+            if key in value:
+                value[key] = _fill(value[key], sub)
+    elif sch.get("type") == "array" and isinstance(value, list) and "items" in sch:
+        value = [_fill(v, sch["items"]) for v in value]
+    return value
+
+
+def resolve(config: dict | None, *, source: str = "config") -> dict:
+    """Validate a config and fill in every default; a mistake is one line naming the key."""
+    import jsonschema
+
+    cfg = copy.deepcopy(config or {})
+    validator = jsonschema.Draft7Validator(schema())
+    errors = sorted(validator.iter_errors(cfg), key=lambda e: list(e.path))
+    if errors:
+        err = errors[0]
+        key = ".".join(str(p) for p in err.path) or "(top level)"
+        raise EpaError(f"{key}: {err.message}", path=source)
+    return _fill(cfg, schema())
+
+
+def defaults() -> dict:
+    """Every stage setting at its default (no truth/algorithms folders)."""
+    return _fill({}, schema())

@@ -1,0 +1,47 @@
+"""The trajectory value type: parallel arrays, never lists of 4x4 matrices."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from epa import geometry
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    t: np.ndarray  # (N,) seconds
+    p: np.ndarray  # (N, 3) metres
+    q: np.ndarray  # (N, 4) unit quaternions (x, y, z, w)
+    # Optional per-pose marginal covariances kept for consistency metrics:
+    # orientation (N, 3, 3) rad^2 and position (N, 3, 3) m^2.
+    cov_rot: np.ndarray | None = field(default=None, repr=False)
+    cov_pos: np.ndarray | None = field(default=None, repr=False)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def r(self) -> np.ndarray:
+        return geometry.quat_to_rot(self.q)
+
+    def select(self, idx) -> "Trajectory":
+        return replace(
+            self,
+            t=self.t[idx],
+            p=self.p[idx],
+            q=self.q[idx],
+            cov_rot=None if self.cov_rot is None else self.cov_rot[idx],
+            cov_pos=None if self.cov_pos is None else self.cov_pos[idx],
+        )
+
+    def shifted(self, dt: float) -> "Trajectory":
+        return replace(self, t=self.t + dt)
+
+    def length(self) -> float:
+        return float(geometry.path_distances(self.p)[-1]) if len(self) else 0.0
+
+    @staticmethod
+    def from_rp(t, r, p, **extra) -> "Trajectory":
+        return Trajectory(np.asarray(t, float), np.asarray(p, float), geometry.rot_to_quat(r), **extra)
