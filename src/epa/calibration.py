@@ -32,6 +32,9 @@ class Extrinsic:
         p_b = self.scale * est.p - np.einsum("nab,b->na", r_b, self.t)
         return Trajectory.from_rp(est.t, r_b, p_b)
 
+    def translation_unobservable(self) -> bool:
+        return bool(self.info.get("translation_unobservable_directions"))
+
     def to_dict(self) -> dict:
         return {"trusted": self.trusted, "reason": self.reason,
                 "rotation": self.R.tolist(), "quaternion_xyzw": geometry.rot_to_quat(self.R).tolist(),

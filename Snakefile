@@ -1,0 +1,27 @@
+# epica: algorithm x dataset x run grid -> error_comparison tables. See README.md.
+from snakemake.utils import min_version, validate
+
+min_version("8.0")
+
+
+configfile: "config/config.yaml"
+
+
+validate(config, "config/config.schema.yaml")
+
+
+include: "rules/common.smk"
+include: "rules/load.smk"
+include: "rules/crop.smk"
+include: "rules/sync.smk"
+include: "rules/calibrate.smk"
+include: "rules/align.smk"
+include: "rules/metrics.smk"
+include: "rules/drift.smk"
+include: "rules/tables.smk"
+
+
+rule all:
+    input:
+        TABLE_OUTPUTS,
+    default_target: True

@@ -1,0 +1,143 @@
+"""Local drift/fail detection, success rate and drift-valid metrics (seed 000, issue 4).
+
+Signals are computed on the final aligned case: the 1 s time-RPE pairs and the APE translation
+series. A pose is invalid when a 1 s pair spanning it has a translation error above the threshold
+(or not finite), or when it lies in an APE growth stretch. An interval between consecutive poses
+is valid when both ends are valid. A constant bias never invalidates anything: only growth does.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from epa.metrics import stats
+
+
+def thresholds(settings: dict, ref_t: np.ndarray, ref_dist: np.ndarray, time_pairs) -> dict:
+    """The thresholds in force: the fixed defaults, or derived from the reference's own motion."""
+    th = {k: settings[k] for k in ("rpe_trans_max_m", "jump_rise_m", "jump_rate_m_s", "jump_hold_m")}
+    th["mode"] = settings["mode"]
+    if settings["mode"] == "scale_aware":
+        i, j = time_pairs
+        step = np.median(ref_dist[j] - ref_dist[i]) if len(i) else 0.0
+        length = ref_dist[-1] if len(ref_dist) else 0.0
+        th["rpe_trans_max_m"] = max(settings["scale_rpe_factor"] * step, 0.1)
+        th["jump_rise_m"] = th["jump_hold_m"] = max(settings["scale_jump_factor"] * length, 0.5)
+        th["jump_rate_m_s"] = th["jump_rise_m"] / 5.0
+    return th
+
+
+def _span_mask(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Poses covered by any of the index spans [i, j]."""
+    marks = np.zeros(n + 1, int)
+    np.add.at(marks, i, 1)
+    np.add.at(marks, j + 1, -1)
+    return np.cumsum(marks[:-1]) > 0
+
+
+def growth_stretches(t: np.ndarray, ape: np.ndarray, pi: np.ndarray, pj: np.ndarray, *, rise: float,
+                     rate: float, hold: float) -> list[tuple[int, int]]:
+    """APE jumps: a 1 s step (pi -> pj) rising more than ``rise`` faster than ``rate`` starts a
+    stretch at pi, which lasts while APE stays above the level before the jump plus ``hold``."""
+    d_ape = ape[pj] - ape[pi]
+    dt = np.maximum(t[pj] - t[pi], 1e-9)
+    starts = np.flatnonzero((d_ape > rise) & (d_ape / dt > rate))
+    out: list[tuple[int, int]] = []
+    end_prev = -1
+    for s in starts:  # few: one per jump, not one per pose
+        a = int(pi[s])
+        if a <= end_prev:
+            continue
+        below = np.flatnonzero(ape[pj[s]:] <= ape[a] + hold)
+        b = int(pj[s] + below[0] - 1) if len(below) else len(ape) - 1
+        out.append((a, b))
+        end_prev = b
+    return out
+
+
+def knee_threshold(ape: np.ndarray, lo: float = 5.0, hi: float = 30.0) -> dict:
+    """Knee of the sorted APE curve (largest gap below the chord, tail above p95 trimmed), else p95; clamped."""
+    finite = np.sort(ape[np.isfinite(ape)])
+    if finite.size == 0:
+        return {"threshold_m": hi, "mode": "none", "raw_m": np.nan, "clamped": True, "bounds_m": [lo, hi]}
+    p95 = float(np.percentile(finite, 95))
+    y = finite[finite <= p95]
+    raw, mode = p95, "p95"
+    if y.size >= 3 and y[-1] > y[0]:
+        x = np.linspace(0.0, 1.0, y.size)
+        yn = (y - y[0]) / (y[-1] - y[0])
+        gap = x - yn  # chord from (0,0) to (1,1) minus the curve
+        k = int(np.argmax(gap))
+        if gap[k] > 0.05:  # a curve within 5% of its chord has no knee worth the name
+            raw, mode = float(y[k]), "knee"
+    thr = float(np.clip(raw, lo, hi))
+    return {"threshold_m": thr, "mode": mode, "raw_m": raw, "clamped": thr != raw, "bounds_m": [lo, hi]}
+
+
+def detect(t, dist, ape_trans, ape_rot, time_i, time_j, time_trans, settings: dict) -> dict:
+    """Validity of every pose and interval, the fail segments and the success rates."""
+    n = len(t)
+    th = thresholds(settings, t, dist, (time_i, time_j))
+    bad_pair = ~np.isfinite(time_trans) | (time_trans > th["rpe_trans_max_m"])
+    invalid = _span_mask(n, time_i[bad_pair], time_j[bad_pair])
+    stretches = growth_stretches(t, ape_trans, time_i, time_j, rise=th["jump_rise_m"], rate=th["jump_rate_m_s"],
+                                 hold=th["jump_hold_m"])
+    if stretches:
+        invalid |= _span_mask(n, np.array([a for a, _ in stretches]), np.array([b for _, b in stretches]))
+    invalid |= ~np.isfinite(ape_trans)
+    valid_iv = ~invalid[:-1] & ~invalid[1:]
+    seg_len, seg_dur = np.diff(dist), np.diff(t)
+    total_len, total_dur = float(dist[-1] - dist[0]), float(t[-1] - t[0])
+    sr_dist = 100.0 * seg_len[valid_iv].sum() / total_len if total_len > 0 else np.nan
+    sr_time = 100.0 * seg_dur[valid_iv].sum() / total_dur if total_dur > 0 else np.nan
+
+    # maximal runs of invalid poses
+    edges = np.diff(np.concatenate([[0], invalid.astype(int), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    segments = {"index_start": starts, "index_end": ends, "t_start": t[starts], "t_end": t[ends],
+                "dist_start_m": dist[starts], "dist_end_m": dist[ends], "duration_s": t[ends] - t[starts],
+                "length_m": dist[ends] - dist[starts],
+                "ape_max_m": np.array([ape_trans[a:b + 1].max() for a, b in zip(starts, ends)]),
+                "ape_mean_m": np.array([ape_trans[a:b + 1].mean() for a, b in zip(starts, ends)])}
+    finite = ape_trans[np.isfinite(ape_trans)]
+    p5 = float(np.percentile(finite, 5)) if finite.size else np.nan
+    global_failed = not np.isfinite(p5) or p5 > settings["global_fail_p5_m"]
+    knee = knee_threshold(ape_trans, settings["knee_min_m"], settings["knee_max_m"])
+    return {"thresholds": th, "invalid": invalid, "valid_interval": valid_iv,
+            "success_rate_distance_pct": sr_dist, "success_rate_time_pct": sr_time,
+            "ape_p5_m": p5, "global_failed": bool(global_failed), "knee": knee, "fail_segments": segments,
+            "growth_stretches": stretches}
+
+
+def pair_valid(valid_interval: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """A pair is valid when every interval it spans is valid."""
+    bad = np.concatenate([[0], np.cumsum(~valid_interval)])
+    return (bad[j] - bad[i]) == 0
+
+
+def valid_metrics(det: dict, ape_trans, ape_rot, seg: dict, tpairs: dict, segments) -> dict:
+    """Drift-valid ATE (poses touching a valid interval) and RPE / drift rate / 1 s RPE over valid pairs."""
+    nan_all = det["global_failed"] or not (det["success_rate_distance_pct"] > 0)
+    viv = det["valid_interval"]
+    touch = np.zeros(len(ape_trans), bool)
+    touch[:-1] |= viv
+    touch[1:] |= viv
+    out = {"ate": {"trans_m": stats(ape_trans[touch]), "rot_deg": stats(ape_rot[touch])},
+           "rpe_distance": {}, "drift_rate_pct": {}}
+    sv = pair_valid(viv, seg["i"].astype(int), seg["j"].astype(int)) if len(seg["i"]) else np.zeros(0, bool)
+    for length in segments:
+        key = f"{float(length):g}"
+        sel = sv & (seg["length_m"] == float(length))
+        out["rpe_distance"][key] = {"trans_m": stats(seg["trans_m"][sel]), "rot_deg": stats(seg["rot_deg"][sel])}
+        out["drift_rate_pct"][key] = float(np.mean(seg["trans_m"][sel] / length) * 100) if sel.any() else np.nan
+    tv = pair_valid(viv, tpairs["i"].astype(int), tpairs["j"].astype(int)) if len(tpairs["i"]) else np.zeros(0, bool)
+    out["rpe_time_1s"] = {"trans_m": stats(tpairs["trans_m"][tv]), "rot_deg": stats(tpairs["rot_deg"][tv])}
+    if nan_all:
+        out = _nan_like(out)
+    return out, (sv if not nan_all else np.zeros_like(sv)), (tv if not nan_all else np.zeros_like(tv))
+
+
+def _nan_like(d):
+    if isinstance(d, dict):
+        return {k: (0 if k == "n" else _nan_like(v)) for k, v in d.items()}
+    return np.nan

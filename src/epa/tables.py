@@ -1,0 +1,321 @@
+"""error_comparison.txt (seed 000 layout), one LaTeX table per .tex file, and summary.csv.
+
+Aggregation rules: an ATE cell is the mean over runs of each run's RMSE; an RPE / drift-rate /
+1 s RPE cell is the mean of the errors pooled over runs (and, for the per-algorithm segment
+tables, over datasets); a success-rate cell is the mean over runs; the Average column is the mean
+over the datasets that have a number; a cell with no successful run prints ``- / -``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from epa import io
+from epa.workflow import failure_of
+
+RULE_SHORT = "=" * 38
+RULE_LONG = "=" * 44
+_LATEX_SPECIAL = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
+                  "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}"}
+
+
+def latex_escape(text: str) -> str:
+    return "".join(_LATEX_SPECIAL.get(ch, ch) for ch in str(text))
+
+
+@dataclass
+class CaseResult:
+    algorithm: str
+    dataset: str
+    run: str
+    status: str = "ok"
+    load: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)
+    drift: dict = field(default_factory=dict)
+    segments: dict = field(default_factory=dict)
+    time: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok" or self.status.startswith("globally failed")
+
+
+def collect(cases, inputs) -> list[CaseResult]:
+    out = []
+    for k, (alg, ds, run) in enumerate(cases):
+        res = CaseResult(alg, ds, run)
+        if failure_of(inputs.load[k]) is None:
+            res.load = io.read_json(inputs.load[k])
+        reason = failure_of(inputs.drift[k])
+        if reason is not None:
+            res.status = "failed: " + reason
+        else:
+            res.metrics = io.read_json(inputs.metrics[k])
+            res.drift = io.read_json(inputs.drift[k])
+            res.segments = io.read_csv(inputs.segments[k])
+            res.time = io.read_csv(inputs.time[k])
+            if res.drift.get("status"):
+                res.status = res.drift["status"]
+        out.append(res)
+    return out
+
+
+def _num(x) -> float:
+    return np.nan if x is None else float(x)
+
+
+def _nanmean(values) -> float:
+    v = np.array([_num(x) for x in values], float)
+    v = v[~np.isnan(v)]
+    return float(v.mean()) if v.size else np.nan
+
+
+class _Cell:
+    """A table cell: missing (no successful run), or numbers that may be nan."""
+
+    def __init__(self, values=None):
+        self.values = values
+
+    def fmt(self, decimals: int) -> str:
+        if self.values is None:
+            return "- / -" if self._pair else "-"
+        return " / ".join("nan" if np.isnan(v) else f"{v:.{decimals}f}" for v in self.values)
+
+    _pair = True
+
+
+def _cell(values, pair=True) -> _Cell:
+    c = _Cell(values)
+    c._pair = pair
+    return c
+
+
+def _average(cells: list[_Cell], pair=True) -> _Cell:
+    have = [c.values for c in cells if c.values is not None]
+    if not have:
+        return _cell(None, pair)
+    arr = np.array(have, float)
+    return _cell(tuple(_nanmean(arr[:, k]) for k in range(arr.shape[1])), pair)
+
+
+# ----------------------------------------------------------------------------- per-cell values
+def _ok_runs(grid, alg, ds=None):
+    return [c for c in grid if c.algorithm == alg and (ds is None or c.dataset == ds) and c.ok]
+
+
+def _ate(runs, valid: bool) -> _Cell:
+    if not runs:
+        return _cell(None)
+    src = [(c.drift["drift_valid"]["ate"] if valid else c.metrics["ate"]) for c in runs]
+    return _cell((_nanmean(s["rot_deg"]["rmse"] for s in src), _nanmean(s["trans_m"]["rmse"] for s in src)))
+
+
+def _pooled(runs, table: str, valid: bool, length=None):
+    rot, trans = [], []
+    for c in runs:
+        t = getattr(c, table)
+        sel = np.ones(len(t.get("rot_deg", [])), bool)
+        if length is not None:
+            sel &= t["length_m"] == float(length)
+        if valid:
+            sel &= t["valid"] > 0
+        rot.append(t["rot_deg"][sel])
+        trans.append(t["trans_m"][sel])
+    return (np.concatenate(rot) if rot else np.zeros(0)), (np.concatenate(trans) if trans else np.zeros(0))
+
+
+def _mean_pair(runs, table, valid, length=None) -> _Cell:
+    if not runs:
+        return _cell(None)
+    rot, trans = _pooled(runs, table, valid, length)
+    if _all_nan_valid(runs, valid) or rot.size == 0:
+        return _cell((np.nan, np.nan))
+    return _cell((float(rot.mean()), float(trans.mean())))
+
+
+def _drift_rate(runs, valid, length) -> _Cell:
+    if not runs:
+        return _cell(None, pair=False)
+    _, trans = _pooled(runs, "segments", valid, length)
+    if _all_nan_valid(runs, valid) or trans.size == 0:
+        return _cell((np.nan,), pair=False)
+    return _cell((float(np.mean(trans / float(length)) * 100),), pair=False)
+
+
+def _all_nan_valid(runs, valid):
+    return valid and all(c.drift["global_failed"] or not (_num(c.drift["success_rate_distance_pct"]) > 0) for c in runs)
+
+
+def _success(runs) -> _Cell:
+    if not runs:
+        return _cell(None, pair=False)
+    return _cell((_nanmean(c.drift["success_rate_distance_pct"] for c in runs),), pair=False)
+
+
+# ----------------------------------------------------------------------------- rendering
+def _latex_rows(header: list[str], rows: list[tuple[str, list[_Cell]]], decimals: int) -> list[str]:
+    lines = [" & " + " & ".join(r"\textbf{" + latex_escape(h) + "}" for h in header) + r" \\ \hline"]
+    for name, cells in rows:
+        lines.append(latex_escape(name) + " & " + " & ".join(c.fmt(decimals) for c in cells) + r" \\")
+    return lines
+
+
+def build_tables(grid: list[CaseResult], segments, decimals: int = 3) -> list[tuple[str, str, list[str], int]]:
+    """(file name, title, latex row lines, number of columns) for every table, in report order."""
+    algs = sorted({c.algorithm for c in grid})
+    datasets = sorted({c.dataset for c in grid})
+    seg_labels = [f"{float(s):g}m" for s in segments]
+    out = []
+
+    def per_dataset(name, title, fn, pair=True, dec=decimals):
+        rows = []
+        for a in algs:
+            cells = [fn(_ok_runs(grid, a, d)) for d in datasets]
+            rows.append((a, cells + [_average(cells, pair)]))
+        out.append((name, title, _latex_rows(datasets + ["Average"], rows, dec), len(datasets) + 2))
+
+    def per_segment(name, title, fn):
+        rows = [(a, [fn(_ok_runs(grid, a), s) for s in segments]) for a in algs]
+        out.append((name, title, _latex_rows(seg_labels, rows, decimals), len(segments) + 1))
+
+    for prefix, valid, tag in (("", False, "FULL TRAJECTORY"), ("valid_", True, "DRIFT-VALID ONLY")):
+        if valid:
+            per_dataset("success_rate", "DRIFT-VALID SUCCESS RATE LATEX TABLE (% PATH LENGTH)", _success, pair=False,
+                        dec=2)
+        per_dataset(prefix + "ate", f"{tag} ATE LATEX TABLE (ROT DEG / TRANS M)", lambda r: _ate(r, valid))
+        per_segment(prefix + "rpe_distance", f"{tag} DISTANCE RPE LATEX TABLE (ROT DEG / TRANS M)",
+                    lambda r, s: _mean_pair(r, "segments", valid, s))
+        per_segment(prefix + "drift_rate", f"{tag} DISTANCE DRIFT RATE LATEX TABLE (% TRANS / DIST)",
+                    lambda r, s: _drift_rate(r, valid, s))
+        per_dataset(prefix + "rpe_time_1s", f"{tag} 1S TIME RPE LATEX TABLE (ROT DEG / TRANS M)",
+                    lambda r: _mean_pair(r, "time", valid))
+    return out
+
+
+def _stat(d: dict, *keys):
+    for k in keys:
+        if not isinstance(d, dict) or k not in d:
+            return np.nan
+        d = d[k]
+    return _num(d)
+
+
+def report_text(grid: list[CaseResult], segments, decimals: int = 3) -> str:
+    lines = []
+    datasets = sorted({c.dataset for c in grid})
+    for ds in datasets:
+        info = next((c.load for c in grid if c.dataset == ds and c.load), None)
+        if info:
+            lines.append(f"[COMP]: {info['n_ref']} poses in {info['ref_file']} => length of {info['ref_length_m']:.2f} meters")
+        else:
+            lines.append(f"[COMP]: reference of {ds} could not be loaded")
+    lines.append(RULE_SHORT)
+    sources = {"epa": 0, "ov_eval": 0}
+    for alg in sorted({c.algorithm for c in grid}):
+        lines.append(f"[COMP]: processing {alg} algorithm")
+        for ds in datasets:
+            cases = [c for c in grid if c.algorithm == alg and c.dataset == ds]
+            if not cases:
+                continue
+            runs = [c for c in cases if c.ok]
+            lines.append(f"[COMP]: processing {alg} algorithm => {ds} dataset")
+            ate = _ate(runs, False)
+            if ate.values is None:
+                lines.append(f"        ATE: - / - (0 runs)")
+            else:
+                lines.append(f"        ATE: mean_ori = {ate.values[0]:.3f} | mean_pos = {ate.values[1]:.3f} ({len(runs)} runs)")
+            src = {"epa": 0, "ov_eval": 0}
+            for c in runs:
+                src[c.metrics.get("eval_source", "epa")] += 1
+            for k in sources:
+                sources[k] += src[k]
+            lines.append(f"        eval_source: epa={src['epa']}, ov_eval={src['ov_eval']}")
+            if runs:
+                for s in segments:
+                    rot, trans = _pooled(runs, "segments", False, s)
+                    if rot.size:
+                        lines.append(f"        RPE: seg {float(s):g} - median_ori = {np.median(rot):.4f} | "
+                                     f"median_pos = {np.median(trans):.4f} ({rot.size} samples)")
+                    else:
+                        lines.append(f"        RPE: seg {float(s):g} - no segment this long (0 samples)")
+                rot, trans = _pooled(runs, "time", False)
+                if rot.size:
+                    lines.append(f"        RPE time 1s - mean_ori = {rot.mean():.3f} | mean_pos = {trans.mean():.3f}"
+                                 f" ({rot.size} samples)")
+                sr_d = _nanmean(c.drift["success_rate_distance_pct"] for c in runs)
+                sr_t = _nanmean(c.drift["success_rate_time_pct"] for c in runs)
+                lines.append(f"        SR - distance = {sr_d:.2f}% | time = {sr_t:.2f}%")
+            for c in cases:
+                if c.status != "ok":
+                    lines.append(f"        {c.run}: {c.status}")
+    lines += [RULE_LONG, f"TOOL SOURCE: epa={sources['epa']}, ov_eval={sources['ov_eval']}", RULE_LONG]
+    for _, title, rows, _ in build_tables(grid, segments, decimals):
+        lines += [RULE_LONG, title, RULE_LONG, *rows, RULE_LONG]
+    return "\n".join(lines) + "\n"
+
+
+def tex_document(title: str, rows: list[str], ncols: int) -> str:
+    """A table that \\input's into a paper: a tabular with the report's rows, titled in a comment."""
+    spec = "l" + "c" * (ncols - 1)
+    return "\n".join([f"% {title}", r"\begin{tabular}{" + spec + "}", *rows, r"\end{tabular}", ""])
+
+
+SUMMARY_FIXED = ["algorithm", "dataset", "run", "status", "eval_source", "n_matched", "ate_trans_rmse_m",
+                 "ate_rot_rmse_deg", "time_rpe_1s_trans_mean_m", "time_rpe_1s_rot_mean_deg", "time_offset_s",
+                 "extrinsic_rot_deg", "extrinsic_trans_m", "success_rate_distance_pct", "success_rate_time_pct",
+                 "global_failed", "knee_threshold_m", "fail_segments"]
+
+
+def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict]]:
+    seg_cols = []
+    for s in segments:
+        L = f"{float(s):g}"
+        seg_cols += [f"rpe_{L}m_trans_mean_m", f"rpe_{L}m_rot_mean_deg", f"drift_rate_{L}m_pct"]
+    rows = []
+    for c in grid:
+        m, d = c.metrics, c.drift
+        row = {"algorithm": c.algorithm, "dataset": c.dataset, "run": c.run, "status": c.status}
+        if c.ok:
+            row.update(eval_source=m.get("eval_source"), n_matched=m.get("n_matched"),
+                       ate_trans_rmse_m=_stat(m, "ate", "trans_m", "rmse"), ate_rot_rmse_deg=_stat(m, "ate", "rot_deg", "rmse"),
+                       time_rpe_1s_trans_mean_m=_stat(m, "rpe_time_1s", "trans_m", "mean"),
+                       time_rpe_1s_rot_mean_deg=_stat(m, "rpe_time_1s", "rot_deg", "mean"),
+                       time_offset_s=m.get("time_offset_s"), extrinsic_rot_deg=m.get("extrinsic_rot_deg"),
+                       extrinsic_trans_m=m.get("extrinsic_trans_m"),
+                       success_rate_distance_pct=_num(d.get("success_rate_distance_pct")),
+                       success_rate_time_pct=_num(d.get("success_rate_time_pct")),
+                       global_failed=d.get("global_failed"), knee_threshold_m=_stat(d, "knee", "threshold_m"),
+                       fail_segments=d.get("n_fail_segments"))
+            for s in segments:
+                L = f"{float(s):g}"
+                row[f"rpe_{L}m_trans_mean_m"] = _stat(m, "rpe_distance", L, "trans_m", "mean")
+                row[f"rpe_{L}m_rot_mean_deg"] = _stat(m, "rpe_distance", L, "rot_deg", "mean")
+                row[f"drift_rate_{L}m_pct"] = _stat(m, "drift_rate_pct", L)
+        rows.append(row)
+    return SUMMARY_FIXED[:4] + SUMMARY_FIXED[4:] + seg_cols, rows
+
+
+def summary_csv(grid, segments) -> str:
+    cols, rows = summary_rows(grid, segments)
+    buf = _io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n", restval="")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if v is None else (f"{v:.9g}" if isinstance(v, float) else v)) for k, v in r.items()})
+    return buf.getvalue()
+
+
+def write_all(grid: list[CaseResult], output, cfg: dict) -> None:
+    segments = cfg["metrics"]["segments"]
+    decimals = cfg["tables"]["decimals"]
+    io.write_text(output.text, report_text(grid, segments, decimals))
+    io.write_text(output.summary, summary_csv(grid, segments))
+    by_name = {name: (title, rows, n) for name, title, rows, n in build_tables(grid, segments, decimals)}
+    for path in output.tex:
+        title, rows, n = by_name[Path(path).stem]
+        io.write_text(path, tex_document(title, rows, n))
