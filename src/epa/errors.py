@@ -18,6 +18,3 @@ class EpaError(Exception):
             where = self.path + (f":{self.line}" if self.line is not None else "") + ": "
         return (where + self.message).replace("\n", " ")
 
-
-class CaseFailed(EpaError):
-    """An upstream stage of this case already failed; carries its recorded reason forward."""

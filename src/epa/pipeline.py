@@ -19,7 +19,9 @@ def load(ref_path, est_path, cfg: dict):
     c = cfg["load"]
     opts = dict(time_unit=c["time_unit"], on_unsorted=c["unsorted"], kitti_rate=c["kitti_rate"])
     ref = io.read_trajectory(ref_path, c["truth_format"], **opts)
-    est = io.read_trajectory(est_path, c["estimate_format"], **opts)
+    # KITTI estimates rarely ship their own times file: they are index-aligned with the reference's.
+    est_times = io.kitti_times_for(Path(est_path)) or io.kitti_times_for(Path(ref_path))
+    est = io.read_trajectory(est_path, c["estimate_format"], kitti_times=est_times, **opts)
     info = {"ref_file": Path(ref_path).name, "est_file": Path(est_path).name, "n_ref": len(ref), "n_est": len(est),
             "ref_length_m": ref.length(), "est_length_m": est.length(),
             "ref_span_s": [float(ref.t[0]), float(ref.t[-1])], "est_span_s": [float(est.t[0]), float(est.t[-1])]}

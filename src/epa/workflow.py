@@ -9,7 +9,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from epa import io
-from epa.errors import CaseFailed, EpaError
+from epa.errors import EpaError
 
 FAILED_PREFIX = "# epa-failed: "
 USER_INPUTS = {"truth", "estimate"}  # the user's own files, never failure markers
@@ -53,16 +53,16 @@ def stage(smk, *, check_inputs: bool = True):
     """Run one rule's body. An EpaError (user mistake) becomes this case's recorded failure;
     a bug keeps its traceback and fails the job."""
     logger = _setup_logging(smk.log[0] if len(smk.log) else None)
+    for name, path in (smk.input.items() if check_inputs else ()):
+        if name not in USER_INPUTS:
+            reason = failure_of(path)
+            if reason is not None:  # an upstream stage failed: pass its reason on, nothing to compute
+                logger.error("case failed upstream: %s", reason)
+                write_failure(list(smk.output), reason)
+                sys.exit(0)
     try:
-        for name, path in (smk.input.items() if check_inputs else ()):
-            if name not in USER_INPUTS:
-                reason = failure_of(path)
-                if reason is not None:
-                    raise CaseFailed(reason)
         yield logger
     except EpaError as exc:
-        reason = exc.one_line()
-        if not isinstance(exc, CaseFailed):
-            reason = f"{smk.rule}: {reason}"
+        reason = f"{smk.rule}: {exc.one_line()}"
         logger.error("case failed: %s", reason)
         write_failure(list(smk.output), reason)

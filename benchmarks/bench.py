@@ -1,0 +1,68 @@
+"""Benchmarks (figures go in the closing note, never in a timed test).
+
+    python benchmarks/bench.py [--skip-evo]
+
+1. epa eval vs evo_ape + evo_rpe (8 m, all pairs) on a 100,000-pose simulated pair.
+2. epa eval on one EuRoC case (../shared/data), wall time and peak memory.
+3. Steps 1+2 vs the metrics stage on the 100,000-pose pair.
+"""
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from epa import calibration, io, pipeline, settings, simulate, sync
+from epa.trajectory import Trajectory
+
+
+def timed(cmd):
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, capture_output=True)
+    return time.perf_counter() - t0
+
+
+def big_pair(tmp: Path, n=100_000):
+    t = np.arange(n) / 200.0
+    r, p = simulate.truth_pose("drone_figure8", t % 150)
+    ref = Trajectory.from_rp(1e9 + t, r, p)
+    rng = np.random.default_rng(0)
+    est = Trajectory.from_rp(1e9 + t, r, p + rng.normal(0, 0.02, p.shape))
+    io.write_tum(tmp / "ref.txt", ref)
+    io.write_tum(tmp / "est.txt", est)
+    return ref, est
+
+
+def main():
+    tmp = Path(tempfile.mkdtemp())
+    ref, est = big_pair(tmp)
+    epa_s = timed(["epa", "eval", str(tmp / "ref.txt"), str(tmp / "est.txt"), "--out", str(tmp / "o")])
+    print(f"epa eval, 100k poses: {epa_s:.2f} s")
+    if "--skip-evo" not in sys.argv:
+        evo_s = timed(["evo_ape", "tum", str(tmp / "ref.txt"), str(tmp / "est.txt"), "-a"])
+        evo_s += timed(["evo_rpe", "tum", str(tmp / "ref.txt"), str(tmp / "est.txt"), "-a", "--delta", "8",
+                        "--delta_unit", "m", "--all_pairs"])
+        print(f"evo_ape + evo_rpe (8 m, all pairs): {evo_s:.2f} s  -> speed-up {evo_s / epa_s:.1f}x")
+    cfg = settings.defaults()
+    t0 = time.perf_counter()
+    off = sync.estimate_offset(ref, est)
+    ir, ie = sync.associate(ref, est, offset=off.offset)
+    calibration.solve(ref.select(ir), est.select(ie))
+    steps = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    pipeline.metrics_stage(ref.select(ir), est.select(ie), cfg)
+    print(f"Steps 1+2: {steps:.2f} s; metrics stage: {time.perf_counter() - t0:.2f} s (same 100k pair)")
+    data = Path(__file__).resolve().parents[2] / "shared/data"
+    if data.is_dir():
+        cmd = ["/usr/bin/time", "-f", "%e s %M KB", "epa", "eval",
+               str(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt"),
+               str(data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv"), "--out", str(tmp / "e")]
+        out = subprocess.run(cmd, capture_output=True, text=True)
+        print("epa eval, one EuRoC case (MH_01 OpenVINS):", out.stderr.strip().splitlines()[-1])
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,85 @@
+import numpy as np
+import pytest
+
+from epa import drift, io, pipeline, settings
+
+CFG = settings.defaults()
+
+
+def run(t, ape, dist=None):
+    """Drift stage on a synthetic case: straight line at 2 m/s, APE series given, rotation exact."""
+    from epa.metrics import time_pairs
+
+    dist = 2.0 * (t - t[0]) if dist is None else dist
+    i, j = time_pairs(t)
+    # a 1 s pair's translation error is the change of the APE vector; along one axis it is the difference
+    tables = {"ape": {"t": t, "dist_m": dist, "trans_m": ape, "rot_deg": 0 * ape},
+              "rpe_segments": {k: np.zeros(0) for k in ("length_m", "i", "j", "rot_deg", "trans_m")},
+              "rpe_time": {"i": i, "j": j, "t": t[i], "rot_deg": 0 * i, "trans_m": np.abs(ape[j] - ape[i])}}
+    return pipeline.drift_stage(tables, CFG)
+
+
+T = np.arange(0, 100, 0.05)
+
+
+def test_constant_bias_is_not_drift():
+    s, art = run(T, np.full(len(T), 6.0))
+    assert s["success_rate_distance_pct"] == 100 and s["n_fail_segments"] == 0 and not s["global_failed"]
+
+
+def test_jump_starts_a_fail_segment_at_its_time():
+    ape = np.where(T >= 40, 10.0, 0.1)
+    s, art = run(T, ape)
+    assert s["n_fail_segments"] >= 1
+    assert abs(art["fail_segments"]["t_start"][0] - 39.0) <= 1.0
+
+
+def test_divergence_success_rate_equals_valid_fraction():
+    ape = 0.1 + np.where(T > 70, 3.0 * (T - 70) ** 2, 0.0)
+    s, _ = run(T, ape)
+    assert s["success_rate_distance_pct"] == pytest.approx(70.0, abs=1.0)
+    assert s["success_rate_time_pct"] == pytest.approx(70.0, abs=1.0)
+
+
+def test_global_gate_makes_drift_valid_nan():
+    s, _ = run(T, np.full(len(T), 45.0))
+    assert s["global_failed"] and "globally failed" in s["status"]
+    assert s["success_rate_distance_pct"] == 100  # still reported
+    assert np.isnan(s["drift_valid"]["ate"]["trans_m"]["rmse"])
+
+
+def test_knee_threshold_cases():
+    rng = np.random.default_rng(0)
+    assert drift.knee_threshold(rng.uniform(0, 0.5, 500))["threshold_m"] == 5.0
+    assert drift.knee_threshold(rng.uniform(100, 200, 500))["threshold_m"] == 30.0
+    tail = np.concatenate([rng.uniform(0, 1, 900), np.linspace(8, 20, 90), [1e4] * 10])
+    k = drift.knee_threshold(tail)
+    assert k["mode"] == "knee" and 5 <= k["threshold_m"] < 30 and k["raw_m"] < 1e4  # outlier trimmed
+
+
+def _case(gt, est, **kw):
+    cfg = settings.defaults()
+    ref, e, _ = pipeline.load(gt, est, {**cfg, "load": {**cfg["load"], **kw}})
+    r, m, sync_info, _ = pipeline.sync_stage(ref, e, cfg)
+    c, ci = pipeline.calibrate_stage(r, m, cfg, sync_info)
+    _, a, ai = pipeline.align_stage(r, c, cfg, ci)
+    _, tables = pipeline.metrics_stage(r, a, cfg)
+    return pipeline.drift_stage(tables, cfg)[0]
+
+
+def test_real_openvins_mh04_divergence_is_flagged(data):
+    s = _case(data / "rpng_open_vins/ov_data/euroc_mav/MH_04_difficult.txt", data / "qmy0519_open_vins-master/traj_estimate.txt")
+    assert s["global_failed"] and s["n_fail_segments"] >= 1
+    assert s["success_rate_distance_pct"] < 30
+
+
+@pytest.mark.parametrize("gt,est", [
+    ("rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt", "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv"),
+    ("rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt", "Gaiyh14_ORBSLAM3-EVO/f_dataset-MH01_monoi.txt"),
+    ("rpng_open_vins/ov_data/euroc_mav/MH_03_medium.txt", "uzh-rpg_rpg_trajectory_evaluation/results/euroc_mono_stereo/laptop/vio_stereo/laptop_vio_stereo_MH_03/stamped_traj_estimate.txt"),
+    ("MichaelGrupp_evo/test/data/KITTI_00_gt.txt", "MichaelGrupp_evo/test/data/KITTI_00_ORB.txt"),
+    ("MichaelGrupp_evo/test/data/KITTI_00_gt.txt", "MichaelGrupp_evo/test/data/KITTI_00_SPTAM.txt"),
+])
+def test_healthy_real_estimates_keep_95_percent(data, gt, est):
+    s = _case(data / gt, data / est)
+    assert s["success_rate_distance_pct"] >= 95 and not s["global_failed"]

@@ -1,0 +1,87 @@
+"""Steps 1-3 on simulated motion with known offset, extrinsic and scale, including degenerate motion."""
+import numpy as np
+import pytest
+
+from epa import alignment, calibration, geometry, simulate, sync
+from epa.trajectory import Trajectory
+
+
+def case(seq="handheld_office", offset=0.037, rot=(0.3, -1.1, 0.7), trans=(0.1, -0.05, 0.03), scale=1.0, rate=20.0,
+         noise=0.0, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, 100, 1 / 200)
+    r, p = simulate.truth_pose(seq, t)
+    ref = Trajectory.from_rp(t, r, p)
+    te = np.arange(1, 99, 1 / rate)
+    re, pe = simulate.truth_pose(seq, te + offset)
+    rx, tx = geometry.so3_exp(np.array(rot)), np.array(trans)
+    rc = re @ rx
+    pc = pe + np.einsum("nab,b->na", re, tx) + rng.normal(0, noise, (len(te), 3))
+    world = geometry.rot_z(0.8)
+    est = Trajectory.from_rp(te, world @ rc, (pc @ world.T + [3, -2, 1]) / scale)
+    return ref, est, rx, tx
+
+
+def test_step1_absolute_offset_on_20hz_simulation():
+    # Rich-motion sequences (drone, handheld). The slow, yaw-only vehicle sequence is a known
+    # shortfall (up to ~20 ms there), reported in the README.
+    errors = []
+    for seq in ("drone_figure8", "handheld_office"):
+        for offset in (-0.9, -0.42, 0.037, 0.25, 0.8):
+            ref, est, _, _ = case(seq, offset)
+            out = sync.estimate_offset(ref, est)
+            assert out.used, out.reason
+            errors.append(abs(out.offset - offset))
+    assert np.median(errors) <= 0.002 and np.max(errors) <= 0.005, errors
+
+
+def test_step2_recovers_extrinsic_and_scale():
+    ref, est, rx, tx = case(scale=3.7, noise=0.002)
+    ir, ie = sync.associate(ref, est, offset=0.037)
+    ext = calibration.solve(ref.select(ir), est.select(ie), scale=True)
+    assert ext.trusted
+    assert np.degrees(geometry.rotation_angle(ext.R.T @ rx)) < 0.05
+    assert np.linalg.norm(ext.t - tx) < 0.005 and abs(ext.scale - 3.7) / 3.7 < 1e-3
+
+
+def _planar(yaw_only=True, rotate=True):
+    t = np.arange(0, 100, 0.05)
+    yaw = 0.8 * np.sin(t / 3) if rotate else 0 * t
+    r = np.stack([geometry.rot_z(y) for y in yaw])
+    p = np.c_[np.cos(t / 10) * 20, np.sin(t / 7) * 15, 0 * t]
+    return Trajectory.from_rp(t, r, p)
+
+
+def test_step2_planar_motion_reports_unobservable_z():
+    ref = _planar()
+    rx, tx = geometry.so3_exp(np.array([0.0, 0.0, 0.4])), np.array([0.2, 0.1, 0.3])
+    est = Trajectory.from_rp(ref.t, ref.r @ rx, ref.p + np.einsum("nab,b->na", ref.r, tx))
+    ext = calibration.solve(ref, est)
+    dirs = np.array(ext.info["translation_unobservable_directions"])
+    assert len(dirs) == 1 and abs(abs(dirs[0][2]) - 1) < 1e-6
+    assert ext.t[2] == pytest.approx(0, abs=1e-9)  # reported and left at zero, not fitted to noise
+    assert "rotation ill-conditioned" in ext.reason and not ext.trusted  # one rotation axis only
+
+
+def test_step2_pure_translation_is_untrusted():
+    ref = _planar(rotate=False)
+    ext = calibration.solve(ref, ref)
+    assert not ext.trusted and "too little rotation" in ext.reason
+
+
+def test_umeyama_recovers_random_sim3(rng):
+    src = rng.normal(size=(50, 3)) * 10
+    r = geometry.so3_exp(rng.normal(size=3))
+    dst = 2.5 * src @ r.T + [1, 2, 3]
+    fit = alignment.umeyama(src, dst, with_scale=True)
+    assert np.allclose(fit.R, r, atol=1e-12) and abs(fit.s - 2.5) < 1e-12 and np.allclose(fit.t, [1, 2, 3], atol=1e-10)
+
+
+def test_posyaw_leaves_roll_and_pitch_alone():
+    ref, est, _, _ = case(rot=(0, 0, 0), trans=(0, 0, 0), offset=0.0)
+    ir, ie = sync.associate(ref, est)
+    r, e = ref.select(ir), est.select(ie)
+    fit = alignment.fit(r, e, method="posyaw")
+    assert np.allclose(fit.R[2], [0, 0, 1]) and np.degrees(np.arctan2(fit.R[1, 0], fit.R[0, 0])) == pytest.approx(-np.degrees(0.8), abs=1e-6)
+    a = fit.apply(e)
+    assert np.allclose(a.p, r.p, atol=1e-6)
