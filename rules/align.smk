@@ -1,17 +1,17 @@
 # Step 3: world-frame alignment.
 rule align:
     input:
-        pairs=CASE + "/04_calibrate/pairs.csv",
-        calibrate=CASE + "/04_calibrate/calibrate.json",
+        pairs=f"{CASE}/04_calibrate/pairs.csv",
+        calibrate=f"{CASE}/04_calibrate/calibrate.json",
     output:
-        pairs=CASE + "/05_align/pairs.csv",
-        aligned=CASE + "/05_align/aligned.tum",
-        transform=CASE + "/05_align/transform.json",
+        pairs=f"{CASE}/05_align/pairs.csv",
+        aligned=f"{CASE}/05_align/aligned.tum",
+        transform=f"{CASE}/05_align/transform.json",
     params:
         cfg={"mode": EPA["mode"], "align": EPA["align"]},
         version=EPA_VERSION,
     log:
-        CASE + "/logs/align.log",
+        f"{CASE}/logs/align.log",
     conda:
         "../envs/epica.yaml"
     script:

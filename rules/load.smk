@@ -3,14 +3,14 @@ rule load:
         truth=lambda wc: str(TRUTH[wc.dataset]),
         estimate=lambda wc: ESTIMATES[f"{wc.algorithm}/{wc.dataset}/{wc.run}"],
     output:
-        ref=CASE + "/01_load/ref.tum",
-        est=CASE + "/01_load/est.tum",
-        info=CASE + "/01_load/load.json",
+        ref=f"{CASE}/01_load/ref.tum",
+        est=f"{CASE}/01_load/est.tum",
+        info=f"{CASE}/01_load/load.json",
     params:
         cfg={"load": EPA["load"]},
         version=EPA_VERSION,
     log:
-        CASE + "/logs/load.log",
+        f"{CASE}/logs/load.log",
     conda:
         "../envs/epica.yaml"
     script:
