@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa.metrics import stats
+from epa.metrics import segment_key, stats
 
 
 def thresholds(settings: dict, ref_t: np.ndarray, ref_dist: np.ndarray, time_pairs) -> dict:
@@ -115,8 +115,11 @@ def pair_valid(valid_interval: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.n
     return (bad[j] - bad[i]) == 0
 
 
-def valid_metrics(det: dict, ape_trans, ape_rot, seg: dict, tpairs: dict, segments) -> dict:
-    """Drift-valid ATE (poses touching a valid interval) and RPE / drift rate / 1 s RPE over valid pairs."""
+def valid_metrics(det: dict, ape_trans, ape_rot, seg: dict, tpairs: dict, segments) -> tuple[dict, np.ndarray, np.ndarray]:
+    """Drift-valid ATE (poses touching a valid interval) and RPE / drift rate / 1 s RPE over valid pairs.
+
+    Returns the metrics and the validity of each segment pair and each time pair (all False when
+    the case is globally failed or has no valid path)."""
     nan_all = det["global_failed"] or not (det["success_rate_distance_pct"] > 0)
     viv = det["valid_interval"]
     touch = np.zeros(len(ape_trans), bool)
@@ -126,7 +129,7 @@ def valid_metrics(det: dict, ape_trans, ape_rot, seg: dict, tpairs: dict, segmen
            "rpe_distance": {}, "drift_rate_pct": {}}
     sv = pair_valid(viv, seg["i"].astype(int), seg["j"].astype(int)) if len(seg["i"]) else np.zeros(0, bool)
     for length in segments:
-        key = f"{float(length):g}"
+        key = segment_key(length)
         sel = sv & (seg["length_m"] == float(length))
         out["rpe_distance"][key] = {"trans_m": stats(seg["trans_m"][sel]), "rot_deg": stats(seg["rot_deg"][sel])}
         out["drift_rate_pct"][key] = float(np.mean(seg["trans_m"][sel] / length) * 100) if sel.any() else np.nan

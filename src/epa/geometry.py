@@ -105,6 +105,8 @@ def relative_errors(r_ref, p_ref, r_est, p_est, i, j):
 
     Returns (rotation angle in degrees, translation norm in metres) for each pair.
     """
+    if len(i) == 0:
+        return np.zeros(0), np.zeros(0)
     rq, tq = relative_poses(r_ref, p_ref, i, j)
     rp, tp = relative_poses(r_est, p_est, i, j)
     rq_t = np.swapaxes(rq, -1, -2)

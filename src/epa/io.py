@@ -45,6 +45,12 @@ def _split(line: str) -> list[str]:
     return line.replace(",", " ").replace(";", " ").split()
 
 
+def _header_names(line: str) -> list[str]:
+    """Column names of a header line: comma-separated if it has commas, else whitespace-separated."""
+    body = line.lstrip("#%").strip()
+    return [h.strip() for h in (body.split(",") if "," in body else body.split()) if h.strip()]
+
+
 def _is_number(tok: str) -> bool:
     try:
         float(tok)
@@ -71,11 +77,10 @@ def _read_table(path: Path) -> _Table:
             continue
         if s.startswith("#") or s.startswith("%"):
             if not data:  # the last comment before the data may name the columns
-                header = [h.strip() for h in re.split(r"[,\s]\s*", s.lstrip("#%").strip()) if h.strip()] \
-                    if "," not in s else [h.strip() for h in s.lstrip("#%").split(",")]
+                header = _header_names(s)
             continue
-        if not data and not numbers and not _is_number(_split(s)[0]):
-            header = [h.strip() for h in (s.split(",") if "," in s else s.split())]
+        if not data and not _is_number(_split(s)[0]):  # an uncommented header line
+            header = _header_names(s)
             continue
         data.append(s)
         numbers.append(no)

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from epa import io
+from epa.metrics import segment_key
 from epa.workflow import failure_of
 
 RULE_SHORT = "=" * 38
@@ -76,31 +77,25 @@ def _nanmean(values) -> float:
 
 
 class _Cell:
-    """A table cell: missing (no successful run), or numbers that may be nan."""
+    """A table cell: missing (None: no successful run), or numbers that may be nan.
+    ``pair`` cells hold rot / trans; the others a single number."""
 
-    def __init__(self, values=None):
-        self.values = values
+    def __init__(self, values=None, pair: bool = True):
+        self.values, self.pair = values, pair
 
     def fmt(self, decimals: int) -> str:
         if self.values is None:
-            return "- / -" if self._pair else "-"
+            return "- / -" if self.pair else "-"
         return " / ".join("nan" if np.isnan(v) else f"{v:.{decimals}f}" for v in self.values)
 
-    _pair = True
-
-
-def _cell(values, pair=True) -> _Cell:
-    c = _Cell(values)
-    c._pair = pair
-    return c
 
 
 def _average(cells: list[_Cell], pair=True) -> _Cell:
     have = [c.values for c in cells if c.values is not None]
     if not have:
-        return _cell(None, pair)
+        return _Cell(None, pair)
     arr = np.array(have, float)
-    return _cell(tuple(_nanmean(arr[:, k]) for k in range(arr.shape[1])), pair)
+    return _Cell(tuple(_nanmean(arr[:, k]) for k in range(arr.shape[1])), pair)
 
 
 # ----------------------------------------------------------------------------- per-cell values
@@ -110,9 +105,9 @@ def _ok_runs(grid, alg, ds=None):
 
 def _ate(runs, valid: bool) -> _Cell:
     if not runs:
-        return _cell(None)
+        return _Cell(None)
     src = [(c.drift["drift_valid"]["ate"] if valid else c.metrics["ate"]) for c in runs]
-    return _cell((_nanmean(s["rot_deg"]["rmse"] for s in src), _nanmean(s["trans_m"]["rmse"] for s in src)))
+    return _Cell((_nanmean(s["rot_deg"]["rmse"] for s in src), _nanmean(s["trans_m"]["rmse"] for s in src)))
 
 
 def _pooled(runs, table: str, valid: bool, length=None):
@@ -131,20 +126,20 @@ def _pooled(runs, table: str, valid: bool, length=None):
 
 def _mean_pair(runs, table, valid, length=None) -> _Cell:
     if not runs:
-        return _cell(None)
+        return _Cell(None)
     rot, trans = _pooled(runs, table, valid, length)
     if _all_nan_valid(runs, valid) or rot.size == 0:
-        return _cell((np.nan, np.nan))
-    return _cell((float(rot.mean()), float(trans.mean())))
+        return _Cell((np.nan, np.nan))
+    return _Cell((float(rot.mean()), float(trans.mean())))
 
 
 def _drift_rate(runs, valid, length) -> _Cell:
     if not runs:
-        return _cell(None, pair=False)
+        return _Cell(None, pair=False)
     _, trans = _pooled(runs, "segments", valid, length)
     if _all_nan_valid(runs, valid) or trans.size == 0:
-        return _cell((np.nan,), pair=False)
-    return _cell((float(np.mean(trans / float(length)) * 100),), pair=False)
+        return _Cell((np.nan,), pair=False)
+    return _Cell((float(np.mean(trans / float(length)) * 100),), pair=False)
 
 
 def _all_nan_valid(runs, valid):
@@ -153,8 +148,8 @@ def _all_nan_valid(runs, valid):
 
 def _success(runs) -> _Cell:
     if not runs:
-        return _cell(None, pair=False)
-    return _cell((_nanmean(c.drift["success_rate_distance_pct"] for c in runs),), pair=False)
+        return _Cell(None, pair=False)
+    return _Cell((_nanmean(c.drift["success_rate_distance_pct"] for c in runs),), pair=False)
 
 
 # ----------------------------------------------------------------------------- rendering
@@ -169,7 +164,7 @@ def build_tables(grid: list[CaseResult], segments, decimals: int = 3) -> list[tu
     """(file name, title, latex row lines, number of columns) for every table, in report order."""
     algs = sorted({c.algorithm for c in grid})
     datasets = sorted({c.dataset for c in grid})
-    seg_labels = [f"{float(s):g}m" for s in segments]
+    seg_labels = [f"{segment_key(s)}m" for s in segments]
     out = []
 
     def per_dataset(name, title, fn, pair=True, dec=decimals):
@@ -239,10 +234,10 @@ def report_text(grid: list[CaseResult], segments, decimals: int = 3) -> str:
                 for s in segments:
                     rot, trans = _pooled(runs, "segments", False, s)
                     if rot.size:
-                        lines.append(f"        RPE: seg {float(s):g} - median_ori = {np.median(rot):.4f} | "
+                        lines.append(f"        RPE: seg {segment_key(s)} - median_ori = {np.median(rot):.4f} | "
                                      f"median_pos = {np.median(trans):.4f} ({rot.size} samples)")
                     else:
-                        lines.append(f"        RPE: seg {float(s):g} - no segment this long (0 samples)")
+                        lines.append(f"        RPE: seg {segment_key(s)} - no segment this long (0 samples)")
                 rot, trans = _pooled(runs, "time", False)
                 if rot.size:
                     lines.append(f"        RPE time 1s - mean_ori = {rot.mean():.3f} | mean_pos = {trans.mean():.3f}"
@@ -274,7 +269,7 @@ SUMMARY_FIXED = ["algorithm", "dataset", "run", "status", "eval_source", "n_matc
 def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict]]:
     seg_cols = []
     for s in segments:
-        L = f"{float(s):g}"
+        L = segment_key(s)
         seg_cols += [f"rpe_{L}m_trans_mean_m", f"rpe_{L}m_rot_mean_deg", f"drift_rate_{L}m_pct"]
     rows = []
     for c in grid:
@@ -292,12 +287,12 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
                        global_failed=d.get("global_failed"), knee_threshold_m=_stat(d, "knee", "threshold_m"),
                        fail_segments=d.get("n_fail_segments"))
             for s in segments:
-                L = f"{float(s):g}"
+                L = segment_key(s)
                 row[f"rpe_{L}m_trans_mean_m"] = _stat(m, "rpe_distance", L, "trans_m", "mean")
                 row[f"rpe_{L}m_rot_mean_deg"] = _stat(m, "rpe_distance", L, "rot_deg", "mean")
                 row[f"drift_rate_{L}m_pct"] = _stat(m, "drift_rate_pct", L)
         rows.append(row)
-    return SUMMARY_FIXED[:4] + SUMMARY_FIXED[4:] + seg_cols, rows
+    return SUMMARY_FIXED + seg_cols, rows
 
 
 def summary_csv(grid, segments) -> str:
