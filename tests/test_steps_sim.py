@@ -85,3 +85,12 @@ def test_posyaw_leaves_roll_and_pitch_alone():
     assert np.allclose(fit.R[2], [0, 0, 1]) and np.degrees(np.arctan2(fit.R[1, 0], fit.R[0, 0])) == pytest.approx(-np.degrees(0.8), abs=1e-6)
     a = fit.apply(e)
     assert np.allclose(a.p, r.p, atol=1e-6)
+
+
+def test_quaternion_helpers_match_matrix_algebra(rng):
+    a, b = geometry.normalize_quat(rng.normal(size=(200, 4))), geometry.normalize_quat(rng.normal(size=(200, 4)))
+    v = rng.normal(size=(200, 3))
+    ra, rb = geometry.quat_to_rot(a), geometry.quat_to_rot(b)
+    assert np.allclose(geometry.quat_to_rot(geometry.quat_mul(a, b)), ra @ rb, atol=1e-12)
+    assert np.allclose(geometry.quat_rotate(a, v), np.einsum("nab,nb->na", ra, v), atol=1e-12)
+    assert np.allclose(geometry.quat_angle(a), geometry.rotation_angle(ra), atol=1e-12)

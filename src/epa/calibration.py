@@ -59,9 +59,10 @@ def solve(ref: Trajectory, est: Trajectory, *, pair_step: float = 1.0, min_rotat
     info: dict = {"pairs": int(len(i)), "pair_step_s": pair_step}
     if len(i) < min_pairs:
         return Extrinsic(trusted=False, reason=f"only {len(i)} motion pairs ({min_pairs} needed)", info=info)
-    ra, ta = geometry.relative_poses(ref.r, ref.p, i, j)
-    rb, tb = geometry.relative_poses(est.r, est.p, i, j)
-    alpha, beta = geometry.so3_log(ra), geometry.so3_log(rb)
+    qa, ta = geometry.relative_motions(ref.q, ref.p, i, j)
+    qb, tb = geometry.relative_motions(est.q, est.p, i, j)
+    alpha, beta = geometry.quat_log(qa), geometry.quat_log(qb)
+    ra = geometry.quat_to_rot(qa)  # the translation equations need (R_A - I) as matrices
     angle = np.degrees(np.linalg.norm(alpha, axis=1))
     use = angle >= min_rotation_deg
     info["rotation_pairs"] = int(use.sum())
@@ -117,13 +118,18 @@ def _robust_lstsq(m: np.ndarray, b: np.ndarray, max_condition: float):
     k, _, n = m.shape
     keep = np.ones(k, bool)
     for _ in range(2):
-        a = m[keep].reshape(-1, n)
-        y = b[keep].reshape(-1)
-        col = np.linalg.norm(a, axis=0)
+        # The normal matrix (n x n, n = 3 or 4) has the stacked system's singular values squared and
+        # the same right singular vectors: no tall SVD over all 3K rows is needed.
+        ata = np.einsum("kai,kaj->ij", m[keep], m[keep])
+        aty = np.einsum("kai,ka->i", m[keep], b[keep])
+        col = np.sqrt(np.diag(ata))
         col[col == 0] = 1.0
-        u, sv, vt = np.linalg.svd(a / col, full_matrices=False)
+        eig, v = np.linalg.eigh(ata / np.outer(col, col))
+        order = np.argsort(eig)[::-1]
+        sv = np.sqrt(np.clip(eig[order], 0, None))
+        vt = v[:, order].T
         observable = sv >= sv[0] / max_condition
-        coef = (u.T @ y)[observable] / sv[observable]
+        coef = (vt[observable] @ (aty / col)) / sv[observable] ** 2
         x = (vt[observable].T @ coef) / col
         resid = np.linalg.norm(np.einsum("kab,b->ka", m, x) - b, axis=1)
         limit = max(3.0 * np.median(resid[keep]), 1e-3)

@@ -63,13 +63,17 @@ def rot_to_quat(r: np.ndarray) -> np.ndarray:
 
 def rotation_angle(r: np.ndarray) -> np.ndarray:
     """Angle (rad) of rotation matrices, computed via the quaternion (accurate near 0 and pi)."""
-    q = rot_to_quat(r)
-    return 2 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), np.abs(q[..., 3]))
+    return quat_angle(rot_to_quat(r))
 
 
 def so3_log(r: np.ndarray) -> np.ndarray:
     """Rotation vectors (..., 3) of rotation matrices (..., 3, 3)."""
-    q = rot_to_quat(r)
+    return quat_log(rot_to_quat(r))
+
+
+def quat_log(q: np.ndarray) -> np.ndarray:
+    """Rotation vectors (..., 3) of unit quaternions (x, y, z, w)."""
+    q = np.where(q[..., 3:4] < 0, -q, q)  # same rotation, angle in [0, pi]
     v = q[..., :3]
     n = np.linalg.norm(v, axis=-1)
     angle = 2 * np.arctan2(n, q[..., 3])
@@ -94,25 +98,55 @@ def rot_z(yaw: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def relative_poses(r: np.ndarray, p: np.ndarray, i: np.ndarray, j: np.ndarray):
-    """Relative motions T_i^-1 T_j for index arrays i, j: (R_rel (M,3,3), t_rel (M,3))."""
-    ri_t = np.swapaxes(r[i], -1, -2)
-    return ri_t @ r[j], np.einsum("nab,nb->na", ri_t, p[j] - p[i])
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of (..., 4) quaternions (x, y, z, w): R(a) R(b)."""
+    av, aw = a[..., :3], a[..., 3:]
+    bv, bw = b[..., :3], b[..., 3:]
+    return np.concatenate([aw * bv + bw * av + np.cross(av, bv), aw * bw - np.sum(av * bv, axis=-1, keepdims=True)],
+                          axis=-1)
 
 
-def relative_errors(r_ref, p_ref, r_est, p_est, i, j):
+def quat_conj(q: np.ndarray) -> np.ndarray:
+    return q * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def quat_angle(q: np.ndarray) -> np.ndarray:
+    """Rotation angle (rad) of unit quaternions; atan2 keeps small angles accurate."""
+    return 2 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), np.abs(q[..., 3]))
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """R(q) v for (..., 4) unit quaternions and (..., 3) vectors."""
+    u, w = q[..., :3], q[..., 3:]
+    uv = np.cross(u, v)
+    return v + 2 * (w * uv + np.cross(u, uv))
+
+
+def relative_motions(q: np.ndarray, p: np.ndarray, i, j):
+    """Relative motions T_i^-1 T_j for index arrays i, j, as (quaternions (M, 4), translations (M, 3))."""
+    qi_inv = quat_conj(q[i])
+    return quat_mul(qi_inv, q[j]), quat_rotate(qi_inv, p[j] - p[i])
+
+
+def pose_discrepancy(q_ref: np.ndarray, q_est: np.ndarray) -> np.ndarray:
+    """d_k = q_ref,k * conj(q_est,k), i.e. D_k = Q_k P_k^T: computed once per pose, it turns every
+    relative error into one quaternion product per pair (see relative_errors)."""
+    return quat_mul(q_ref, quat_conj(q_est))
+
+
+def relative_errors(d: np.ndarray, p_ref: np.ndarray, p_est: np.ndarray, i, j):
     """Per-pair relative pose error E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j), as in evo and ov_eval.
 
+    With D = Q P^T (``pose_discrepancy``): angle(E) = angle(D_i D_j^T) and
+    |t(E)| = |D_i (p_j - p_i) - (q_j - q_i)|, exact rewrites that gather one quaternion per pair.
     Returns (rotation angle in degrees, translation norm in metres) for each pair.
     """
     if len(i) == 0:
         return np.zeros(0), np.zeros(0)
-    rq, tq = relative_poses(r_ref, p_ref, i, j)
-    rp, tp = relative_poses(r_est, p_est, i, j)
-    rq_t = np.swapaxes(rq, -1, -2)
-    r_err = rq_t @ rp
-    t_err = np.einsum("nab,nb->na", rq_t, tp - tq)
-    return np.degrees(rotation_angle(r_err)), np.linalg.norm(t_err, axis=-1)
+    di = d[i]
+    angle = quat_angle(quat_mul(di, quat_conj(d[j])))
+    t_err = quat_rotate(di, p_est[j] - p_est[i]) - (p_ref[j] - p_ref[i])
+    return np.degrees(angle), np.linalg.norm(t_err, axis=-1)
 
 
 def path_distances(p: np.ndarray) -> np.ndarray:

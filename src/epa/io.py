@@ -12,6 +12,7 @@ import logging
 import os
 import re
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -30,15 +31,28 @@ NS_THRESHOLD = 1e12
 
 # ----------------------------------------------------------------------------- text parsing
 class _Table:
-    """Numeric rows of a text file with the 1-based file line of each row."""
+    """Numeric rows of a text file. The file line of each row and the raw row text are derived
+    only when needed (an error message, the sec.nsec repair), so the common path stays in C."""
 
-    def __init__(self, path: Path, rows: np.ndarray, lines: np.ndarray, header: list[str] | None,
-                 first_tokens: list[str]):
-        self.path, self.rows, self.lines, self.header = path, rows, lines, header
-        self.first_tokens = first_tokens  # raw time tokens, for sec.nsec repair
+    def __init__(self, path: Path, rows: np.ndarray, body: list[str], first_line: int, header: list[str] | None):
+        self.path, self.rows, self.header = path, rows, header
+        self._body, self._first_line = body, first_line  # the file's lines from the first data row on
+
+    def data_lines(self) -> tuple[list[str], list[int]]:
+        """The data rows' text and their 1-based file line numbers (comments and blanks skipped)."""
+        text, numbers = [], []
+        for no, line in enumerate(self._body, start=self._first_line):
+            s = line.strip()
+            if s and s[0] not in "#%":
+                text.append(s)
+                numbers.append(no)
+        return text, numbers
+
+    def line_of(self, row: int) -> int:
+        return self.data_lines()[1][row]
 
     def fail(self, row: int | None, message: str):
-        raise EpaError(message, path=str(self.path), line=None if row is None else int(self.lines[row]))
+        raise EpaError(message, path=str(self.path), line=None if row is None else self.line_of(row))
 
 
 def _split(line: str) -> list[str]:
@@ -70,44 +84,51 @@ def _read_table(path: Path) -> _Table:
         raise EpaError(f"cannot read: {exc.strerror}", path=str(path)) from None
     raw = text.splitlines()
     header: list[str] | None = None
-    data, numbers = [], []
-    for no, line in enumerate(raw, start=1):
+    start = 0
+    for start, line in enumerate(raw):  # leading comments and a header line; the last one names the columns
         s = line.strip()
         if not s:
             continue
-        if s.startswith("#") or s.startswith("%"):
-            if not data:  # the last comment before the data may name the columns
-                header = _header_names(s)
-            continue
-        if not data and not _is_number(_split(s)[0]):  # an uncommented header line
+        if s[0] in "#%" or not _is_number(_split(s)[0]):
             header = _header_names(s)
             continue
-        data.append(s)
-        numbers.append(no)
-    if not data:
-        raise EpaError("no data rows (the file is empty or holds only comments)", path=str(path))
-    lines = np.asarray(numbers)
-    first_tokens = [_split(s)[0] for s in data]
+        break
+    else:
+        start = len(raw)
+    body = raw[start:]
+    tab = _Table(path, np.zeros((0, 0)), body, start + 1, header)
+    first = body[0] if body else ""
+    parse = [line.replace(",", " ").replace(";", " ") for line in body] if ("," in first or ";" in first) else body
     try:
-        rows = np.loadtxt([s.replace(",", " ").replace(";", " ") for s in data], ndmin=2, dtype=float)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
+            # one comment character keeps numpy on its C path; "%" comments are rare, so pay only then
+            comments = ("#", "%") if "%" in text else "#"
+            rows = np.loadtxt(parse, ndmin=2, dtype=float, comments=comments)
     except ValueError:
-        rows = None
-    if rows is None:
-        width = len(_split(data[0]))
-        for k, s in enumerate(data):
-            toks = _split(s)
-            if len(toks) != width:
-                raise EpaError(f"expected {width} columns like the first data row, found {len(toks)}",
-                               path=str(path), line=int(lines[k]))
-            for tok in toks:
-                if not _is_number(tok):
-                    raise EpaError(f"not a number: {tok!r}", path=str(path), line=int(lines[k]))
-        raise EpaError("could not parse the numeric rows", path=str(path))
+        _diagnose(tab)
+    if rows.size == 0:
+        raise EpaError("no data rows (the file is empty or holds only comments)", path=str(path))
     bad = ~np.isfinite(rows)
     if bad.any():
-        k = int(np.argmax(bad.any(axis=1)))
-        raise EpaError("non-finite value (nan or inf)", path=str(path), line=int(lines[k]))
-    return _Table(path, rows, lines, header, first_tokens)
+        tab.fail(int(np.argmax(bad.any(axis=1))), "non-finite value (nan or inf)")
+    tab.rows = rows
+    return tab
+
+
+def _diagnose(tab: _Table):
+    """The numeric parse failed: find the first offending line, slowly, for the error message."""
+    data, numbers = tab.data_lines()
+    width = len(_split(data[0]))
+    for s, no in zip(data, numbers):
+        toks = _split(s)
+        if len(toks) != width:
+            raise EpaError(f"expected {width} columns like the first data row, found {len(toks)}",
+                           path=str(tab.path), line=no)
+        for tok in toks:
+            if not _is_number(tok):
+                raise EpaError(f"not a number: {tok!r}", path=str(tab.path), line=no)
+    raise EpaError("could not parse the numeric rows", path=str(tab.path))
 
 
 # ----------------------------------------------------------------------------- column naming
@@ -176,8 +197,9 @@ def _finish(tab: _Table, t: np.ndarray, p: np.ndarray, q_xyzw: np.ndarray, *, ti
 
 def _sec_nsec(tab: _Table) -> np.ndarray:
     """Stamps written as sec.nsec with nsec not zero-padded (e.g. OKVIS): sec + int(frac)/1e9."""
-    out = np.empty(len(tab.first_tokens))
-    for k, tok in enumerate(tab.first_tokens):
+    tokens = [_split(line)[0] for line in tab.data_lines()[0]]
+    out = np.empty(len(tokens))
+    for k, tok in enumerate(tokens):
         sec, _, frac = tok.partition(".")
         if not sec.isdigit() or (frac and not frac.isdigit()):
             tab.fail(k, f"timestamp {tok!r} is not of the form sec.nsec")

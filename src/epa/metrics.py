@@ -107,12 +107,10 @@ def segment_key(length) -> str:
     return f"{float(length):g}"
 
 
-def ape(ref: Trajectory, est: Trajectory, r_ref=None, r_est=None) -> tuple[np.ndarray, np.ndarray]:
+def ape(ref: Trajectory, est: Trajectory, d: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per-pose translation error (m) and rotation error (deg) of aligned, matched poses."""
-    r_ref = ref.r if r_ref is None else r_ref
-    r_est = est.r if r_est is None else r_est
-    trans = np.linalg.norm(est.p - ref.p, axis=1)
-    return trans, np.degrees(geometry.rotation_angle(np.swapaxes(r_ref, -1, -2) @ r_est))
+    d = geometry.pose_discrepancy(ref.q, est.q) if d is None else d
+    return np.linalg.norm(est.p - ref.p, axis=1), np.degrees(geometry.quat_angle(d))
 
 
 def evaluate(ref: Trajectory, est: Trajectory, *, segments=(8, 16, 24, 32, 40, 48), segment_tol: float = 0.5,
@@ -120,8 +118,8 @@ def evaluate(ref: Trajectory, est: Trajectory, *, segments=(8, 16, 24, 32, 40, 4
     """All metrics of one case. Returns (summary dict for metrics.json, per-pose/per-pair tables)."""
     if len(ref) != len(est):
         raise EpaError("reference and estimate must be matched pose for pose")
-    r_ref, r_est = ref.r, est.r  # rotation matrices once, shared by every metric below
-    trans, rot = ape(ref, est, r_ref, r_est)
+    d = geometry.pose_discrepancy(ref.q, est.q)  # once, shared by every metric below
+    trans, rot = ape(ref, est, d)
     dist = geometry.path_distances(ref.p)
     summary = {"n_matched": len(ref), "ref_length_m": float(dist[-1]) if len(dist) else 0.0,
                "duration_s": float(ref.t[-1] - ref.t[0]),
@@ -132,7 +130,7 @@ def evaluate(ref: Trajectory, est: Trajectory, *, segments=(8, 16, 24, 32, 40, 4
     summary["rpe_distance"], summary["drift_rate_pct"] = {}, {}
     for length in segments:
         i, j = segment_pairs(dist, float(length), segment_tol)
-        er, et = geometry.relative_errors(r_ref, ref.p, r_est, est.p, i, j)
+        er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
         key = segment_key(length)
         summary["rpe_distance"][key] = {"trans_m": stats(et), "rot_deg": stats(er)}
         summary["drift_rate_pct"][key] = float(np.mean(et / length) * 100) if len(et) else np.nan
@@ -141,7 +139,7 @@ def evaluate(ref: Trajectory, est: Trajectory, *, segments=(8, 16, 24, 32, 40, 4
     tables["rpe_segments"] = {k: np.concatenate(v) if v else np.zeros(0) for k, v in seg_rows.items()}
 
     i, j = time_pairs(ref.t, time_delta, time_tol)
-    er, et = geometry.relative_errors(r_ref, ref.p, r_est, est.p, i, j)
+    er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
     summary["rpe_time_1s"] = {"delta_s": time_delta, "trans_m": stats(et), "rot_deg": stats(er)}
     tables["rpe_time"] = {"i": i, "j": j, "t": ref.t[i], "rot_deg": er, "trans_m": et}
 
@@ -150,7 +148,7 @@ def evaluate(ref: Trajectory, est: Trajectory, *, segments=(8, 16, 24, 32, 40, 4
         pairs_from = ref if spec.get("pairs_from", "est") == "ref" else est
         i, j = evo_pairs(pairs_from, spec["delta"], spec["unit"], all_pairs=spec.get("all_pairs", False),
                          rel_tol=spec.get("rel_tol", 0.1))
-        er, et = geometry.relative_errors(r_ref, ref.p, r_est, est.p, i, j)
+        er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
         summary["rpe"].append({**spec, "trans_m": stats(et), "rot_deg": stats(er)})
     return summary, tables
 

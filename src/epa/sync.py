@@ -87,11 +87,10 @@ def associate(ref: Trajectory, est: Trajectory, *, policy: str = "ov_eval", max_
 # ----------------------------------------------------------------------------- Step 1
 def angular_speed(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     """|log(R_i^T R_{i+1})| / dt, stamped at the midpoints (seed 004)."""
-    r = traj.r
     dt = np.diff(traj.t)
     i = np.arange(len(traj) - 1)
-    rel, _ = geometry.relative_poses(r, traj.p, i, i + 1)
-    w = geometry.rotation_angle(rel) / dt
+    rel, _ = geometry.relative_motions(traj.q, traj.p, i, i + 1)
+    w = geometry.quat_angle(rel) / dt
     return traj.t[:-1] + dt / 2, w
 
 
@@ -111,6 +110,11 @@ class OffsetEstimate:
 
     def to_dict(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if not k.startswith("curve_")}
+
+
+def _span(mask: np.ndarray) -> tuple[int, int]:
+    idx = np.flatnonzero(mask)
+    return int(idx[0]), int(idx[-1])
 
 
 def _clip_spikes(w: np.ndarray) -> np.ndarray:
@@ -169,8 +173,9 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     lags = np.arange(-kmax, kmax + 1)
     corr = full[lags % nfft]
     # Normalise by the overlap so a lag that slides part of a signal off the other is not favoured.
-    overlap = np.fft.irfft(np.fft.rfft(in_a.astype(float), nfft) * np.conj(np.fft.rfft(in_b.astype(float), nfft)), nfft)
-    ov = overlap[lags % nfft]
+    # Both supports are index intervals, so the overlap at lag k is |[b0, b1] ∩ [a0 - k, a1 - k]|.
+    (a0, a1), (b0, b1) = _span(in_a), _span(in_b)
+    ov = np.maximum(0, np.minimum(b1, a1 - lags) - np.maximum(b0, a0 - lags) + 1).astype(float)
     full_ov = max(ov.max(), 1.0)
     corr = corr * np.sqrt(full_ov / np.maximum(ov, 0.1 * full_ov))
     k = int(np.argmax(corr))
