@@ -25,6 +25,7 @@ T = np.arange(0, 100, 0.05)
 def test_constant_bias_is_not_drift():
     s, art = run(T, np.full(len(T), 6.0))
     assert s["success_rate_distance_pct"] == 100 and s["n_fail_segments"] == 0 and not s["global_failed"]
+    assert s["diverged_at_s"] is None
 
 
 def test_jump_starts_a_fail_segment_at_its_time():
@@ -37,6 +38,7 @@ def test_jump_starts_a_fail_segment_at_its_time():
 def test_divergence_success_rate_equals_valid_fraction():
     ape = 0.1 + np.where(T > 70, 3.0 * (T - 70) ** 2, 0.0)
     s, _ = run(T, ape)
+    assert abs(s["diverged_at_s"] - 70) <= 1.0
     assert s["success_rate_distance_pct"] == pytest.approx(70.0, abs=1.0)
     assert s["success_rate_time_pct"] == pytest.approx(70.0, abs=1.0)
 
@@ -71,6 +73,8 @@ def test_real_openvins_mh04_divergence_is_flagged(data):
     s = _case(data / "rpng_open_vins/ov_data/euroc_mav/MH_04_difficult.txt", data / "qmy0519_open_vins-master/traj_estimate.txt")
     assert s["global_failed"] and s["n_fail_segments"] >= 1
     assert s["success_rate_distance_pct"] < 30
+    # 1 s RPE passes 2 m at ~3.4 s and keeps growing; the run leaves a 50 m radius at 9.6 s (SOURCES.md)
+    assert 2.0 <= s["diverged_at_s"] <= 9.6
 
 
 @pytest.mark.parametrize("gt,est", [

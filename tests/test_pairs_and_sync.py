@@ -100,3 +100,15 @@ def test_step1_falls_back_without_motion():
     still = Trajectory(t, np.c_[t, 0 * t, 0 * t], np.tile([0, 0, 0, 1.0], (len(t), 1)))
     out = sync.estimate_offset(still, still.shifted(0.3), fallback=0.01)
     assert not out.used and out.offset == 0.01 and "too little rotational motion" in out.reason
+
+
+def test_step1_refuses_an_ambiguous_periodic_peak():
+    from epa import geometry
+    from epa.trajectory import Trajectory
+
+    t = np.arange(0, 60, 0.005)
+    yaw = 0.5 * np.sin(2 * np.pi * t / 0.8)  # every 0.8 s the motion repeats exactly
+    traj = Trajectory.from_rp(t, np.stack([geometry.rot_z(y) for y in yaw]), np.zeros((len(t), 3)))
+    est = traj.select(np.arange(0, len(t), 10)).shifted(-0.3)
+    out = sync.estimate_offset(traj, est, fallback=0.0)
+    assert not out.used and out.offset == 0.0 and "ambiguous" in out.reason

@@ -128,6 +128,9 @@ def drift_stage(tables: dict, cfg: dict):
                "success_rate_time_pct": det["success_rate_time_pct"], "global_failed": det["global_failed"],
                "ape_p5_m": det["ape_p5_m"], "knee": det["knee"], "n_fail_segments": int(len(fs["index_start"])),
                "first_fail_t": float(fs["t_start"][0] - ape["t"][0]) if len(fs["t_start"]) else None,
+               # a fail segment that reaches the last pose: the run never recovered from there
+               "diverged_at_s": (float(fs["t_start"][-1] - ape["t"][0])
+                                 if len(fs["t_start"]) and fs["index_end"][-1] == len(ape["t"]) - 1 else None),
                "drift_valid": valid}
     if det["global_failed"]:
         summary["status"] = (f"globally failed: 5th percentile APE {det['ape_p5_m']:.3g} m >"

@@ -85,13 +85,12 @@ def associate(ref: Trajectory, est: Trajectory, *, policy: str = "ov_eval", max_
 
 
 # ----------------------------------------------------------------------------- Step 1
-def angular_speed(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
-    """|log(R_i^T R_{i+1})| / dt, stamped at the midpoints (seed 004)."""
-    dt = np.diff(traj.t)
-    i = np.arange(len(traj) - 1)
-    rel, _ = geometry.relative_motions(traj.q, traj.p, i, i + 1)
-    w = geometry.quat_angle(rel) / dt
-    return traj.t[:-1] + dt / 2, w
+def angular_speed(traj: Trajectory, step: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """|log(R_i^T R_{i+step})| / dt, stamped at the midpoints (seed 004; step 1 = consecutive poses)."""
+    i = np.arange(len(traj) - step)
+    dt = traj.t[i + step] - traj.t[i]
+    rel, _ = geometry.relative_motions(traj.q, traj.p, i, i + step)
+    return traj.t[i] + dt / 2, geometry.quat_angle(rel) / dt
 
 
 @dataclass
@@ -117,6 +116,13 @@ def _span(mask: np.ndarray) -> tuple[int, int]:
     return int(idx[0]), int(idx[-1])
 
 
+def _window_sums(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """sum(x[lo:hi + 1]) for every (lo, hi), clipped to the array."""
+    c = np.concatenate([[0.0], np.cumsum(x)])
+    n = len(x)
+    return c[np.clip(hi + 1, 0, n)] - c[np.clip(lo, 0, n)]
+
+
 def _clip_spikes(w: np.ndarray) -> np.ndarray:
     # Initialisation jumps (identity placeholder poses, resets) give one huge sample that would
     # dominate the correlation; cap at a robust multiple of the typical speed.
@@ -138,8 +144,11 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
 
     if len(ref) < 4 or len(est) < 4:
         return fail("too few poses for a correlation")
-    t_a, w_a = angular_speed(ref)
-    t_b, w_b = angular_speed(est)
+    # The coarser trajectory only sees chord rates over its own sample interval: measure the finer
+    # one over the same interval (the magnitude of a mean rate is not the mean of magnitudes).
+    dt_ref, dt_est = np.median(np.diff(ref.t)), np.median(np.diff(est.t))
+    t_a, w_a = angular_speed(ref, max(1, int(round(dt_est / dt_ref))))
+    t_b, w_b = angular_speed(est, max(1, int(round(dt_ref / dt_est))))
     motion_a, motion_b = float(np.std(w_a)), float(np.std(w_b))
     if min(motion_a, motion_b) < min_motion:
         return fail(f"too little rotational motion (std of angular speed {min(motion_a, motion_b):.3g}"
@@ -158,12 +167,6 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
 
     a, in_a = on_grid(t_a, w_a)
     b, in_b = on_grid(t_b, w_b)
-    # A 20 Hz estimate sees the mean angular speed over each 50 ms: box-filter both signals to the
-    # coarser sampling interval so they describe the same thing (capped: keyframe logs are irregular).
-    width = int(round(min(max(np.median(np.diff(t_a)), np.median(np.diff(t_b))), 0.1) / dt))
-    if width > 1:
-        kernel = np.ones(width) / width
-        a, b = np.convolve(a, kernel, mode="same"), np.convolve(b, kernel, mode="same")
     n = len(grid)
     nfft = 1 << int(np.ceil(np.log2(2 * n)))
     # corr[k] = sum_m a[m + k] b[m]: the estimate signal shifted later by k samples matches the reference.
@@ -172,12 +175,16 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     kmax = int(round(window / dt))
     lags = np.arange(-kmax, kmax + 1)
     corr = full[lags % nfft]
-    # Normalise by the overlap so a lag that slides part of a signal off the other is not favoured.
-    # Both supports are index intervals, so the overlap at lag k is |[b0, b1] ∩ [a0 - k, a1 - k]|.
+    # Normalised cross-correlation: divide each lag by the energy of both signals under the overlap.
+    # The estimate usually covers only part of the reference, so that slice's energy changes with
+    # the lag and, for slow motion, would tilt the peak by tens of ms. Supports are index intervals:
+    # the energies are prefix-sum differences.
     (a0, a1), (b0, b1) = _span(in_a), _span(in_b)
-    ov = np.maximum(0, np.minimum(b1, a1 - lags) - np.maximum(b0, a0 - lags) + 1).astype(float)
-    full_ov = max(ov.max(), 1.0)
-    corr = corr * np.sqrt(full_ov / np.maximum(ov, 0.1 * full_ov))
+    energy_a = _window_sums(a * a, b0 + lags, b1 + lags)  # a under the shifted support of b
+    energy_b = _window_sums(b * b, a0 - lags, a1 - lags)  # b under the shifted support of a
+    overlap = np.minimum(b1, a1 - lags) - np.maximum(b0, a0 - lags) + 1
+    enough = overlap >= 0.5 * (min(a1 - a0, b1 - b0) + 1)  # at least half the shorter signal overlaps
+    corr = np.where(enough, corr / np.sqrt(np.maximum(energy_a * energy_b, 1e-300)), -1.0)
     k = int(np.argmax(corr))
     peak = float(corr[k])
     frac = 0.0
@@ -187,18 +194,15 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
         if den < 0:
             frac = float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5))
     estimated = float((lags[k] + frac) * dt)
-    # Second-best peak: the highest local maximum outside the main lobe (where corr falls below half).
-    lobe = np.ones(len(corr), bool)
-    left = k
-    while left > 0 and corr[left - 1] < corr[left] and corr[left - 1] > 0.5 * peak:
-        left -= 1
-    right = k
-    while right < len(corr) - 1 and corr[right + 1] < corr[right] and corr[right + 1] > 0.5 * peak:
-        right += 1
-    lobe[max(left - 1, 0):right + 2] = False
-    others = corr[lobe]
-    interior = (others[1:-1] >= others[:-2]) & (others[1:-1] >= others[2:]) if len(others) > 2 else np.zeros(0, bool)
-    second = float(others[1:-1][interior].max()) if interior.any() else 0.0
+    # Second-best peak: the highest local maximum of the whole curve outside the main lobe, the lobe
+    # reaching from the nearest local minimum on the left of the peak to the nearest on the right.
+    inner = corr[1:-1]
+    minima = np.flatnonzero((inner <= corr[:-2]) & (inner <= corr[2:])) + 1
+    maxima = np.flatnonzero((inner >= corr[:-2]) & (inner >= corr[2:])) + 1
+    left = minima[minima < k].max(initial=0)
+    right = minima[minima > k].min(initial=len(corr) - 1)
+    outside = maxima[(maxima < left) | (maxima > right)]
+    second = float(corr[outside].max()) if len(outside) else 0.0
     ratio = peak / second if second > 0 else float("inf")
     curve = dict(curve_lag=lags * dt, curve_corr=corr, peak_corr=peak, peak_ratio=ratio,
                  ref_motion_rad_s=motion_a, est_motion_rad_s=motion_b, dt=dt)

@@ -263,7 +263,7 @@ def tex_document(title: str, rows: list[str], ncols: int) -> str:
 SUMMARY_FIXED = ["algorithm", "dataset", "run", "status", "eval_source", "n_matched", "ate_trans_rmse_m",
                  "ate_rot_rmse_deg", "time_rpe_1s_trans_mean_m", "time_rpe_1s_rot_mean_deg", "time_offset_s",
                  "extrinsic_rot_deg", "extrinsic_trans_m", "success_rate_distance_pct", "success_rate_time_pct",
-                 "global_failed", "knee_threshold_m", "fail_segments"]
+                 "global_failed", "knee_threshold_m", "fail_segments", "diverged_at_s"]
 
 
 def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict]]:
@@ -285,7 +285,7 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
                        success_rate_distance_pct=_num(d.get("success_rate_distance_pct")),
                        success_rate_time_pct=_num(d.get("success_rate_time_pct")),
                        global_failed=d.get("global_failed"), knee_threshold_m=_stat(d, "knee", "threshold_m"),
-                       fail_segments=d.get("n_fail_segments"))
+                       fail_segments=d.get("n_fail_segments"), diverged_at_s=d.get("diverged_at_s"))
             for s in segments:
                 L = segment_key(s)
                 row[f"rpe_{L}m_trans_mean_m"] = _stat(m, "rpe_distance", L, "trans_m", "mean")
