@@ -6,7 +6,7 @@ from epa import drift, io, pipeline, settings
 CFG = settings.defaults()
 
 
-def run(t, ape, dist=None):
+def run(t, ape, dist=None, cfg=CFG):
     """Drift stage on a synthetic case: straight line at 2 m/s, APE series given, rotation exact."""
     from epa.metrics import time_pairs
 
@@ -16,7 +16,7 @@ def run(t, ape, dist=None):
     tables = {"ape": {"t": t, "dist_m": dist, "trans_m": ape, "rot_deg": 0 * ape},
               "rpe_segments": {k: np.zeros(0) for k in ("length_m", "i", "j", "rot_deg", "trans_m")},
               "rpe_time": {"i": i, "j": j, "t": t[i], "rot_deg": 0 * i, "trans_m": np.abs(ape[j] - ape[i])}}
-    return pipeline.drift_stage(tables, CFG)
+    return pipeline.drift_stage(tables, cfg)
 
 
 T = np.arange(0, 100, 0.05)
@@ -87,3 +87,15 @@ def test_real_openvins_mh04_divergence_is_flagged(data):
 def test_healthy_real_estimates_keep_95_percent(data, gt, est):
     s = _case(data / gt, data / est)
     assert s["success_rate_distance_pct"] >= 95 and not s["global_failed"]
+
+
+def test_scale_aware_mode_fires_where_metre_thresholds_cannot():
+    # indoor walk at 0.5 m/s; from 50 s the estimate runs away at 1 m/s: under the fixed 2 m / 5 m
+    # thresholds nothing fires, the scale-aware ones (from the reference's own motion) do
+    t = np.arange(0, 100, 0.05)
+    ape = 0.05 + np.where(t > 50, 1.0 * (t - 50), 0.0)
+    fixed, _ = run(t, ape, dist=0.5 * t)
+    assert fixed["success_rate_time_pct"] == 100
+    aware, _ = run(t, ape, dist=0.5 * t, cfg={**CFG, "drift": {**CFG["drift"], "mode": "scale_aware"}})
+    assert aware["thresholds"]["rpe_trans_max_m"] == pytest.approx(0.5, abs=0.01)
+    assert aware["success_rate_time_pct"] == pytest.approx(50, abs=1.5) and abs(aware["diverged_at_s"] - 50) <= 1
