@@ -25,3 +25,7 @@ rule all:
     input:
         TABLE_OUTPUTS,
     default_target: True
+
+
+onsuccess:
+    print(epa_tables.failure_report(f"{RESULTS}/summary.csv"))

@@ -1,18 +1,17 @@
-# Step 3: world-frame alignment.
+# Step 3: world-frame alignment: 05_align/.
 rule align:
     input:
-        pairs=f"{CASE}/04_calibrate/pairs.csv",
-        calibrate=f"{CASE}/04_calibrate/calibrate.json",
+        upstream=manifest("calibrate"),
     output:
-        pairs=f"{CASE}/05_align/pairs.csv",
-        aligned=f"{CASE}/05_align/aligned.tum",
-        transform=f"{CASE}/05_align/transform.json",
+        manifest=manifest("align"),
     params:
-        cfg={"mode": EPA["mode"], "align": EPA["align"]},
-        version=EPA_VERSION,
+        **stage_params("align"),
     log:
-        f"{CASE}/logs/align.log",
-    conda:
-        "../envs/epica.yaml"
-    script:
-        "../scripts/align.py"
+        batch_log("align"),
+    benchmark:
+        batch_benchmark("align")
+    threads: 1
+    resources:
+        **STAGE_RESOURCES,
+    run:
+        run_stage("align", params, output, log, input.upstream)

@@ -1,17 +1,17 @@
-# Step 2: sensor-to-body extrinsic (hand-eye), or the ov_eval fallback.
+# Step 2 (sensor-to-body extrinsic) and the evaluation plan (the ov_eval fallback): 04_calibrate/.
 rule calibrate:
     input:
-        pairs=f"{CASE}/03_sync/pairs.csv",
-        sync=f"{CASE}/03_sync/sync.json",
+        upstream=manifest("sync"),
     output:
-        pairs=f"{CASE}/04_calibrate/pairs.csv",
-        info=f"{CASE}/04_calibrate/calibrate.json",
+        manifest=manifest("calibrate"),
     params:
-        cfg={"mode": EPA["mode"], "sync": EPA["sync"], "calibrate": EPA["calibrate"]},
-        version=EPA_VERSION,
+        **stage_params("calibrate"),
     log:
-        f"{CASE}/logs/calibrate.log",
-    conda:
-        "../envs/epica.yaml"
-    script:
-        "../scripts/calibrate.py"
+        batch_log("calibrate"),
+    benchmark:
+        batch_benchmark("calibrate")
+    threads: 1
+    resources:
+        **STAGE_RESOURCES,
+    run:
+        run_stage("calibrate", params, output, log, input.upstream)

@@ -1,31 +1,71 @@
-# Parse-time setup: resolved settings (schema defaults filled in) and the discovered cases.
-import os
-
+# Parse-time setup: resolved settings (schema defaults filled in), the discovered cases, their batches.
+# Every stage rule runs one stage for one batch (one case on small grids) in-process; see
+# docs/performance.md for why, with the measurements.
 import epa
-from epa import cases as epa_cases, settings as epa_settings
+from epa import cases as epa_cases, chain as epa_chain, grid as epa_grid, settings as epa_settings, tables as epa_tables
 
 EPA = epa_settings.resolve(config, source="config")
 EPA_VERSION = epa.__version__
 RESULTS = EPA["results_dir"]
-CASE = os.path.join(RESULTS, "cases", "{algorithm}", "{dataset}", "{run}")
 TRUTH, CASES = epa_cases.discover(EPA["truth_dir"], EPA["algorithms_dir"])
-ESTIMATES = {c.key: str(c.estimate) for c in CASES}
-DATASETS = sorted({c.dataset for c in CASES})
-TABLE_NAMES = [
-    "ate", "rpe_distance", "drift_rate", "rpe_time_1s", "success_rate",
-    "valid_ate", "valid_rpe_distance", "valid_drift_rate", "valid_rpe_time_1s",
-]
+CASE_BY_KEY = {c.key: c for c in CASES}
+BATCHES = epa_grid.batches(sorted(CASE_BY_KEY), EPA["grid"]["max_batches"])
 TABLE_OUTPUTS = [f"{RESULTS}/error_comparison.txt", f"{RESULTS}/summary.csv"] + [
-    f"{RESULTS}/tables/{name}.tex" for name in TABLE_NAMES
+    f"{RESULTS}/tables/{name}.tex" for name in epa_tables.TABLE_NAMES
 ]
 
 
 wildcard_constraints:
-    algorithm="[^/]+",
-    dataset="[^/]+",
-    run="[^/]+",
+    batch=".+",
 
 
-def case_files(path):
-    """One path per discovered case, for the tables rule."""
-    return [path.format(algorithm=c.algorithm, dataset=c.dataset, run=c.run) for c in CASES]
+def manifest(stage):
+    """A stage job's declared output: which cases of its batch succeeded (artifacts are per case)."""
+    return f"{RESULTS}/batches/{{batch}}/{stage}.json"
+
+
+def batch_log(stage):
+    return f"{RESULTS}/batches/{{batch}}/logs/{stage}.log"
+
+
+def batch_benchmark(stage):
+    return f"{RESULTS}/batches/{{batch}}/benchmarks/{stage}.tsv"
+
+
+def stage_params(stage):
+    """Everything a stage's result depends on, so a change re-runs exactly what it affects."""
+    if stage == "load":  # only load reads the user's files: a moved file re-runs load onward
+        cases = lambda wc: [
+            {"key": k, "truth": str(CASE_BY_KEY[k].truth), "estimate": str(CASE_BY_KEY[k].estimate)}
+            for k in BATCHES[wc.batch]
+        ]
+    else:
+        cases = lambda wc: BATCHES[wc.batch]
+    return {"cases": cases, "settings": epa_chain.settings_for(stage, EPA), "version": EPA_VERSION}
+
+
+# A stage job's scheduling data: one core; memory and run time grow with the batch.
+STAGE_RESOURCES = {
+    "mem_mb": lambda wc: 1000 + 20 * len(BATCHES[wc.batch]),
+    "runtime": lambda wc: 2 + len(BATCHES[wc.batch]) // 20,
+}
+
+
+def workers():
+    """Worker processes for in-process jobs: the cores Snakemake was given."""
+    try:
+        return max(1, int(workflow.cores))
+    except Exception:  # no --cores (e.g. a remote job): run in the calling thread
+        return 1
+
+
+def run_stage(stage, params, output, log, upstream=None):
+    cases = params.cases if stage == "load" else [{"key": k} for k in params.cases]
+    epa_grid.run_job(stage, cases, RESULTS, params.settings, output.manifest, upstream, log[0], workers=workers())
+
+
+def make_tables(params, log):
+    failed = epa_grid.call(workers(), epa_tables.make, params.cases, RESULTS, params.settings)
+    lines = [f"{len(params.cases)} cases, {len(failed)} without a result"] + [f"{k}: {r}" for k, r in failed]
+    with open(log[0], "w") as fh:
+        fh.write("\n".join(lines) + "\n")

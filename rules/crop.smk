@@ -1,17 +1,17 @@
+# Crop: the configured time window (crop.start/end, crop.skip_first).
 rule crop:
     input:
-        ref=f"{CASE}/01_load/ref.tum",
-        est=f"{CASE}/01_load/est.tum",
+        upstream=manifest("load"),
     output:
-        ref=f"{CASE}/02_crop/ref.tum",
-        est=f"{CASE}/02_crop/est.tum",
-        info=f"{CASE}/02_crop/crop.json",
+        manifest=manifest("crop"),
     params:
-        cfg={"crop": EPA["crop"]},
-        version=EPA_VERSION,
+        **stage_params("crop"),
     log:
-        f"{CASE}/logs/crop.log",
-    conda:
-        "../envs/epica.yaml"
-    script:
-        "../scripts/crop.py"
+        batch_log("crop"),
+    benchmark:
+        batch_benchmark("crop")
+    threads: 1
+    resources:
+        **STAGE_RESOURCES,
+    run:
+        run_stage("crop", params, output, log, input.upstream)

@@ -1,21 +1,17 @@
-# Local drift/fail detection, success rate and drift-valid metrics.
+# Drift/fail detection, success rate, drift-valid metrics: 07_drift/.
 rule drift:
     input:
-        ape=f"{CASE}/06_metrics/ape.csv",
-        segments=f"{CASE}/06_metrics/rpe_segments.csv",
-        time=f"{CASE}/06_metrics/rpe_time.csv",
+        upstream=manifest("metrics"),
     output:
-        drift=f"{CASE}/07_drift/drift.json",
-        fail_segments=f"{CASE}/07_drift/fail_segments.csv",
-        pose_valid=f"{CASE}/07_drift/pose_valid.csv",
-        segments=f"{CASE}/07_drift/rpe_segments.csv",
-        time=f"{CASE}/07_drift/rpe_time.csv",
+        manifest=manifest("drift"),
     params:
-        cfg={"drift": EPA["drift"], "metrics": EPA["metrics"]},
-        version=EPA_VERSION,
+        **stage_params("drift"),
     log:
-        f"{CASE}/logs/drift.log",
-    conda:
-        "../envs/epica.yaml"
-    script:
-        "../scripts/drift.py"
+        batch_log("drift"),
+    benchmark:
+        batch_benchmark("drift")
+    threads: 1
+    resources:
+        **STAGE_RESOURCES,
+    run:
+        run_stage("drift", params, output, log, input.upstream)

@@ -1,17 +1,17 @@
+# Load: read the reference and the estimate in any supported format: 01_load/.
 rule load:
     input:
-        truth=lambda wc: str(TRUTH[wc.dataset]),
-        estimate=lambda wc: ESTIMATES[f"{wc.algorithm}/{wc.dataset}/{wc.run}"],
+        sources=lambda wc: sorted({str(p) for k in BATCHES[wc.batch] for p in (CASE_BY_KEY[k].truth, CASE_BY_KEY[k].estimate)}),
     output:
-        ref=f"{CASE}/01_load/ref.tum",
-        est=f"{CASE}/01_load/est.tum",
-        info=f"{CASE}/01_load/load.json",
+        manifest=manifest("load"),
     params:
-        cfg={"load": EPA["load"]},
-        version=EPA_VERSION,
+        **stage_params("load"),
     log:
-        f"{CASE}/logs/load.log",
-    conda:
-        "../envs/epica.yaml"
-    script:
-        "../scripts/load.py"
+        batch_log("load"),
+    benchmark:
+        batch_benchmark("load")
+    threads: 1
+    resources:
+        **STAGE_RESOURCES,
+    run:
+        run_stage("load", params, output, log)

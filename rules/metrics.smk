@@ -1,20 +1,17 @@
+# ATE, distance and time RPE, drift rate; per-pose and per-pair errors: 06_metrics/.
 rule metrics:
     input:
-        pairs=f"{CASE}/05_align/pairs.csv",
-        transform=f"{CASE}/05_align/transform.json",
-        sync=f"{CASE}/03_sync/sync.json",
-        calibrate=f"{CASE}/04_calibrate/calibrate.json",
+        upstream=manifest("align"),
     output:
-        metrics=f"{CASE}/06_metrics/metrics.json",
-        ape=f"{CASE}/06_metrics/ape.csv",
-        segments=f"{CASE}/06_metrics/rpe_segments.csv",
-        time=f"{CASE}/06_metrics/rpe_time.csv",
+        manifest=manifest("metrics"),
     params:
-        cfg={"metrics": EPA["metrics"]},
-        version=EPA_VERSION,
+        **stage_params("metrics"),
     log:
-        f"{CASE}/logs/metrics.log",
-    conda:
-        "../envs/epica.yaml"
-    script:
-        "../scripts/metrics.py"
+        batch_log("metrics"),
+    benchmark:
+        batch_benchmark("metrics")
+    threads: 1
+    resources:
+        **STAGE_RESOURCES,
+    run:
+        run_stage("metrics", params, output, log, input.upstream)

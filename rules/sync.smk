@@ -1,18 +1,17 @@
-# Step 1 (time offset by angular-speed cross-correlation) and association.
+# Step 1 (time offset by angular-speed cross-correlation), then association: 03_sync/.
 rule sync:
     input:
-        ref=f"{CASE}/02_crop/ref.tum",
-        est=f"{CASE}/02_crop/est.tum",
+        upstream=manifest("crop"),
     output:
-        pairs=f"{CASE}/03_sync/pairs.csv",
-        info=f"{CASE}/03_sync/sync.json",
-        xcorr=f"{CASE}/03_sync/xcorr.csv",
+        manifest=manifest("sync"),
     params:
-        cfg={"mode": EPA["mode"], "sync": EPA["sync"]},
-        version=EPA_VERSION,
+        **stage_params("sync"),
     log:
-        f"{CASE}/logs/sync.log",
-    conda:
-        "../envs/epica.yaml"
-    script:
-        "../scripts/sync.py"
+        batch_log("sync"),
+    benchmark:
+        batch_benchmark("sync")
+    threads: 1
+    resources:
+        **STAGE_RESOURCES,
+    run:
+        run_stage("sync", params, output, log, input.upstream)

@@ -1,21 +1,22 @@
+# error_comparison.txt, one .tex per LaTeX table, summary.csv: every case, failed ones marked.
 rule tables:
     input:
-        load=case_files(f"{CASE}/01_load/load.json"),
-        metrics=case_files(f"{CASE}/06_metrics/metrics.json"),
-        drift=case_files(f"{CASE}/07_drift/drift.json"),
-        segments=case_files(f"{CASE}/07_drift/rpe_segments.csv"),
-        time=case_files(f"{CASE}/07_drift/rpe_time.csv"),
+        expand(manifest("drift"), batch=BATCHES),
     output:
         text=report(f"{RESULTS}/error_comparison.txt", caption="../docs/report_caption.rst", category="Tables"),
         summary=report(f"{RESULTS}/summary.csv", caption="../docs/report_caption.rst", category="Tables"),
-        tex=[f"{RESULTS}/tables/{name}.tex" for name in TABLE_NAMES],
+        tex=[f"{RESULTS}/tables/{name}.tex" for name in epa_tables.TABLE_NAMES],
     params:
-        cases=[[c.algorithm, c.dataset, c.run] for c in CASES],
-        cfg={"tables": EPA["tables"], "metrics": EPA["metrics"]},
+        cases=sorted(CASE_BY_KEY),
+        settings={"tables": EPA["tables"], "metrics": EPA["metrics"]},
         version=EPA_VERSION,
     log:
         f"{RESULTS}/logs/tables.log",
-    conda:
-        "../envs/epica.yaml"
-    script:
-        "../scripts/tables.py"
+    benchmark:
+        f"{RESULTS}/benchmarks/tables.tsv"
+    threads: 1
+    resources:
+        mem_mb=lambda wc: 1000 + len(CASE_BY_KEY) // 10,
+        runtime=lambda wc: 2 + len(CASE_BY_KEY) // 2000,
+    run:
+        make_tables(params, log)

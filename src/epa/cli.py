@@ -19,7 +19,11 @@ def _parser() -> argparse.ArgumentParser:
     e = sub.add_parser("eval", help="evaluate one estimate against one reference")
     e.add_argument("ref", help="reference trajectory file")
     e.add_argument("est", help="estimated trajectory file")
-    e.add_argument("--out", required=True, help="output folder (metrics.json)")
+    e.add_argument("--out", required=True,
+                   help="output folder, laid out as a workflow case folder (06_metrics/metrics.json, 07_drift/drift.json, ...)")
+    e.add_argument("--artifacts", action="store_true",
+                   help="also write the per-pose and per-pair files (pairs.csv, ape.csv, ...) as the workflow does")
+    e.add_argument("-v", "--verbose", action="store_true", help="print each stage and its time")
     e.add_argument("--config", help="YAML with stage settings (the workflow's keys: sync, align, ...)")
     e.add_argument("--mode", choices=["epa", "ov_eval"], help="ov_eval: no Step 1/2, one-to-one 0.02 s")
     e.add_argument("--align", choices=["se3", "sim3", "posyaw", "none"], help="Step 3 method")
@@ -76,20 +80,36 @@ def _eval_config(args) -> dict:
     return settings.resolve(cfg, source=args.config or "command line")
 
 
+def _eval(args) -> None:
+    import time
+
+    from epa import chain
+
+    cfg = _eval_config(args)
+    out = chain.CaseFolder(args.out)
+    chain.clear_tables(out)
+    clock = {"stage": None, "t": time.perf_counter()}
+
+    def on_stage(name):
+        now = time.perf_counter()
+        if args.verbose and clock["stage"]:
+            print(f"epa: {clock['stage']:<9} {now - clock['t']:7.3f} s", file=sys.stderr)
+        clock.update(stage=name, t=now)
+
+    result = chain.run_case(args.ref, args.est, args.out, cfg, write_tables=args.artifacts, on_stage=on_stage)
+    on_stage(None)
+    record = result["metrics"]
+    ate = record["ate"]["trans_m"]["rmse"]
+    print(f"{record['n_matched']} poses matched, eval_source {record['eval_source']}, "
+          f"ATE rmse {ate:.4f} m -> {out.path('metrics', 'metrics.json')}")
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="epa: %(levelname)s: %(message)s")
     try:
         if args.command == "eval":
-            from epa import io, pipeline
-
-            cfg = _eval_config(args)
-            record = pipeline.evaluate_case(args.ref, args.est, cfg)
-            out = Path(args.out)
-            io.write_json(out / "metrics.json", record)
-            ate = record["ate"]["trans_m"]["rmse"]
-            print(f"{record['n_matched']} poses matched, eval_source {record['eval_source']}, "
-                  f"ATE rmse {ate:.4f} m -> {out / 'metrics.json'}")
+            _eval(args)
         elif args.command == "simulate":
             from epa import simulate
 

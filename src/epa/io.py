@@ -332,12 +332,17 @@ def read_trajectory(path, fmt: str = "auto", *, time_unit: str = "auto", on_unso
 
 
 # ----------------------------------------------------------------------------- artifacts
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
+
+
 def _atomic_write(path, write) -> None:
     """Write via a temporary file and rename, so no half-written file is ever taken as done."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix="." + path.name + ".", dir=path.parent)
     try:
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; results are for the group too
         with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
             write(fh)
         os.replace(tmp, path)
@@ -380,10 +385,14 @@ def read_json(path) -> dict:
 TUM_HEADER = "# t x y z qx qy qz qw"
 
 
+# Stage artifacts are lossless (%.17g round-trips a float64 exactly): the next stage reads exactly
+# what this one computed, so the workflow and the in-memory `epa eval` give identical results.
+EXACT = "%.17g"
+
+
 def write_tum(path, traj: Trajectory) -> None:
     data = np.column_stack([traj.t, traj.p, traj.q])
-    _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt="%.9f %.9f %.9f %.9f %.12f %.12f %.12f %.12f",
-                                              header=TUM_HEADER[2:]))
+    _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=EXACT, header=TUM_HEADER[2:]))
 
 
 def read_tum_file(path) -> Trajectory:
@@ -392,25 +401,18 @@ def read_tum_file(path) -> Trajectory:
     return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8])
 
 
-_PAIR_COLS = ["t_ref", "x_ref", "y_ref", "z_ref", "qx_ref", "qy_ref", "qz_ref", "qw_ref",
-              "t_est", "x_est", "y_est", "z_est", "qx_est", "qy_est", "qz_est", "qw_est"]
+def write_pair_indices(path, i_ref, i_est, t_ref, t_est) -> None:
+    """Matched pairs as row indices into the cropped reference and estimate (02_crop/*.tum, first
+    pose = 0), with both stamps for reading by eye."""
+    write_csv(path, {"i_ref": i_ref, "i_est": i_est, "t_ref": t_ref[i_ref], "t_est": t_est[i_est]})
 
 
-def write_pairs(path, ref: Trajectory, est: Trajectory) -> None:
-    """Matched pairs, one row each: the reference pose and the estimate pose it was matched to."""
-    data = np.column_stack([ref.t, ref.p, ref.q, est.t, est.p, est.q])
-    fmt = ",".join(["%.9f"] * 4 + ["%.12f"] * 4 + ["%.9f"] * 4 + ["%.12f"] * 4)
-    _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=fmt, delimiter=",", header=",".join(_PAIR_COLS),
-                                              comments=""))
+def read_pair_indices(path) -> tuple[np.ndarray, np.ndarray]:
+    cols = read_csv(path)
+    return cols["i_ref"].astype(np.intp), cols["i_est"].astype(np.intp)
 
 
-def read_pairs(path) -> tuple[Trajectory, Trajectory]:
-    rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-    return (Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8]),
-            Trajectory(rows[:, 8], rows[:, 9:12], rows[:, 12:16]))
-
-
-def write_csv(path, columns: dict[str, np.ndarray], fmt: str = "%.9g") -> None:
+def write_csv(path, columns: dict[str, np.ndarray], fmt: str = EXACT) -> None:
     names = list(columns)
     data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names]) if names else np.zeros((0, 0))
     _atomic_write(path, lambda fh: np.savetxt(fh, data.reshape(-1, len(names)), fmt=fmt, delimiter=",",

@@ -1,5 +1,5 @@
-"""One function per stage, on in-memory values. The rule scripts and ``epa eval`` both call these,
-in the same order, so the workflow and the command line can never disagree."""
+"""The computation of each stage, on in-memory values (no files). :mod:`epa.chain` wires them into
+the stage sequence that both ``epa eval`` and the workflow run."""
 
 from __future__ import annotations
 
@@ -15,10 +15,20 @@ from epa.trajectory import Trajectory
 log = logging.getLogger("epa")
 
 
-def load(ref_path, est_path, cfg: dict):
+def _load_options(cfg: dict) -> dict:
     c = cfg["load"]
-    opts = dict(time_unit=c["time_unit"], on_unsorted=c["unsorted"], kitti_rate=c["kitti_rate"])
-    ref = io.read_trajectory(ref_path, c["truth_format"], **opts)
+    return dict(time_unit=c["time_unit"], on_unsorted=c["unsorted"], kitti_rate=c["kitti_rate"])
+
+
+def load_reference(ref_path, cfg: dict) -> Trajectory:
+    return io.read_trajectory(ref_path, cfg["load"]["truth_format"], **_load_options(cfg))
+
+
+def load(ref_path, est_path, cfg: dict, reference: Trajectory | None = None):
+    """Read the reference (unless already read: ``reference``) and the estimate."""
+    c = cfg["load"]
+    opts = _load_options(cfg)
+    ref = load_reference(ref_path, cfg) if reference is None else reference
     # KITTI estimates rarely ship their own times file: they are index-aligned with the reference's.
     est_times = io.kitti_times_for(Path(est_path)) or io.kitti_times_for(Path(ref_path))
     est = io.read_trajectory(est_path, c["estimate_format"], kitti_times=est_times, **opts)
@@ -38,18 +48,26 @@ def crop(ref: Trajectory, est: Trajectory, cfg: dict):
     est_c = est.select(est_keep)
     if len(ref_c) < 2 or len(est_c) < 2:
         raise EpaError(f"the crop window leaves {len(ref_c)} reference and {len(est_c)} estimate poses")
-    return ref_c, est_c, {"settings": c, "n_ref": len(ref_c), "n_est": len(est_c)}
+    return ref_c, est_c, crop_info(cfg, {"n_ref": len(ref_c), "n_est": len(est_c)})
+
+
+def crops(cfg: dict) -> bool:
+    """Whether the crop settings cut anything at all."""
+    c = cfg["crop"]
+    return c["start"] is not None or c["end"] is not None or c["skip_first"] > 0
+
+
+def crop_info(cfg: dict, counts: dict) -> dict:
+    return {"settings": cfg["crop"], "n_ref": counts["n_ref"], "n_est": counts["n_est"]}
 
 
 def sync_stage(ref: Trajectory, est: Trajectory, cfg: dict):
-    """Step 1 (unless disabled or in ov_eval mode), then association. Returns matched (ref, est)."""
+    """Step 1 (when ``sync.estimate_offset``), then association. Returns the matched indices
+    (i_ref, i_est), the record and the correlation curve."""
     c = cfg["sync"]
-    ov_mode = cfg["mode"] == "ov_eval"
-    policy = "ov_eval" if ov_mode else c["policy"]
-    max_diff = 0.02 if ov_mode else c["max_diff"]
-    info: dict = {"mode": cfg["mode"], "policy": policy}
+    info: dict = {"mode": cfg["mode"], "policy": c["policy"]}
     curve = None
-    if c["estimate_offset"] and not ov_mode:
+    if c["estimate_offset"]:
         est_off = sync.estimate_offset(ref, est, window=c["window"], resample_dt=c["resample_dt"],
                                        min_motion=c["min_motion"], min_corr=c["min_corr"],
                                        min_peak_ratio=c["min_peak_ratio"], fallback=c["offset"])
@@ -61,52 +79,86 @@ def sync_stage(ref: Trajectory, est: Trajectory, cfg: dict):
     else:
         info["step1"] = {"used": False, "reason": "disabled", "offset": c["offset"], "estimated": None}
         offset = c["offset"]
-    i_ref, i_est = sync.associate(ref, est, policy=policy, max_diff=max_diff, offset=offset)
-    info.update(offset_s=offset, max_diff_s=sync.POLICIES[policy] if max_diff is None else max_diff,
-                n_matched=int(len(i_ref)), n_ref=len(ref), n_est=len(est))
+    i_ref, i_est, assoc = associate(ref, est, c, offset)
+    info.update(assoc)
+    return (i_ref, i_est), info, curve
+
+
+def associate(ref: Trajectory, est: Trajectory, c: dict, offset: float):
+    """Matched indices under the ``sync`` settings ``c`` and a time offset; too few pairs is an error."""
+    i_ref, i_est = sync.associate(ref, est, policy=c["policy"], max_diff=c["max_diff"], offset=offset)
+    max_diff = sync.POLICIES[c["policy"]] if c["max_diff"] is None else c["max_diff"]
     if len(i_ref) < c["min_pairs"]:
-        raise EpaError(f"only {len(i_ref)} poses matched within {info['max_diff_s']} s (offset {offset:.6f} s);"
+        raise EpaError(f"only {len(i_ref)} poses matched within {max_diff} s (offset {offset:.6f} s);"
                        f" {c['min_pairs']} needed: check the time unit, the offset or the files")
-    return ref.select(i_ref), est.select(i_est), info, curve
+    info = {"offset_s": offset, "max_diff_s": max_diff, "n_matched": int(len(i_ref)), "n_ref": len(ref),
+            "n_est": len(est)}
+    return i_ref, i_est, info
 
 
-def calibrate_stage(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict):
-    """Step 2, with the fallback: an untrusted Step 1 or Step 2 means the case is evaluated the
-    ov_eval way (no offset, no extrinsic, SE3) and marked ``eval_source: ov_eval``."""
-    c = cfg["calibrate"]
-    info: dict = {"mode": cfg["mode"]}
-    step1 = sync_info.get("step1", {})
+def evaluation_plan(cfg: dict, step1: dict, extrinsic: calibration.Extrinsic | None = None) -> dict:
+    """How a case is evaluated: the one place that decides the ov_eval fallback.
+
+    An untrusted Step 1 or Step 2 means the case is evaluated the ov_eval way: the configured
+    ``sync.offset`` (default 0) instead of an estimated one, no extrinsic, SE3 alignment on all
+    poses (see :func:`alignment_of`); it is marked ``eval_source: ov_eval``. ``mode: ov_eval`` is
+    that evaluation by choice, with the configured alignment."""
+    fallback = {"eval_source": "ov_eval", "fallback": True, "offset_s": cfg["sync"]["offset"], "apply_extrinsic": False}
     if cfg["mode"] == "ov_eval":
-        info.update(eval_source="ov_eval", reason="ov_eval mode", extrinsic=None)
-        return est, info
+        return {**fallback, "fallback": False, "reason": "ov_eval mode"}
     if cfg["sync"]["estimate_offset"] and not step1.get("used", False):
-        info.update(eval_source="ov_eval", reason=f"Step 1 not trusted: {step1.get('reason')}", extrinsic=None)
-        return est, info
-    if not c["enabled"]:
-        info.update(eval_source="epa", reason="Step 2 disabled", extrinsic=None)
-        return est, info
-    ext = calibration.solve(ref, est, pair_step=c["pair_step"], min_rotation_deg=c["min_rotation_deg"],
-                            scale=c["scale"], max_rot_residual_deg=c["max_rot_residual_deg"],
-                            max_trans_residual_m=c["max_trans_residual_m"], max_condition=c["max_condition"],
-                            min_pairs=c["min_pairs"], outlier_iterations=c["outlier_iterations"])
-    info["extrinsic"] = ext.to_dict()
-    if ext.translation_unobservable():
-        log.warning("Step 2: translation unobservable along %s (left at 0)", ext.info["translation_unobservable_directions"])
-    if not ext.trusted:
-        log.warning("Step 2 not trusted: %s; evaluating the ov_eval way", ext.reason)
-        info.update(eval_source="ov_eval", reason=f"Step 2 not trusted: {ext.reason}")
-        return est, info
-    info.update(eval_source="epa", reason="Steps 1 and 2 applied")
-    return ext.apply(est), info
+        return {**fallback, "reason": f"Step 1 not trusted: {step1.get('reason')}"}
+    if extrinsic is not None and not extrinsic.trusted:
+        return {**fallback, "reason": f"Step 2 not trusted: {extrinsic.reason}"}
+    applied = extrinsic is not None
+    return {"eval_source": "epa", "fallback": False, "offset_s": step1.get("offset", cfg["sync"]["offset"]),
+            "apply_extrinsic": applied, "reason": "Steps 1 and 2 applied" if applied else "Step 2 disabled"}
+
+
+def alignment_of(plan: dict, cfg: dict) -> tuple[str, int]:
+    """Step 3 method and first_n under an evaluation plan: the fallback aligns SE3 on all poses."""
+    return ("se3", -1) if plan["fallback"] else (cfg["align"]["method"], cfg["align"]["first_n"])
+
+
+def calibrate_stage(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict, cropped=None):
+    """Step 2 and the evaluation plan on the matched (ref, est). ``cropped()`` gives the unmatched
+    trajectories, needed only when the plan drops an estimated offset (Step 2 not trusted) and the
+    poses are re-associated; the new indices are then returned, else None."""
+    c = cfg["calibrate"]
+    step1 = sync_info.get("step1", {})
+    plan = evaluation_plan(cfg, step1)
+    info: dict = {"mode": cfg["mode"], "extrinsic": None}
+    ext = None
+    if plan["eval_source"] == "epa" and c["enabled"]:
+        ext = calibration.solve(ref, est, pair_step=c["pair_step"], min_rotation_deg=c["min_rotation_deg"],
+                                scale=c["scale"], max_rot_residual_deg=c["max_rot_residual_deg"],
+                                max_trans_residual_m=c["max_trans_residual_m"], max_condition=c["max_condition"],
+                                min_pairs=c["min_pairs"], outlier_iterations=c["outlier_iterations"])
+        info["extrinsic"] = ext.to_dict()
+        if ext.translation_unobservable():
+            log.warning("Step 2: translation unobservable along %s (left at 0)",
+                        ext.info["translation_unobservable_directions"])
+        plan = evaluation_plan(cfg, step1, ext)
+        if not ext.trusted:
+            log.warning("Step 2 not trusted: %s; evaluating the ov_eval way", ext.reason)
+    pairs = None
+    if plan["offset_s"] != sync_info["offset_s"]:
+        if cropped is None:
+            raise ValueError("re-association needs the cropped trajectories")
+        ref_c, est_c = cropped()
+        i_ref, i_est, assoc = associate(ref_c, est_c, cfg["sync"], plan["offset_s"])
+        ref, est, pairs = ref_c.select(i_ref), est_c.select(i_est), (i_ref, i_est)
+        info["reassociated"] = assoc
+    info.update(eval_source=plan["eval_source"], reason=plan["reason"], plan=plan)
+    return ref, (ext.apply(est) if plan["apply_extrinsic"] else est), info, pairs
 
 
 def align_stage(ref: Trajectory, est: Trajectory, cfg: dict, calib_info: dict):
-    c = cfg["align"]
-    fallback = cfg["mode"] == "epa" and calib_info.get("eval_source") == "ov_eval"
-    method = "se3" if fallback else c["method"]
-    fit = alignment.fit(ref, est, method=method, first_n=-1 if fallback else c["first_n"])
-    return fit, fit.apply(est), {"method": method, "first_n": c["first_n"], "fallback_se3": fallback,
-                                 **fit.to_dict()}
+    plan = calib_info["plan"]
+    method, first_n = alignment_of(plan, cfg)
+    fit = alignment.fit(ref, est, method=method, first_n=first_n)
+    return fit.apply(est), {"method": method, "first_n": first_n, "fallback_se3": plan["fallback"],
+                            **fit.to_dict()}
 
 
 def metrics_stage(ref: Trajectory, est: Trajectory, cfg: dict):
@@ -136,30 +188,19 @@ def drift_stage(tables: dict, cfg: dict):
         summary["status"] = (f"globally failed: 5th percentile APE {det['ape_p5_m']:.3g} m >"
                              f" {cfg['drift']['global_fail_p5_m']} m")
     artifacts = {"fail_segments": fs, "pose_valid": {"t": ape["t"], "valid": ~det["invalid"]},
-                 "rpe_segments": {**seg, "valid": seg_valid}, "rpe_time": {**tp, "valid": time_valid}}
+                 # row k: whether pair k of 06_metrics/rpe_segments.csv (rpe_time.csv) is drift-valid
+                 "rpe_segments_valid": {"valid": seg_valid}, "rpe_time_valid": {"valid": time_valid}}
     return summary, artifacts
 
 
-def evaluate_case(ref_path, est_path, cfg: dict) -> dict:
-    """Every stage in one process (``epa eval``): the same functions the rules call."""
-    ref, est, load_info = load(ref_path, est_path, cfg)
-    ref, est, _ = crop(ref, est, cfg)
-    ref_m, est_m, sync_info, _ = sync_stage(ref, est, cfg)
-    est_c, calib_info = calibrate_stage(ref_m, est_m, cfg, sync_info)
-    _, aligned, align_info = align_stage(ref_m, est_c, cfg, calib_info)
-    summary, tables = metrics_stage(ref_m, aligned, cfg)
-    drift_summary, _ = drift_stage(tables, cfg)
-    return {**case_record(sync_info, calib_info, align_info, summary), "load": load_info, "sync": sync_info,
-            "calibrate": calib_info, "drift": drift_summary}
-
-
-def case_record(sync_info: dict, calib_info: dict, align_info: dict, summary: dict) -> dict:
-    """metrics.json: the metrics plus what Steps 1-3 did, so one file tells the whole case."""
+def case_record(load_info: dict, sync_info: dict, calib_info: dict, align_info: dict, summary: dict) -> dict:
+    """metrics.json: the metrics plus what loading and Steps 1-3 did, so one file tells the whole case."""
     ext = calib_info.get("extrinsic") or {}
-    applied = calib_info.get("eval_source") == "epa" and bool(ext)
+    applied = bool(calib_info.get("plan", {}).get("apply_extrinsic"))
+    offset = calib_info.get("reassociated", sync_info)["offset_s"]
     return {"n_matched": summary["n_matched"], "eval_source": calib_info.get("eval_source", "epa"),
-            "time_offset_s": sync_info["offset_s"],
+            "time_offset_s": offset,
             "extrinsic_rot_deg": ext.get("rotation_deg") if applied else None,
             "extrinsic_trans_m": ext.get("translation_norm_m") if applied else None,
-            "alignment": align_info, **{k: v for k, v in summary.items() if k != "n_matched"}}
-
+            "alignment": align_info, **{k: v for k, v in summary.items() if k != "n_matched"},
+            "load": load_info, "sync": sync_info, "calibrate": calib_info}

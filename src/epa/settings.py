@@ -43,7 +43,26 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
         err = errors[0]
         key = ".".join(str(p) for p in err.path) or "(top level)"
         raise EpaError(f"{key}: {err.message}", path=source)
-    return _fill(cfg, schema())
+    return apply_mode(_fill(cfg, schema()), given=config or {})
+
+
+# What `mode: ov_eval` means for the stages, so that no stage has to test the mode.
+OV_EVAL_SETTINGS = {("sync", "estimate_offset"): False, ("sync", "policy"): "ov_eval", ("sync", "max_diff"): 0.02,
+                    ("calibrate", "enabled"): False}
+
+
+def apply_mode(cfg: dict, given: dict) -> dict:
+    """Turn ``mode: ov_eval`` into the stage settings it implies; warn where it overrides a given one."""
+    if cfg.get("mode") != "ov_eval":
+        return cfg
+    import logging
+
+    for (section, key), value in OV_EVAL_SETTINGS.items():
+        user = (given.get(section) or {}).get(key, value) if isinstance(given.get(section), dict) else value
+        if user != value:
+            logging.getLogger("epa").warning("mode ov_eval overrides %s.%s: %r -> %r", section, key, user, value)
+        cfg[section][key] = value
+    return cfg
 
 
 def defaults() -> dict:

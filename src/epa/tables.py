@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from epa import io
+from epa.chain import CaseFolder, failure_of
 from epa.metrics import segment_key
-from epa.workflow import failure_of
 
 RULE_SHORT = "=" * 38
 RULE_LONG = "=" * 44
@@ -46,24 +46,34 @@ class CaseResult:
         return self.status == "ok" or self.status.startswith("globally failed")
 
 
-def collect(cases, inputs) -> list[CaseResult]:
+def collect(keys: list[str], results_dir) -> list[CaseResult]:
+    """Read every case's artifacts (``<results_dir>/cases/<algorithm>/<dataset>/<run>/``)."""
     out = []
-    for k, (alg, ds, run) in enumerate(cases):
+    for key in keys:
+        alg, ds, run = key.split("/")
+        case = CaseFolder(Path(results_dir) / "cases" / key)
         res = CaseResult(alg, ds, run)
-        if failure_of(inputs.load[k]) is None:
-            res.load = io.read_json(inputs.load[k])
-        reason = failure_of(inputs.drift[k])
+        if failure_of(case.path("load", "load.json")) is None:
+            res.load = io.read_json(case.path("load", "load.json"))
+        reason = failure_of(case.path("drift", "drift.json"))
         if reason is not None:
-            res.status = "failed: " + reason
+            res.status = reason if reason.startswith("internal error") else "failed: " + reason
         else:
-            res.metrics = io.read_json(inputs.metrics[k])
-            res.drift = io.read_json(inputs.drift[k])
-            res.segments = io.read_csv(inputs.segments[k])
-            res.time = io.read_csv(inputs.time[k])
+            res.metrics = io.read_json(case.path("metrics", "metrics.json"))
+            res.drift = io.read_json(case.path("drift", "drift.json"))
+            res.segments = {**io.read_csv(case.path("metrics", "rpe_segments.csv")),
+                            **io.read_csv(case.path("drift", "rpe_segments_valid.csv"))}
+            res.time = {**io.read_csv(case.path("metrics", "rpe_time.csv")),
+                        **io.read_csv(case.path("drift", "rpe_time_valid.csv"))}
             if res.drift.get("status"):
                 res.status = res.drift["status"]
         out.append(res)
     return out
+
+
+def failed_cases(grid: list[CaseResult]) -> list[tuple[str, str]]:
+    """(case key, status) of every case without a result, for the end-of-run list."""
+    return [(f"{c.algorithm}/{c.dataset}/{c.run}", c.status) for c in grid if not c.ok]
 
 
 def _num(x) -> float:
@@ -305,12 +315,37 @@ def summary_csv(grid, segments) -> str:
     return buf.getvalue()
 
 
-def write_all(grid: list[CaseResult], output, cfg: dict) -> None:
+TABLE_NAMES = ("ate", "rpe_distance", "drift_rate", "rpe_time_1s", "success_rate",
+               "valid_ate", "valid_rpe_distance", "valid_drift_rate", "valid_rpe_time_1s")
+
+
+def write_all(grid: list[CaseResult], results_dir, cfg: dict) -> None:
+    """error_comparison.txt, summary.csv and tables/<name>.tex under ``results_dir``."""
+    results_dir = Path(results_dir)
     segments = cfg["metrics"]["segments"]
     decimals = cfg["tables"]["decimals"]
-    io.write_text(output.text, report_text(grid, segments, decimals))
-    io.write_text(output.summary, summary_csv(grid, segments))
-    by_name = {name: (title, rows, n) for name, title, rows, n in build_tables(grid, segments, decimals)}
-    for path in output.tex:
-        title, rows, n = by_name[Path(path).stem]
-        io.write_text(path, tex_document(title, rows, n))
+    io.write_text(results_dir / "error_comparison.txt", report_text(grid, segments, decimals))
+    io.write_text(results_dir / "summary.csv", summary_csv(grid, segments))
+    for name, title, rows, n in build_tables(grid, segments, decimals):
+        io.write_text(results_dir / "tables" / f"{name}.tex", tex_document(title, rows, n))
+
+
+def make(keys: list[str], results_dir, cfg: dict) -> list[tuple[str, str]]:
+    """The tables rule: read every case, write every table; returns the failed cases."""
+    grid = collect(keys, results_dir)
+    write_all(grid, results_dir, cfg)
+    return failed_cases(grid)
+
+
+def failure_report(summary_path, most: int = 20) -> str:
+    """A short end-of-run list of the cases without a result (empty when every case has one)."""
+    with open(summary_path, encoding="utf-8", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    bad = [r for r in rows if r["status"] != "ok" and not r["status"].startswith("globally failed")]
+    if not bad:
+        return ""
+    lines = [f"epica: {len(bad)} of {len(rows)} cases have no result (see {summary_path}):"]
+    lines += [f"  {r['algorithm']}/{r['dataset']}/{r['run']}: {r['status']}" for r in bad[:most]]
+    if len(bad) > most:
+        lines.append(f"  ... and {len(bad) - most} more")
+    return "\n".join(lines)

@@ -1,0 +1,213 @@
+"""Grid execution benchmark (issue: grid execution at the cost of the work). Figures go in
+docs/performance.md and the closing note, never in a timed test.
+
+    python benchmarks/grid.py [--skip-evo] [--skip-large] [--cases 1000,10000] [--out DIR]
+
+1. The 52-case EuRoC grid from ../shared/data (rpg vio_mono, vio_stereo, vislam_rp, vislam_ba x10,
+   OpenVINS MH_01 and MH_04): `snakemake --cores 2`, the library in a loop (`epa eval`, two at a
+   time), and `evo_ape` + `evo_rpe` in a loop (two at a time), on the same cases.
+2. The bundled 18-case example: wall time at --cores 1 and 2, the dry run, and the per-stage-job
+   overhead = (wall at --cores 1 - dry run - the stages' own time in one process) / stage jobs.
+3. Simulated grids of short cases (default 1,000 and 10,000): dry run, full run on 2 cores, peak
+   memory of the Snakemake process, and a check that the tables equal per-case execution (every
+   stage run case by case in one process, then the same table code).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("EPA_SHARED_DATA", ROOT.parent / "shared" / "data"))
+SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile")]
+
+
+def run(cmd, cwd=None, check=True) -> tuple[float, int, str]:
+    """Wall seconds and peak RSS (MB, the largest process) of a command."""
+    t0 = time.perf_counter()
+    out = subprocess.run(["/usr/bin/time", "-f", "%M", *cmd], cwd=cwd, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if check and out.returncode != 0:
+        raise SystemExit(f"failed: {' '.join(map(str, cmd))}\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}")
+    rss_kb = int(out.stderr.strip().splitlines()[-1]) if out.stderr.strip() else 0
+    return wall, rss_kb // 1024, out.stdout + out.stderr
+
+
+def smk(cwd, *args):
+    return run([*SNAKEMAKE, "--directory", str(cwd), "--configfile", str(cwd / "cfg.yaml"), *args])
+
+
+def write_cfg(cwd: Path, extra: str = "") -> None:
+    (cwd / "cfg.yaml").write_text(f"truth_dir: truth\nalgorithms_dir: algorithms\nresults_dir: results\n{extra}")
+
+
+# ----------------------------------------------------------------------------- the EuRoC grid
+def euroc_grid(cwd: Path) -> list[tuple[Path, Path]]:
+    """The 52 real cases, laid out as a grid (files linked, not copied into the project)."""
+    gt = DATA / "rpng_open_vins/ov_data/euroc_mav"
+    rpg = DATA / "uzh-rpg_rpg_trajectory_evaluation/results"
+    seqs = {"MH_01": "MH_01_easy", "MH_03": "MH_03_medium", "MH_04": "MH_04_difficult", "MH_05": "MH_05_difficult"}
+    (cwd / "truth").mkdir(parents=True)
+    for short, name in seqs.items():
+        os.symlink(gt / f"{name}.txt", cwd / "truth" / f"{short}.txt")
+    runs: dict[tuple[str, str, str], Path] = {}
+    for alg in ("vio_mono", "vio_stereo"):
+        for s in ("MH_01", "MH_03", "MH_05"):
+            runs[alg, s, "run0"] = rpg / f"euroc_mono_stereo/laptop/{alg}/laptop_{alg}_{s}/stamped_traj_estimate.txt"
+    for s in seqs:
+        runs["vislam_rp", s, "run0"] = rpg / f"euroc_vislam_mono/laptop/vislam_rp/laptop_vislam_rp_{s}/stamped_traj_estimate0.txt"
+        for k in range(10):
+            runs["vislam_ba", s, f"run{k}"] = (rpg / f"euroc_vislam_mono/laptop/vislam_ba/laptop_vislam_ba_{s}/"
+                                               f"stamped_ba_estimate{k}.txt")
+    runs["openvins", "MH_01", "run0"] = DATA / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv"
+    runs["openvins", "MH_04", "run0"] = DATA / "qmy0519_open_vins-master/traj_estimate.txt"
+    pairs = []
+    for (alg, s, r), src in runs.items():
+        dst = cwd / "algorithms" / alg / s / f"{r}{src.suffix}"
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        os.symlink(src, dst)
+        pairs.append((cwd / "truth" / f"{s}.txt", dst))
+    return pairs
+
+
+def in_pairs(cmds, workers=2) -> float:
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(workers) as pool:
+        list(pool.map(lambda c: subprocess.run(c, capture_output=True), cmds))
+    return time.perf_counter() - t0
+
+
+def bench_euroc(tmp: Path, skip_evo: bool) -> dict:
+    from epa import io
+
+    cwd = tmp / "euroc"
+    pairs = euroc_grid(cwd)
+    write_cfg(cwd)
+    wf, rss, _ = smk(cwd, "--cores", "2", "--quiet")
+    lib = in_pairs([["epa", "eval", str(r), str(e), "--out", str(tmp / "lib" / f"{k}")] for k, (r, e) in enumerate(pairs)])
+    out = {"cases": len(pairs), "workflow_s": wf, "workflow_rss_mb": rss, "library_loop_s": lib}
+    if not skip_evo:
+        evo_cmds = []
+        for k, (r, e) in enumerate(pairs):
+            tum = tmp / "evo" / f"{k}.tum"  # evo reads TUM; the OpenVINS CSV is converted once, outside the timing
+            tum.parent.mkdir(exist_ok=True)
+            io.write_tum(tum, io.read_trajectory(e))
+            evo_cmds += [["evo_ape", "tum", str(r), str(tum), "-a"],
+                         ["evo_rpe", "tum", str(r), str(tum), "-a", "--delta", "8", "--delta_unit", "m", "--all_pairs"]]
+        out["evo_loop_s"] = in_pairs(evo_cmds)
+    return out
+
+
+# ----------------------------------------------------------------------------- the example
+def bench_example(tmp: Path) -> dict:
+    from epa import chain, settings, simulate
+
+    cwd = tmp / "example"
+    simulate.simulate(cwd / "sim")
+    (cwd / "truth").symlink_to(cwd / "sim/truth")
+    (cwd / "algorithms").symlink_to(cwd / "sim/algorithms")
+    write_cfg(cwd)
+    smk(cwd, "-n", "--cores", "2", "--quiet")  # warm the file cache
+    dry, _, _ = smk(cwd, "-n", "--cores", "2", "--quiet")
+    out = {"dry_run_s": dry}
+    for cores in (1, 2):
+        shutil.rmtree(cwd / "results", ignore_errors=True)
+        shutil.rmtree(cwd / ".snakemake", ignore_errors=True)
+        out[f"cores{cores}_s"], _, _ = smk(cwd, "--cores", str(cores), "--quiet")
+    # the stages' own time, in one process, writing the same artifacts
+    cfg = settings.resolve({"truth_dir": str(cwd / "truth"), "algorithms_dir": str(cwd / "algorithms")})
+    from epa import cases as epa_cases
+
+    _, cases = epa_cases.discover(cwd / "truth", cwd / "algorithms")
+    t0 = time.perf_counter()
+    for c in cases:
+        case = chain.CaseFolder(tmp / "inproc" / c.key, c.truth, c.estimate)
+        for name in chain.NAMES:
+            chain.run_stage(name, case, cfg)
+    out["stages_in_process_s"] = time.perf_counter() - t0
+    jobs = len(cases) * len(chain.NAMES)
+    out["overhead_per_stage_job_s"] = (out["cores1_s"] - dry - out["stages_in_process_s"]) / jobs
+    return out
+
+
+# ----------------------------------------------------------------------------- large simulated grids
+def short_grid(cwd: Path, n_cases: int, seed: int = 0) -> None:
+    """n_cases short cases: 20 s references at 50 Hz, estimates at 20 Hz with noise and drift."""
+    from epa import io, simulate
+    from epa.trajectory import Trajectory
+
+    rng = np.random.default_rng(seed)
+    n_alg, n_run = 10, 10
+    n_ds = max(1, n_cases // (n_alg * n_run))
+    (cwd / "truth").mkdir(parents=True)
+    t_ref = np.arange(0, 20, 0.02)
+    t_est = np.arange(0.01, 20, 0.05)
+    for d in range(n_ds):
+        r, p = simulate.truth_pose("drone_figure8", t_ref + d)
+        io.write_tum(cwd / "truth" / f"seq{d:03d}.txt", Trajectory.from_rp(1e9 + t_ref, r, p))
+        re, pe = simulate.truth_pose("drone_figure8", t_est + d)
+        for a in range(n_alg):
+            folder = cwd / "algorithms" / f"alg{a:02d}" / f"seq{d:03d}"
+            folder.mkdir(parents=True)
+            for k in range(n_run):
+                noisy = pe + rng.normal(0, 0.02, pe.shape) + np.outer(t_est, rng.normal(0, 0.01, 3))
+                io.write_tum(folder / f"run{k}.txt", Trajectory.from_rp(1e9 + t_est, re, noisy))
+
+
+def bench_large(tmp: Path, n_cases: int) -> dict:
+    from epa import chain, settings, tables
+    from epa import cases as epa_cases
+
+    cwd = tmp / f"grid{n_cases}"
+    short_grid(cwd, n_cases)
+    write_cfg(cwd)
+    out = {"cases": n_cases}
+    out["dry_run_s"], out["dry_run_rss_mb"], _ = smk(cwd, "-n", "--cores", "2", "--quiet")
+    out["run_s"], out["run_rss_mb"], _ = smk(cwd, "--cores", "2", "--quiet")
+    # per-case execution of the same cases, then the same table code
+    cfg = settings.resolve({"truth_dir": str(cwd / "truth"), "algorithms_dir": str(cwd / "algorithms")})
+    _, cases = epa_cases.discover(cwd / "truth", cwd / "algorithms")
+    ref_dir = cwd / "per_case"
+    t0 = time.perf_counter()
+    for c in cases:
+        case = chain.CaseFolder(ref_dir / "cases" / c.key, c.truth, c.estimate)
+        for name in chain.NAMES:
+            chain.run_stage(name, case, cfg)
+    out["per_case_in_process_s"] = time.perf_counter() - t0
+    tables.make(sorted(c.key for c in cases), ref_dir, cfg)
+    same = all((cwd / "results" / f).read_bytes() == (ref_dir / f).read_bytes()
+               for f in ("error_comparison.txt", "summary.csv"))
+    out["tables_identical_to_per_case"] = same
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--skip-evo", action="store_true")
+    ap.add_argument("--skip-large", action="store_true")
+    ap.add_argument("--cases", default="1000,10000")
+    ap.add_argument("--out", help="keep the grids here (default: a temporary folder)")
+    args = ap.parse_args()
+    tmp = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="epa_grid_"))
+    tmp.mkdir(parents=True, exist_ok=True)
+    print("example:", bench_example(tmp), flush=True)
+    if DATA.is_dir():
+        print("euroc:", bench_euroc(tmp, args.skip_evo), flush=True)
+    else:
+        print(f"euroc: skipped, no {DATA}")
+    if not args.skip_large:
+        for n in (int(x) for x in args.cases.split(",")):
+            print(f"grid {n}:", bench_large(tmp, n), flush=True)
+
+
+if __name__ == "__main__":
+    main()

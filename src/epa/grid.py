@@ -1,0 +1,185 @@
+"""Running one stage over a batch of cases: what a workflow job does (see docs/performance.md).
+
+- Batching: up to ``grid.max_batches`` cases, each case is its own batch; beyond, cases are spread
+  over ``max_batches`` batches by a stable hash of their name, so the job count stays bounded and an
+  added case changes one batch.
+- Isolation: a user mistake or a bug in one case is that case's recorded failure (markers in its
+  artifacts, the traceback in its log); the batch's other cases go on. A stage that failed upstream
+  passes the reason on. The batch's manifest (the job's only declared output) records each case.
+- Parallelism: a job's work runs in a pool of worker processes that live as long as the Snakemake
+  process (numpy and epa imported once per worker, never once per job); one core runs it in the
+  calling thread.
+
+No snakemake import here: the rules call :func:`run_job` with plain values.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import traceback
+import zlib
+from contextlib import contextmanager
+from pathlib import Path
+
+from epa import io
+from epa.errors import EpaError
+
+log = logging.getLogger("epa")
+
+
+# ----------------------------------------------------------------------------- batches
+def batches(keys: list[str], max_batches: int) -> dict[str, list[str]]:
+    """Batch id -> case keys. A case is its own batch (id = its key) while the grid is small."""
+    if len(keys) <= max_batches:
+        return {key: [key] for key in keys}
+    out: dict[str, list[str]] = {}
+    for key in keys:
+        out.setdefault(f"batch{zlib.crc32(key.encode()) % max_batches:04d}", []).append(key)
+    return dict(sorted(out.items()))
+
+
+def case_dir(results_dir, key: str) -> Path:
+    return Path(results_dir) / "cases" / key
+
+
+# ----------------------------------------------------------------------------- per-case logs
+class _ThreadFileHandler(logging.Handler):
+    """Sends each record to the log file of the case the current thread is working on."""
+
+    def __init__(self):
+        super().__init__()
+        self.local = threading.local()
+        self.setFormatter(logging.Formatter("%(levelname)s %(message)s"))
+
+    def emit(self, record):
+        fh = getattr(self.local, "fh", None)
+        if fh is not None:
+            fh.write(self.format(record) + "\n")
+
+
+_HANDLER = _ThreadFileHandler()
+
+
+def _install_handler() -> None:
+    for name in ("epa", "py.warnings"):
+        logger = logging.getLogger(name)
+        if _HANDLER not in logger.handlers:
+            logger.addHandler(_HANDLER)
+            logger.propagate = False  # a grid's warnings go to the case logs, not the terminal
+    logging.getLogger("epa").setLevel(logging.INFO)
+    logging.captureWarnings(True)
+
+
+@contextmanager
+def case_log(path):
+    """Log records of this thread go to ``path`` (replaced) while inside."""
+    _install_handler()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", encoding="utf-8") as fh:
+        _HANDLER.local.fh = fh
+        try:
+            yield
+        finally:
+            _HANDLER.local.fh = None
+
+
+# ----------------------------------------------------------------------------- one stage, many cases
+def run_cases(stage: str, cases: list[dict], results_dir, cfg: dict, upstream: dict[str, str]) -> dict[str, dict]:
+    """Run ``stage`` on each case ({key, truth, estimate}); never raises for a case's failure.
+    ``upstream``: key -> reason for cases whose previous stage failed. Returns key -> status."""
+    import warnings
+
+    from epa import chain
+
+    st = chain.BY_NAME[stage]
+    status: dict[str, dict] = {}
+    for c in cases:
+        key = c["key"]
+        case = chain.CaseFolder(case_dir(results_dir, key), c.get("truth"), c.get("estimate"))
+        reason = upstream.get(key)
+        with case_log(case.log(stage)):
+            if reason is not None:
+                log.error("case failed upstream: %s", reason)
+            else:
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("always")  # every case logs its own warnings
+                        chain.run_stage(stage, case, cfg)
+                except EpaError as exc:
+                    reason = f"{stage}: {exc.one_line()}"
+                    log.error("case failed: %s", reason)
+                except Exception as exc:  # a bug: this case's failure, with its traceback, not the grid's
+                    reason = f"internal error: {type(exc).__name__}: {exc}".replace("\n", " ")
+                    log.error("%s", traceback.format_exc().rstrip())
+                    log.error("case failed: %s", reason)
+        if reason is None:
+            status[key] = {"status": "ok"}
+        else:
+            chain.write_failure(case, st, reason)
+            status[key] = {"status": "failed", "reason": reason}
+    return status
+
+
+def read_manifest(path) -> dict[str, dict]:
+    return io.read_json(path)["cases"]
+
+
+def upstream_failures(manifest_path) -> dict[str, str]:
+    if manifest_path is None:
+        return {}
+    return {k: v["reason"] for k, v in read_manifest(manifest_path).items() if v["status"] != "ok"}
+
+
+# ----------------------------------------------------------------------------- worker pool
+_POOL = None
+_POOL_LOCK = threading.Lock()
+
+
+def _pool(workers: int):
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or getattr(_POOL, "_broken", False):
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            # forkserver: Snakemake's process has threads, which fork() must not copy
+            ctx = multiprocessing.get_context("forkserver")
+            ctx.set_forkserver_preload(["epa.chain", "epa.grid"])
+            _POOL = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+        return _POOL
+
+
+def call(workers: int, fn, *args):
+    if workers <= 1:
+        return fn(*args)
+    return _pool(workers).submit(fn, *args).result()
+
+
+def run_job(stage: str, cases: list[dict], results_dir, cfg: dict, manifest, upstream_manifest=None,
+            log_path=None, workers: int = 1) -> dict[str, dict]:
+    """One workflow job: ``stage`` for a batch of cases, then the batch manifest (written last,
+    atomically, so a killed job leaves no manifest and is re-run)."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    upstream = upstream_failures(upstream_manifest)
+    try:
+        status = call(workers, run_cases, stage, cases, results_dir, cfg, upstream)
+    except BrokenProcessPool:
+        # a worker died (out of memory, a crash in C): retry case by case, record the one that dies
+        status = {}
+        for c in cases:
+            try:
+                status.update(call(workers, run_cases, stage, [c], results_dir, cfg, upstream))
+            except BrokenProcessPool:
+                reason = "internal error: the worker process died (out of memory or a crash)"
+                run_cases(stage, [c], results_dir, cfg, {c["key"]: reason})
+                status[c["key"]] = {"status": "failed", "reason": reason}
+    failed = {k: v["reason"] for k, v in status.items() if v["status"] != "ok"}
+    if log_path is not None:
+        lines = [f"{stage}: {len(status) - len(failed)} ok, {len(failed)} failed"]
+        lines += [f"failed {k}: {r}" for k, r in failed.items()]
+        io.write_text(log_path, "\n".join(lines) + "\n")
+    io.write_json(manifest, {"stage": stage, "cases": status})
+    return status
