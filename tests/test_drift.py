@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from epa import drift, io, pipeline, settings
+from epa import chain, drift, io, pipeline, settings
 
 CFG = settings.defaults()
 
@@ -59,18 +59,15 @@ def test_knee_threshold_cases():
     assert k["mode"] == "knee" and 5 <= k["threshold_m"] < 30 and k["raw_m"] < 1e4  # outlier trimmed
 
 
-def _case(gt, est, **kw):
+def _case(gt, est, tmp_path, **kw):
     cfg = settings.defaults()
-    ref, e, _ = pipeline.load(gt, est, {**cfg, "load": {**cfg["load"], **kw}})
-    r, m, sync_info, _ = pipeline.sync_stage(ref, e, cfg)
-    c, ci = pipeline.calibrate_stage(r, m, cfg, sync_info)
-    _, a, ai = pipeline.align_stage(r, c, cfg, ci)
-    _, tables = pipeline.metrics_stage(r, a, cfg)
-    return pipeline.drift_stage(tables, cfg)[0]
+    cfg["load"].update(kw)
+    return chain.run_case(gt, est, tmp_path, cfg)["drift"]
 
 
-def test_real_openvins_mh04_divergence_is_flagged(data):
-    s = _case(data / "rpng_open_vins/ov_data/euroc_mav/MH_04_difficult.txt", data / "qmy0519_open_vins-master/traj_estimate.txt")
+def test_real_openvins_mh04_divergence_is_flagged(data, tmp_path):
+    s = _case(data / "rpng_open_vins/ov_data/euroc_mav/MH_04_difficult.txt", data / "qmy0519_open_vins-master/traj_estimate.txt",
+              tmp_path)
     assert s["global_failed"] and s["n_fail_segments"] >= 1
     assert s["success_rate_distance_pct"] < 30
     # 1 s RPE passes 2 m at ~3.4 s and keeps growing; the run leaves a 50 m radius at 9.6 s (SOURCES.md)
@@ -84,8 +81,8 @@ def test_real_openvins_mh04_divergence_is_flagged(data):
     ("MichaelGrupp_evo/test/data/KITTI_00_gt.txt", "MichaelGrupp_evo/test/data/KITTI_00_ORB.txt"),
     ("MichaelGrupp_evo/test/data/KITTI_00_gt.txt", "MichaelGrupp_evo/test/data/KITTI_00_SPTAM.txt"),
 ])
-def test_healthy_real_estimates_keep_95_percent(data, gt, est):
-    s = _case(data / gt, data / est)
+def test_healthy_real_estimates_keep_95_percent(data, gt, est, tmp_path):
+    s = _case(data / gt, data / est, tmp_path)
     assert s["success_rate_distance_pct"] >= 95 and not s["global_failed"]
 
 

@@ -16,11 +16,19 @@ ROOT = Path(__file__).resolve().parents[1]
 CMD = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--cores", "2"]
 
 
-def smk(cwd, *args):
-    out = subprocess.run(CMD + ["--directory", str(cwd), "--configfile", str(cwd / "cfg.yaml"), *args],
+def smk(cwd, *args, config="cfg.yaml", snakefile=None):
+    cmd = CMD if snakefile is None else [*CMD[:3], "-s", str(snakefile), *CMD[5:]]
+    out = subprocess.run(cmd + ["--directory", str(cwd), "--configfile", str(cwd / config), *args],
                          capture_output=True, text=True, cwd=cwd)
     assert out.returncode == 0, out.stdout + out.stderr
     return out.stdout + out.stderr
+
+
+def artifacts(results: Path) -> dict[str, bytes]:
+    """Every per-case artifact and table (not logs or Snakemake's bookkeeping), by relative path."""
+    files = [p for p in results.rglob("*") if p.is_file() and "logs" not in p.parts and "batches" not in p.parts
+             and "benchmarks" not in p.parts]
+    return {str(p.relative_to(results)): p.read_bytes() for p in files}
 
 
 def planned_jobs(cwd):
@@ -62,6 +70,9 @@ def test_outputs_exist_and_parse(grid):
     assert "poses matched" in bad["run2"] or "pose" in bad["run2"]
     text = (res / "error_comparison.txt").read_text()
     assert "TOOL SOURCE: epa=4, ov_eval=0" in text and "broken & - / - & - / -" in text
+    # the failed case's log ends with its reason in one line
+    log = (res / "cases/broken/handheld_office/run1/logs/load.log").read_text().strip().splitlines()
+    assert log[-1].startswith("ERROR case failed: load: ") and "not a number" in log[-1]
     m = json.load(open(res / "cases/vio_body/handheld_office/run1/06_metrics/metrics.json"))
     assert {"n_matched", "alignment", "ate", "rpe_distance", "rpe_time_1s", "drift_rate_pct"} <= set(m)
 
@@ -111,3 +122,67 @@ def test_rerun_behaviour(grid):
     (grid / "cfg.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\nalign: {method: posyaw}\n")
     jobs = planned_jobs(grid)
     assert jobs == {"align": 6, "metrics": 6, "drift": 6, "tables": 1}
+
+
+def test_batched_execution_writes_the_same_artifacts_and_tables(grid):
+    # 6 cases in 2 batches per stage instead of one case per job
+    (grid / "batched.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: batched\n"
+                                       "grid: {max_batches: 2}\n")
+    smk(grid, config="batched.yaml")
+    assert len(list((grid / "batched/batches").iterdir())) == 2
+    per_case, batched = artifacts(grid / "results"), artifacts(grid / "batched")
+    assert len(per_case) > 60 and per_case.keys() == batched.keys()
+    assert [k for k in per_case if per_case[k] != batched[k]] == []
+
+
+def test_epa_eval_writes_the_workflow_metrics_json(grid, tmp_path):
+    from epa import cli
+
+    case = "vio_camera/handheld_office/run1"
+    assert cli.main(["eval", str(grid / "truth/handheld_office.txt"), str(grid / f"algs/{case}.csv"),
+                     "--out", str(tmp_path / "eval")]) == 0
+    for stage_file in ("06_metrics/metrics.json", "07_drift/drift.json", "04_calibrate/calibrate.json"):
+        assert (tmp_path / "eval" / stage_file).read_bytes() == (grid / "results/cases" / case / stage_file).read_bytes()
+
+
+def test_a_bug_in_one_case_is_only_that_cases_failure(grid):
+    # a Snakefile that includes the real one and breaks the sync stage of one case (in-thread: --cores 1)
+    wrapper = grid / "Snakefile.bug"
+    wrapper.write_text(f"include: {str(ROOT / 'Snakefile')!r}\n" + """
+import epa.chain as _chain
+_sync = _chain.BY_NAME["sync"].run
+def _buggy(case, *args):
+    if "vio_body/handheld_office/run2" in str(case.root):
+        raise ZeroDivisionError("injected bug")
+    return _sync(case, *args)
+_chain.BY_NAME["sync"] = _chain.BY_NAME["sync"].__class__(**{**_chain.BY_NAME["sync"].__dict__, "run": _buggy})
+""")
+    (grid / "bug.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: bug\n")
+    out = smk(grid, "--cores", "1", config="bug.yaml", snakefile=wrapper)
+    rows = {r["algorithm"] + "/" + r["run"]: r for r in csv.DictReader(open(grid / "bug/summary.csv"))}
+    assert rows["vio_body/run2"]["status"] == "internal error: ZeroDivisionError: injected bug"
+    assert [r["status"] for k, r in rows.items() if k.startswith("vio_")].count("ok") == 3
+    assert "vio_body/handheld_office/run2: internal error: ZeroDivisionError: injected bug" in out
+    log = (grid / "bug/cases/vio_body/handheld_office/run2/logs/sync.log").read_text()
+    assert "Traceback" in log and "ZeroDivisionError" in log
+    downstream = (grid / "bug/cases/vio_body/handheld_office/run2/logs/metrics.log").read_text()
+    assert "failed upstream: internal error: ZeroDivisionError" in downstream
+
+
+@pytest.mark.skipif(shutil.which("sbatch") is not None, reason="runs a stand-in cluster, not a real one")
+def test_cluster_generic_executor_gives_the_local_tables(tmp_path):
+    pytest.importorskip("snakemake_executor_plugin_cluster_generic")
+    cwd = tmp_path
+    simulate.simulate(cwd / "sim")
+    (cwd / "local.yaml").write_text("truth_dir: sim/truth\nalgorithms_dir: sim/algorithms\nresults_dir: local\n"
+                                    "grid: {max_batches: 3}\n")
+    (cwd / "cluster.yaml").write_text((cwd / "local.yaml").read_text().replace("results_dir: local",
+                                                                               "results_dir: cluster"))
+    # a stand-in for sbatch: run the job script in the background, print a job id
+    (cwd / "submit.sh").write_text('#!/bin/bash\nnohup bash "$1" > "$1.out" 2>&1 &\necho $!\n')
+    (cwd / "submit.sh").chmod(0o755)
+    smk(cwd, config="local.yaml")
+    smk(cwd, "--executor", "cluster-generic", "--cluster-generic-submit-cmd", str(cwd / "submit.sh"),
+        "--jobs", "2", "--seconds-between-status-checks", "1", "--latency-wait", "5", config="cluster.yaml")
+    for name in ("error_comparison.txt", "summary.csv"):
+        assert (cwd / "cluster" / name).read_bytes() == (cwd / "local" / name).read_bytes()

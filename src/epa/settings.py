@@ -37,7 +37,7 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
     import jsonschema
 
     cfg = copy.deepcopy(config or {})
-    validator = jsonschema.Draft7Validator(schema())
+    validator = jsonschema.Draft202012Validator(schema())
     errors = sorted(validator.iter_errors(cfg), key=lambda e: list(e.path))
     if errors:
         err = errors[0]

@@ -1,0 +1,133 @@
+"""The stage chain and the grid runner: the fallback decision, batching, per-case failure isolation."""
+import json
+from concurrent.futures.process import BrokenProcessPool
+
+import numpy as np
+import pytest
+
+from epa import chain, grid, io, settings, tables
+from epa.errors import EpaError
+from test_steps_sim import case as sim_case
+
+
+@pytest.fixture
+def offset_case(tmp_path):
+    """A camera-frame estimate 0.25 s late: Step 1 finds the offset, Step 2 the extrinsic."""
+    ref, est, _, _ = sim_case("drone_figure8", offset=0.25, noise=0.002)
+    io.write_tum(tmp_path / "ref.txt", ref.shifted(1e9))
+    io.write_tum(tmp_path / "est.txt", est.shifted(1e9))
+    return tmp_path / "ref.txt", tmp_path / "est.txt"
+
+
+def resolved(**sections):
+    return settings.resolve({"truth_dir": ".", "algorithms_dir": ".", **sections})
+
+
+def test_trusted_steps_use_the_estimated_offset(offset_case, tmp_path):
+    m = chain.run_case(*offset_case, tmp_path / "out", resolved())["metrics"]
+    assert m["eval_source"] == "epa" and abs(m["time_offset_s"] - 0.25) < 0.002
+    assert m["ate"]["trans_m"]["rmse"] < 0.01
+
+
+def test_untrusted_step2_drops_the_step1_offset_and_reassociates(offset_case, tmp_path):
+    # an impossible residual bound: Step 2 is not trusted, so the case is evaluated the ov_eval way,
+    # which means no offset either (the configured sync.offset, 0), not the Step 1 one
+    cfg = resolved(calibrate={"max_trans_residual_m": 1e-6})
+    m = chain.run_case(*offset_case, tmp_path / "out", cfg, write_tables=True)["metrics"]
+    assert m["eval_source"] == "ov_eval" and m["calibrate"]["reason"].startswith("Step 2 not trusted")
+    assert abs(m["sync"]["offset_s"] - 0.25) < 0.002  # what Step 1 found stays on record
+    assert m["time_offset_s"] == 0.0 and m["calibrate"]["reassociated"]["offset_s"] == 0.0
+    assert m["extrinsic_rot_deg"] is None and m["alignment"]["method"] == "se3" and m["alignment"]["fallback_se3"]
+    pairs = io.read_csv(tmp_path / "out/04_calibrate/pairs.csv")
+    assert np.abs(pairs["t_ref"] - pairs["t_est"]).max() <= 0.02  # matched on raw stamps
+    assert not (tmp_path / "out/04_calibrate/est.tum").exists()
+
+
+def test_ov_eval_mode_sets_the_stage_settings_and_warns(caplog):
+    cfg = resolved(mode="ov_eval", sync={"policy": "evo"})
+    assert cfg["sync"] == {**cfg["sync"], "estimate_offset": False, "policy": "ov_eval", "max_diff": 0.02}
+    assert not cfg["calibrate"]["enabled"]
+    assert "mode ov_eval overrides sync.policy: 'evo' -> 'ov_eval'" in caplog.text
+
+
+def test_batches_are_cases_on_small_grids_and_stable_hashes_on_large_ones():
+    keys = [f"a/d{k}/r" for k in range(10)]
+    assert grid.batches(keys, 32) == {k: [k] for k in keys}
+    many = [f"a{k % 7}/d{k % 13}/r{k}" for k in range(500)]
+    b = grid.batches(many, 32)
+    assert len(b) == 32 and sorted(sum(b.values(), [])) == sorted(many)
+    # adding a case changes exactly one batch
+    b2 = grid.batches(many + ["new/case/run"], 32)
+    assert sum(b[k] != b2[k] for k in b) == 1
+
+
+def write_case(root, name, ref, est_text):
+    folder = root / "algs" / name / "seq"
+    folder.mkdir(parents=True)
+    (folder / "run1.txt").write_text(est_text)
+    return {"key": f"{name}/seq/run1", "truth": str(ref), "estimate": str(folder / "run1.txt")}
+
+
+@pytest.fixture
+def three_cases(tmp_path, offset_case):
+    ref, est = offset_case
+    good = est.read_text()
+    return [write_case(tmp_path, "good", ref, good), write_case(tmp_path, "bug", ref, good),
+            write_case(tmp_path, "bad", ref, "1 0 0 0 0 0 0 1\n2 0 0 x 0 0 0 1\n")]
+
+
+def run_grid(tmp_path, cases, cfg):
+    out = tmp_path / "results"
+    manifests = {}
+    for stage in chain.NAMES:
+        prev = manifests.get(chain.previous(stage))
+        manifests[stage] = out / "batches/all" / f"{stage}.json"
+        grid.run_job(stage, cases, out, cfg, manifests[stage], prev, out / f"logs/{stage}.log")
+    return out, manifests
+
+
+def test_a_bug_in_one_case_is_recorded_and_the_others_finish(tmp_path, three_cases, monkeypatch):
+    real = chain.BY_NAME["align"].run
+
+    def buggy(case, *args):
+        if "/bug/" in str(case.root):
+            raise KeyError("injected")
+        return real(case, *args)
+
+    monkeypatch.setitem(chain.BY_NAME, "align", chain.Stage(**{**chain.BY_NAME["align"].__dict__, "run": buggy}))
+    out, manifests = run_grid(tmp_path, three_cases, resolved())
+    status = grid.read_manifest(manifests["drift"])
+    assert status["good/seq/run1"] == {"status": "ok"}
+    assert status["bug/seq/run1"]["reason"] == "internal error: KeyError: 'injected'"
+    assert status["bad/seq/run1"]["reason"].startswith("load: ") and "run1.txt:2: not a number: 'x'" in status["bad/seq/run1"]["reason"]
+    assert "Traceback" in (out / "cases/bug/seq/run1/logs/align.log").read_text()
+    assert json.loads((out / "cases/bug/seq/run1/07_drift/drift.json").read_text())["status"] == "failed"
+    failed = tables.make([c["key"] for c in three_cases], out, resolved())
+    assert dict(failed) == {"bad/seq/run1": "failed: " + status["bad/seq/run1"]["reason"],
+                            "bug/seq/run1": "internal error: KeyError: 'injected'"}
+    assert "(see" in tables.failure_report(out / "summary.csv")
+
+
+def test_a_dead_worker_costs_only_its_case(tmp_path, three_cases, monkeypatch):
+    calls = []
+
+    def flaky(workers, fn, *args):
+        calls.append(len(args[1]))
+        if len(args[1]) > 1 or args[1][0]["key"].startswith("bug"):
+            raise BrokenProcessPool("worker died")
+        return fn(*args)
+
+    monkeypatch.setattr(grid, "call", flaky)
+    status = grid.run_job("load", three_cases, tmp_path / "r", resolved(), tmp_path / "m.json", workers=2)
+    assert calls == [3, 1, 1, 1]
+    assert status["good/seq/run1"] == {"status": "ok"}
+    assert "worker process died" in status["bug/seq/run1"]["reason"]
+
+
+def test_epa_eval_failure_writes_markers_not_results(tmp_path):
+    bad = tmp_path / "bad.txt"
+    bad.write_text("1 2 3\n")
+    with pytest.raises(EpaError):
+        chain.run_case(bad, bad, tmp_path / "out", resolved())
+    assert chain.failure_of(tmp_path / "out/01_load/load.json").startswith("load: ")
+    assert not (tmp_path / "out/06_metrics").exists()
