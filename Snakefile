@@ -28,4 +28,6 @@ rule all:
 
 
 onsuccess:
-    print(epa_tables.failure_report(f"{RESULTS}/summary.csv"))
+    failures = epa_tables.failure_report(f"{RESULTS}/summary.csv")
+    if failures:
+        print(failures)

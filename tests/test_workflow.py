@@ -129,7 +129,7 @@ def test_batched_execution_writes_the_same_artifacts_and_tables(grid):
     (grid / "batched.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: batched\n"
                                        "grid: {max_batches: 2}\n")
     smk(grid, config="batched.yaml")
-    assert len(list((grid / "batched/batches").iterdir())) == 2
+    assert len(list((grid / "batched/batches").iterdir())) <= 2  # 6 cases, at most 2 jobs per stage
     per_case, batched = artifacts(grid / "results"), artifacts(grid / "batched")
     assert len(per_case) > 60 and per_case.keys() == batched.keys()
     assert [k for k in per_case if per_case[k] != batched[k]] == []
@@ -158,7 +158,7 @@ def _buggy(case, *args):
 _chain.BY_NAME["sync"] = _chain.BY_NAME["sync"].__class__(**{**_chain.BY_NAME["sync"].__dict__, "run": _buggy})
 """)
     (grid / "bug.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: bug\n")
-    out = smk(grid, "--cores", "1", config="bug.yaml", snakefile=wrapper)
+    out = smk(grid, "--cores", "1", "all", config="bug.yaml", snakefile=wrapper)
     rows = {r["algorithm"] + "/" + r["run"]: r for r in csv.DictReader(open(grid / "bug/summary.csv"))}
     assert rows["vio_body/run2"]["status"] == "internal error: ZeroDivisionError: injected bug"
     assert [r["status"] for k, r in rows.items() if k.startswith("vio_")].count("ok") == 3
