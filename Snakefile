@@ -1,5 +1,5 @@
 # epica: algorithm x dataset x run grid -> error_comparison tables. See README.md.
-from snakemake.utils import min_version, validate
+from snakemake.utils import min_version
 
 min_version("8.0")
 
@@ -7,9 +7,7 @@ min_version("8.0")
 configfile: "config/config.yaml"
 
 
-validate(config, "config/config.schema.yaml")
-
-
+# validated against config/config.schema.yaml in rules/common.smk (errors name the key and the file)
 include: "rules/common.smk"
 include: "rules/load.smk"
 include: "rules/crop.smk"

@@ -1,13 +1,21 @@
 # Parse-time setup: resolved settings (schema defaults filled in), the discovered cases, their batches.
 # Every stage rule runs one stage for one batch (one case on small grids) in-process; see
 # docs/performance.md for why, with the measurements.
+import os
+
 import epa
+from epa.errors import EpaError
+from snakemake.exceptions import WorkflowError
 from epa import cases as epa_cases, chain as epa_chain, grid as epa_grid, settings as epa_settings, tables as epa_tables
 
-EPA = epa_settings.resolve(config, source="config")
+try:  # a mistake in the config or the folders is one line, not a traceback
+    epa_settings.check_user_configs(workflow.overwrite_configfiles, workflow.config_settings.overwrite_config)
+    EPA = epa_settings.resolve(config, source=", ".join(map(str, workflow.configfiles)) or "config")
+    TRUTH, CASES = epa_cases.discover(EPA["truth_dir"], EPA["algorithms_dir"])
+except EpaError as exc:
+    raise WorkflowError("epa: error: " + exc.one_line()) from None
 EPA_VERSION = epa.__version__
 RESULTS = EPA["results_dir"]
-TRUTH, CASES = epa_cases.discover(EPA["truth_dir"], EPA["algorithms_dir"])
 CASE_BY_KEY = {c.key: c for c in CASES}
 BATCHES = epa_grid.batches(sorted(CASE_BY_KEY), EPA["grid"]["max_batches"])
 TABLE_OUTPUTS = [f"{RESULTS}/error_comparison.txt", f"{RESULTS}/summary.csv"] + [
@@ -30,6 +38,13 @@ def batch_log(stage):
 
 def batch_benchmark(stage):
     return f"{RESULTS}/batches/{{batch}}/benchmarks/{stage}.tsv"
+
+
+def batch_sources(batch):
+    """The user's files a load job reads. One that does not exist (a dangling link) is left out, so
+    its case fails with "file not found" instead of stopping the whole grid."""
+    paths = {str(p) for k in BATCHES[batch] for p in (CASE_BY_KEY[k].truth, CASE_BY_KEY[k].estimate)}
+    return sorted(p for p in paths if os.path.exists(p))
 
 
 def stage_params(stage):

@@ -1,7 +1,7 @@
 # Load: read the reference and the estimate in any supported format: 01_load/.
 rule load:
     input:
-        sources=lambda wc: sorted({str(p) for k in BATCHES[wc.batch] for p in (CASE_BY_KEY[k].truth, CASE_BY_KEY[k].estimate)}),
+        sources=lambda wc: batch_sources(wc.batch),
     output:
         manifest=manifest("load"),
     params:

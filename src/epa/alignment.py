@@ -72,7 +72,8 @@ def fit(ref: Trajectory, est: Trajectory, *, method: str = "se3", first_n: int =
     n = len(ref) if first_n is None or first_n < 0 else min(first_n, len(ref))
     need = 2 if method == "posyaw" else 3
     if n < need:
-        raise EpaError(f"align {method} needs at least {need} matched poses, got {n}")
+        what = f"align.first_n is {first_n} ({len(ref)} poses matched)" if n < len(ref) else f"only {n} poses matched"
+        raise EpaError(f"align {method} needs at least {need} poses: {what}")
     src, dst = est.p[:n], ref.p[:n]
     if method == "posyaw":
         return posyaw(src, dst)

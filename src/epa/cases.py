@@ -26,7 +26,8 @@ class Case:
 
 
 def _trajectory_files(folder: Path):
-    return sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")
+    # a dangling link is kept: its case then fails with "file not found" instead of vanishing
+    return sorted(p for p in folder.iterdir() if (p.is_file() or p.is_symlink()) and not p.name.startswith(".")
                   and not p.name.endswith(SIDE_FILES))
 
 

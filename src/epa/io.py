@@ -27,6 +27,9 @@ FORMATS = ("auto", "tum", "kitti", "euroc", "openvins", "csv")
 TIME_UNITS = ("auto", "s", "ns", "sec_nsec")
 # A stamp this large cannot be seconds (it would be ~30,000 years); it is nanoseconds.
 NS_THRESHOLD = 1e12
+# Farther than this from the origin is no trajectory (the Moon is 4e8 m away); squares of it still fit
+# a float64 comfortably, so metrics never overflow.
+MAX_POSITION_M = 1e9
 
 
 # ----------------------------------------------------------------------------- text parsing
@@ -82,6 +85,9 @@ def _read_table(path: Path) -> _Table:
         raise EpaError("is a directory, expected a trajectory file", path=str(path)) from None
     except OSError as exc:
         raise EpaError(f"cannot read: {exc.strerror}", path=str(path)) from None
+    if "\x00" in text[:4096] or text[:4096].count("\ufffd") > 8:
+        raise EpaError("binary data, not a text trajectory file", path=str(path))
+    text = text.removeprefix("\ufeff")  # a byte-order mark (spreadsheet exports) is not part of the data
     raw = text.splitlines()
     header: list[str] | None = None
     start = 0
@@ -89,6 +95,8 @@ def _read_table(path: Path) -> _Table:
         s = line.strip()
         if not s:
             continue
+        if s[0] not in "#%" and not _split(s):
+            raise EpaError("a row of empty fields", path=str(path), line=start + 1)
         if s[0] in "#%" or not _is_number(_split(s)[0]):
             header = _header_names(s)
             continue
@@ -186,6 +194,7 @@ def _finish(tab: _Table, t: np.ndarray, p: np.ndarray, q_xyzw: np.ndarray, *, ti
         t = _sec_nsec(tab)
     elif time_unit == "ns" or (time_unit == "auto" and (header_ns or np.median(np.abs(t)) > NS_THRESHOLD)):
         t = t / 1e9
+    _check_positions(tab, p)
     norms = np.linalg.norm(q_xyzw, axis=1)
     zero = norms < 1e-6
     if zero.any():
@@ -193,6 +202,13 @@ def _finish(tab: _Table, t: np.ndarray, p: np.ndarray, q_xyzw: np.ndarray, *, ti
     q = q_xyzw / norms[:, None]
     traj = Trajectory(t, p, q, cov_rot=cov_rot, cov_pos=cov_pos)
     return _check_order(traj, tab, on_unsorted)
+
+
+def _check_positions(tab: _Table, p: np.ndarray) -> None:
+    huge = np.abs(p).max(axis=1) > MAX_POSITION_M
+    if huge.any():
+        k = int(np.argmax(huge))
+        tab.fail(k, f"position {np.abs(p[k]).max():.3g} m is beyond {MAX_POSITION_M:.0e} m (a diverged or corrupt row)")
 
 
 def _sec_nsec(tab: _Table) -> np.ndarray:
@@ -282,6 +298,7 @@ def read_kitti(tab: _Table, *, times: np.ndarray | None = None, rate: float = 10
     # Project onto SO(3): KITTI files print about 7 digits, so R^T R is only approximately I.
     u, _, vt = np.linalg.svd(r)
     r = u @ vt
+    _check_positions(tab, m[:, :, 3])
     traj = Trajectory(t, m[:, :, 3].copy(), geometry.rot_to_quat(r))
     return _check_order(traj, tab, "error")
 
@@ -290,17 +307,29 @@ READERS = {"tum": read_tum, "openvins": read_openvins, "euroc": read_euroc, "csv
            "kitti": read_kitti}
 
 
+FORMAT_SETTINGS = "load.truth_format / load.estimate_format"
+
+
 def detect_format(path: Path, tab: _Table) -> str:
+    """The format when the file says it unambiguously; otherwise an error naming what was found.
+
+    A header naming time, position and quaternion columns means ``csv``. A header of the file's
+    width that names them otherwise (``t_s``, a byte-order mark, another language) is not guessed
+    at. Without such a header: ``.csv`` with 8+ columns is EuRoC (``qw`` first), else 8 columns
+    TUM, 12 KITTI, 20 OpenVINS."""
     width = tab.rows.shape[1]
     if _named_columns(tab.header, width) is not None:
         return "csv"
+    if tab.header and len(tab.header) == width and not all(_is_number(h) for h in tab.header):
+        raise EpaError(f"cannot tell the columns from the header ({', '.join(tab.header)}): name them t (or"
+                       " timestamp), x, y, z, qx, qy, qz, qw, or set " + FORMAT_SETTINGS, path=str(path))
     if path.suffix.lower() == ".csv" and width >= 8:
         return "euroc"
     by_width = {8: "tum", 12: "kitti", 20: "openvins"}
     if width in by_width:
         return by_width[width]
     raise EpaError(f"cannot tell the format from {width} columns: expected 8 (TUM), 12 (KITTI),"
-                   " 20 (OpenVINS) or a CSV header naming the columns; set load.format", path=str(path))
+                   f" 20 (OpenVINS) or a CSV header naming the columns; set {FORMAT_SETTINGS}", path=str(path))
 
 
 def kitti_times_for(path: Path) -> Path | None:

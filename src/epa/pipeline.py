@@ -161,8 +161,17 @@ def align_stage(ref: Trajectory, est: Trajectory, cfg: dict, calib_info: dict):
                             **fit.to_dict()}
 
 
+# A matched reference shorter than this has no distance metrics (RPE per metre, drift rate,
+# distance success rate would all be 0/0).
+MIN_PATH_M = 0.01
+
+
 def metrics_stage(ref: Trajectory, est: Trajectory, cfg: dict):
     c = cfg["metrics"]
+    length = ref.length()
+    if length < MIN_PATH_M:
+        raise EpaError(f"the reference does not move ({length:.3g} m over the matched poses): distance RPE,"
+                       " drift rate and success rate are undefined")
     return metrics.evaluate(ref, est, segments=c["segments"], segment_tol=c["segment_tol"],
                             time_delta=c["time_delta"], time_tol=c["time_tol"], rpe=c["rpe"])
 

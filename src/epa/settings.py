@@ -68,3 +68,31 @@ def apply_mode(cfg: dict, given: dict) -> dict:
 def defaults() -> dict:
     """Every stage setting at its default (no truth/algorithms folders)."""
     return _fill({}, schema())
+
+
+GRID_FOLDERS = ("truth_dir", "algorithms_dir")
+
+
+def check_user_configs(configfiles, overrides: dict | None) -> None:
+    """A grid given with ``--configfile`` must name its own folders: the workflow's config/config.yaml
+    (the bundled example) is merged underneath, and its folders must never stand in silently."""
+    import yaml
+
+    if not configfiles:
+        return
+    named = set((overrides or {}).keys())
+    for path in configfiles:
+        try:
+            with open(path, encoding="utf-8") as fh:
+                data = yaml.safe_load(fh)
+        except OSError as exc:
+            raise EpaError(f"cannot read: {exc.strerror}", path=str(path)) from None
+        except yaml.YAMLError as exc:
+            raise EpaError(f"not valid YAML: {str(exc).splitlines()[0]}", path=str(path)) from None
+        if not isinstance(data, dict):
+            raise EpaError(f"a config must be a mapping of settings, not a {type(data).__name__}", path=str(path))
+        named |= data.keys()
+    missing = [k for k in GRID_FOLDERS if k not in named]
+    if missing:
+        raise EpaError(f"names no {' or '.join(missing)} (the bundled example's would be used)",
+                       path=", ".join(map(str, configfiles)))
