@@ -6,7 +6,7 @@ import stat
 import numpy as np
 import pytest
 
-from epa import alignment, cases, chain, io, settings
+from epa import alignment, cases, chain, io, pipeline, settings
 from epa.errors import EpaError
 from epa.trajectory import Trajectory
 
@@ -107,3 +107,28 @@ def test_folders_given_on_the_command_line_count():
 def test_results_follow_the_umask_not_mkstemps_0600(tmp_path):
     io.write_text(tmp_path / "x.txt", "x")
     assert stat.S_IMODE((tmp_path / "x.txt").stat().st_mode) == 0o666 & ~io._UMASK
+
+
+@pytest.mark.parametrize("rows,line,what", [
+    ("1403636592.5 0 0 0 0 0 0 1\n1403636592600000000 1 0 0 0 0 0 1\n1403636592.7 2 0 0 0 0 0 1\n", 2,
+     "timestamp 1403636592600000000 is in nanoseconds but most stamps are seconds: the file mixes units"),
+    ("1403636592500000000 0 0 0 0 0 0 1\n1403636592.6 1 0 0 0 0 0 1\n1403636592700000000 2 0 0 0 0 0 1\n", 2,
+     "timestamp 1403636592.6 is in seconds but most stamps are nanoseconds: the file mixes units"),
+])
+def test_a_file_mixing_second_and_nanosecond_stamps_is_refused(tmp_path, rows, line, what):
+    assert f"m.txt:{line}: {what}" in read_error(tmp_path, "m.txt", rows)
+
+
+def test_every_inference_is_a_note_in_load_json(tmp_path):
+    # nanosecond stamps without a header saying so, and a repeated stamp sorted away
+    rows = "".join(f"{1_700_000_000_000_000_000 + k * 50_000_000} {k * 0.1} 0 0 0 0 0 1\n" for k in range(400))
+    rows += rows.splitlines(keepends=True)[-1]
+    (tmp_path / "est.txt").write_text(rows)
+    cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": ".", "load": {"unsorted": "sort"}})
+    notes: list = []
+    traj = io.read_trajectory(tmp_path / "est.txt", on_unsorted="sort", notes=notes)
+    assert len(traj) == 400
+    assert notes == ["format tum (8 columns)", "stamps read as nanoseconds (above 1e12, so not seconds)",
+                     "0 backward and 1 repeated timestamps: sorted, kept the first of each repeat"]
+    _, _, info = pipeline.load(tmp_path / "est.txt", tmp_path / "est.txt", cfg)
+    assert info["est_notes"] == notes and info["ref_notes"] == notes

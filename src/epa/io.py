@@ -39,6 +39,7 @@ class _Table:
 
     def __init__(self, path: Path, rows: np.ndarray, body: list[str], first_line: int, header: list[str] | None):
         self.path, self.rows, self.header = path, rows, header
+        self.notes: list[str] = []  # every interpretation made that the file did not state
         self._body, self._first_line = body, first_line  # the file's lines from the first data row on
 
     def data_lines(self) -> tuple[list[str], list[int]]:
@@ -193,7 +194,12 @@ def _finish(tab: _Table, t: np.ndarray, p: np.ndarray, q_xyzw: np.ndarray, *, ti
     if time_unit == "sec_nsec":
         t = _sec_nsec(tab)
     elif time_unit == "ns" or (time_unit == "auto" and (header_ns or np.median(np.abs(t)) > NS_THRESHOLD)):
+        if time_unit == "auto" and not header_ns:  # decided by the median: all must agree
+            _check_one_unit(tab, t)
+            tab.notes.append("stamps read as nanoseconds (above 1e12, so not seconds)")
         t = t / 1e9
+    elif time_unit == "auto":
+        _check_seconds(tab, t)
     _check_positions(tab, p)
     norms = np.linalg.norm(q_xyzw, axis=1)
     zero = norms < 1e-6
@@ -202,6 +208,22 @@ def _finish(tab: _Table, t: np.ndarray, p: np.ndarray, q_xyzw: np.ndarray, *, ti
     q = q_xyzw / norms[:, None]
     traj = Trajectory(t, p, q, cov_rot=cov_rot, cov_pos=cov_pos)
     return _check_order(traj, tab, on_unsorted)
+
+
+def _check_one_unit(tab: _Table, t: np.ndarray) -> None:
+    """Nanosecond stamps: every one must be (a mix with seconds would be sorted into nonsense)."""
+    small = np.abs(t) <= NS_THRESHOLD
+    if small.any():
+        k = int(np.argmax(small))
+        tab.fail(k, f"timestamp {float(t[k])!r} is in seconds but most stamps are nanoseconds: the file mixes units"
+                    " (set load.time_unit if every stamp is in one unit)")
+
+
+def _check_seconds(tab: _Table, t: np.ndarray) -> None:
+    big = np.abs(t) > NS_THRESHOLD
+    if big.any():
+        k = int(np.argmax(big))
+        tab.fail(k, f"timestamp {float(t[k]):.0f} is in nanoseconds but most stamps are seconds: the file mixes units")
 
 
 def _check_positions(tab: _Table, p: np.ndarray) -> None:
@@ -237,8 +259,7 @@ def _check_order(traj: Trajectory, tab: _Table, on_unsorted: str) -> Trajectory:
     keep = np.concatenate([[True], np.diff(t_sorted) > 0])
     n_back = int((dt < 0).sum())
     n_dup = int((~keep).sum())
-    log.warning("%s: %d backward and %d repeated timestamps: sorted, kept the first of each repeat",
-                tab.path, n_back, n_dup)
+    tab.notes.append(f"{n_back} backward and {n_dup} repeated timestamps: sorted, kept the first of each repeat")
     return traj.select(order[keep])
 
 
@@ -341,22 +362,33 @@ def kitti_times_for(path: Path) -> Path | None:
 
 
 def read_trajectory(path, fmt: str = "auto", *, time_unit: str = "auto", on_unsorted: str = "error",
-                    kitti_rate: float = 10.0, kitti_times=None) -> Trajectory:
-    """Read any supported trajectory file into seconds and unit quaternions."""
+                    kitti_rate: float = 10.0, kitti_times=None, notes: list | None = None) -> Trajectory:
+    """Read any supported trajectory file into seconds and unit quaternions. Every interpretation the
+    file did not state (detected format, nanoseconds, sorting, KITTI times) is logged as a warning
+    and appended to ``notes``."""
     path = Path(path)
     if fmt not in FORMATS:
         raise EpaError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}", path=str(path))
     tab = _read_table(path)
     if fmt == "auto":
         fmt = detect_format(path, tab)
+        tab.notes.append(f"format {fmt} ({tab.rows.shape[1]} columns{', header names them' if fmt == 'csv' else ''})")
     times = None
     if fmt == "kitti":
         tpath = Path(kitti_times) if kitti_times else kitti_times_for(path)
         if tpath is not None:
             times = _read_table(tpath).rows[:, 0]
+            tab.notes.append(f"KITTI stamps from {tpath.name}")
+        else:
+            tab.notes.append(f"KITTI stamps at {kitti_rate} Hz (no times file; load.kitti_rate)")
     traj = READERS[fmt](tab, time_unit=time_unit, on_unsorted=on_unsorted, times=times, rate=kitti_rate)
     if len(traj) < 2:
         raise EpaError(f"only {len(traj)} pose(s); at least 2 are needed", path=str(path))
+    for note in tab.notes:
+        if not note.startswith("format "):  # a detected format is routine; the rest deserves a look
+            log.warning("%s: %s", path, note)
+    if notes is not None:
+        notes.extend(tab.notes)
     return traj
 
 

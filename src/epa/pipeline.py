@@ -20,21 +20,25 @@ def _load_options(cfg: dict) -> dict:
     return dict(time_unit=c["time_unit"], on_unsorted=c["unsorted"], kitti_rate=c["kitti_rate"])
 
 
-def load_reference(ref_path, cfg: dict) -> Trajectory:
-    return io.read_trajectory(ref_path, cfg["load"]["truth_format"], **_load_options(cfg))
+def load_reference(ref_path, cfg: dict) -> tuple[Trajectory, list[str]]:
+    notes: list[str] = []
+    return io.read_trajectory(ref_path, cfg["load"]["truth_format"], notes=notes, **_load_options(cfg)), notes
 
 
-def load(ref_path, est_path, cfg: dict, reference: Trajectory | None = None):
-    """Read the reference (unless already read: ``reference``) and the estimate."""
+def load(ref_path, est_path, cfg: dict, reference: tuple[Trajectory, list[str]] | None = None):
+    """Read the reference (unless already read: ``reference``, as load_reference returns it) and the
+    estimate. ``ref_notes`` / ``est_notes`` in the record list what was inferred rather than read."""
     c = cfg["load"]
-    opts = _load_options(cfg)
-    ref = load_reference(ref_path, cfg) if reference is None else reference
+    ref, ref_notes = load_reference(ref_path, cfg) if reference is None else reference
     # KITTI estimates rarely ship their own times file: they are index-aligned with the reference's.
     est_times = io.kitti_times_for(Path(est_path)) or io.kitti_times_for(Path(ref_path))
-    est = io.read_trajectory(est_path, c["estimate_format"], kitti_times=est_times, **opts)
+    est_notes: list[str] = []
+    est = io.read_trajectory(est_path, c["estimate_format"], kitti_times=est_times, notes=est_notes,
+                             **_load_options(cfg))
     info = {"ref_file": Path(ref_path).name, "est_file": Path(est_path).name, "n_ref": len(ref), "n_est": len(est),
             "ref_length_m": ref.length(), "est_length_m": est.length(),
-            "ref_span_s": [float(ref.t[0]), float(ref.t[-1])], "est_span_s": [float(est.t[0]), float(est.t[-1])]}
+            "ref_span_s": [float(ref.t[0]), float(ref.t[-1])], "est_span_s": [float(est.t[0]), float(est.t[-1])],
+            "ref_notes": ref_notes, "est_notes": est_notes}
     return ref, est, info
 
 
