@@ -186,3 +186,29 @@ def test_cluster_generic_executor_gives_the_local_tables(tmp_path):
         "--jobs", "2", "--seconds-between-status-checks", "1", "--latency-wait", "5", config="cluster.yaml")
     for name in ("error_comparison.txt", "summary.csv"):
         assert (cwd / "cluster" / name).read_bytes() == (cwd / "local" / name).read_bytes()
+
+
+def test_a_killed_run_resumes_to_the_same_tables(grid):
+    import os
+    import signal
+
+    (grid / "kill.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: killed\n")
+    cmd = CMD + ["--directory", str(grid), "--configfile", str(grid / "kill.yaml"), "--quiet"]
+    proc = subprocess.Popen(cmd, cwd=grid, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.time() + 120
+    while len(list((grid / "killed").glob("batches/**/sync.json"))) < 2 and time.time() < deadline:
+        time.sleep(0.05)
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)  # Snakemake, its forkserver and workers, mid-run
+    except ProcessLookupError:
+        pass
+    proc.wait()
+    assert not (grid / "killed/summary.csv").exists()
+    # no half-written artifact: atomic writes leave only whole files or hidden temporaries
+    for p in (grid / "killed").rglob("*.json"):
+        if not p.name.startswith("."):
+            json.loads(p.read_text())
+    smk(grid, "--unlock", config="kill.yaml")  # the killed run's lock stays behind
+    smk(grid, config="kill.yaml")
+    for name in ("error_comparison.txt", "summary.csv"):
+        assert (grid / "killed" / name).read_bytes() == (grid / "results" / name).read_bytes()
