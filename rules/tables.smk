@@ -7,7 +7,7 @@ rule tables:
         summary=report(f"{RESULTS}/summary.csv", caption="../docs/report_caption.rst", category="Tables"),
         tex=[f"{RESULTS}/tables/{name}.tex" for name in epa_tables.TABLE_NAMES],
     params:
-        cases=sorted(CASE_BY_KEY),
+        cases=lambda wc: sorted(CASE_BY_KEY),  # a function: braces in a name are not wildcards
         settings={"tables": EPA["tables"], "metrics": EPA["metrics"]},
         version=EPA_VERSION,
     log:

@@ -212,3 +212,18 @@ def test_a_killed_run_resumes_to_the_same_tables(grid):
     smk(grid, config="kill.yaml")
     for name in ("error_comparison.txt", "summary.csv"):
         assert (grid / "killed" / name).read_bytes() == (grid / "results" / name).read_bytes()
+
+
+def test_names_with_spaces_unicode_and_symbols_run(tmp_path):
+    alg, ds, run = "alg %&{x}", "dä ta", "run 1"
+    (tmp_path / "truth").mkdir()
+    simulate.simulate(tmp_path / "sim")
+    shutil.copy(tmp_path / "sim/truth/handheld_office.txt", tmp_path / "truth" / f"{ds}.txt")
+    (tmp_path / "algs" / alg / ds).mkdir(parents=True)
+    shutil.copy(tmp_path / "sim/algorithms/vio_body/handheld_office/run1.txt", tmp_path / "algs" / alg / ds / f"{run}.txt")
+    (tmp_path / "cfg.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\n")
+    smk(tmp_path)
+    row = next(csv.DictReader(open(tmp_path / "results/summary.csv", encoding="utf-8")))
+    assert (row["algorithm"], row["dataset"], row["run"], row["status"]) == (alg, ds, run, "ok")
+    assert (tmp_path / "results/cases" / alg / ds / run / "06_metrics/metrics.json").is_file()
+    assert r"alg \%\&\{x\} & " in (tmp_path / "results/tables/ate.tex").read_text()

@@ -16,6 +16,7 @@ No snakemake import here: the rules call :func:`run_job` with plain values.
 from __future__ import annotations
 
 import logging
+import re
 import threading
 import traceback
 import zlib
@@ -30,13 +31,21 @@ log = logging.getLogger("epa")
 
 # ----------------------------------------------------------------------------- batches
 def batches(keys: list[str], max_batches: int) -> dict[str, list[str]]:
-    """Batch id -> case keys. A case is its own batch (id = its key) while the grid is small."""
+    """Batch id -> case keys. A case is its own batch (id = its key, made safe for a Snakemake path
+    pattern) while the grid is small."""
     if len(keys) <= max_batches:
-        return {key: [key] for key in keys}
+        return {_batch_id(key): [key] for key in keys}
     out: dict[str, list[str]] = {}
     for key in keys:
         out.setdefault(f"batch{zlib.crc32(key.encode()) % max_batches:04d}", []).append(key)
     return dict(sorted(out.items()))
+
+
+def _batch_id(key: str) -> str:
+    """The case key, unless it holds characters Snakemake would read as a pattern ({ }) or that a
+    shell or a cluster would trip on; then a readable stand-in with a hash of the key."""
+    safe = re.sub(r"[^A-Za-z0-9._/+-]", "_", key)
+    return key if safe == key else f"{safe}~{zlib.crc32(key.encode()):08x}"
 
 
 def case_dir(results_dir, key: str) -> Path:
