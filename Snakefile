@@ -21,7 +21,7 @@ include: "rules/tables.smk"
 
 rule all:
     input:
-        TABLE_OUTPUTS,
+        rules.tables.output,
     default_target: True
 
 

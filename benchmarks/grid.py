@@ -116,7 +116,7 @@ def in_process(grid_dir: Path, results_dir: Path) -> tuple[float, dict, list[str
     _, cases = epa_cases.discover(grid_dir / "truth", grid_dir / "algorithms")
     t0 = time.perf_counter()
     for c in cases:
-        case = chain.CaseFolder(results_dir / "cases" / c.key, c.truth, c.estimate)
+        case = chain.CaseFolder(chain.case_dir(results_dir, c.key), c.truth, c.estimate)
         for name in chain.NAMES:
             chain.run_stage(name, case, cfg)
     return time.perf_counter() - t0, cfg, sorted(c.key for c in cases)

@@ -18,9 +18,6 @@ EPA_VERSION = epa.__version__
 RESULTS = EPA["results_dir"]
 CASE_BY_KEY = {c.key: c for c in CASES}
 BATCHES = epa_grid.batches(sorted(CASE_BY_KEY), EPA["grid"]["max_batches"])
-TABLE_OUTPUTS = [f"{RESULTS}/error_comparison.txt", f"{RESULTS}/summary.csv"] + [
-    f"{RESULTS}/tables/{name}.tex" for name in epa_tables.TABLE_NAMES
-]
 
 
 wildcard_constraints:
@@ -56,7 +53,7 @@ def stage_params(stage):
             for k in BATCHES[wc.batch]
         ]
     else:
-        cases = lambda wc: BATCHES[wc.batch]
+        cases = lambda wc: [{"key": k} for k in BATCHES[wc.batch]]
     return {"cases": cases, "settings": epa_chain.settings_for(stage, EPA), "version": EPA_VERSION}
 
 
@@ -76,8 +73,8 @@ def workers():
 
 
 def run_stage(stage, params, output, log, upstream=None):
-    cases = params.cases if stage == "load" else [{"key": k} for k in params.cases]
-    epa_grid.run_job(stage, cases, RESULTS, params.settings, output.manifest, upstream, log[0], workers=workers())
+    epa_grid.run_job(stage, params.cases, RESULTS, params.settings, output.manifest, upstream, log[0],
+                     workers=workers())
 
 
 def make_tables(params, log):

@@ -54,16 +54,25 @@ class CaseFolder:
         return self.root / "logs" / f"{stage}.log"
 
 
+def case_dir(results_dir, key: str) -> Path:
+    """Where a case's artifacts live: ``<results_dir>/cases/<algorithm>/<dataset>/<run>``."""
+    return Path(results_dir) / "cases" / key
+
+
 # ----------------------------------------------------------------------------- failure markers
+def read_record(path) -> tuple[dict, str | None]:
+    """A stage's JSON record and, if it is a failure marker, the recorded reason (read once)."""
+    data = io.read_json(path)
+    return data, (data.get("reason", "failed") if data.get("status") == "failed" else None)
+
+
 def failure_of(path) -> str | None:
     """The recorded reason if this artifact is a failure marker, else None."""
     path = Path(path)
+    if path.suffix == ".json":
+        return read_record(path)[1]
     with open(path, encoding="utf-8", errors="replace") as fh:
         head = fh.read(4096)
-    if path.suffix == ".json":
-        if '"status": "failed"' in head:
-            return io.read_json(path).get("reason", "failed")
-        return None
     if head.startswith(FAILED_PREFIX):
         return head[len(FAILED_PREFIX):].splitlines()[0]
     return None
@@ -137,13 +146,20 @@ def _trajectories(case, values, stage):
     return values[stage]
 
 
+def _pair_indices(case, values, stage):
+    key = stage + "/pairs"
+    if key not in values:
+        values[key] = io.read_pair_indices(case.path(stage, "pairs.csv"))
+    return values[key]
+
+
 def _matched(case, values, stage):
     """(ref, est) matched by ``<stage>/pairs.csv``: row k pairs ref[i_ref[k]] with est[i_est[k]] of
     the cropped trajectories."""
     key = stage + "/matched"
     if key not in values:
         ref, est = _trajectories(case, values, "crop")
-        i_ref, i_est = io.read_pair_indices(case.path(stage, "pairs.csv"))
+        i_ref, i_est = _pair_indices(case, values, stage)
         values[key] = (ref.select(i_ref), est.select(i_est))
     return values[key]
 
@@ -186,7 +202,8 @@ def _crop(case, values, cfg, write_tables):
 def _sync(case, values, cfg, write_tables):
     ref, est = _trajectories(case, values, "crop")
     (i_ref, i_est), info, curve = pipeline.sync_stage(ref, est, cfg)
-    values["sync/matched"], values["sync/sync.json"] = (ref.select(i_ref), est.select(i_est)), info
+    values["sync/pairs"], values["sync/sync.json"] = (i_ref, i_est), info
+    values["sync/matched"] = (ref.select(i_ref), est.select(i_est))
     io.write_json(case.path("sync", "sync.json"), info)
     if write_tables:
         io.write_pair_indices(case.path("sync", "pairs.csv"), i_ref, i_est, ref.t, est.t)
@@ -201,9 +218,9 @@ def _calibrate(case, values, cfg, write_tables):
     io.write_json(case.path("calibrate", "calibrate.json"), info)
     if write_tables:
         dst = case.path("calibrate", "pairs.csv")
-        if pairs is not None or not _link(case.path("sync", "pairs.csv"), dst):
+        if pairs is not None or not _link(case.path("sync", "pairs.csv"), dst):  # re-associated, or no links
             ref_c, est_c = _trajectories(case, values, "crop")
-            i_ref, i_est = pairs if pairs is not None else io.read_pair_indices(case.path("sync", "pairs.csv"))
+            i_ref, i_est = pairs if pairs is not None else _pair_indices(case, values, "sync")
             io.write_pair_indices(dst, i_ref, i_est, ref_c.t, est_c.t)
         corrected = case.path("calibrate", "est.tum")
         if info["plan"]["apply_extrinsic"]:

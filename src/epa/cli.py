@@ -51,15 +51,7 @@ def _eval_config(args) -> dict:
 
     cfg: dict = {"truth_dir": ".", "algorithms_dir": "."}
     if args.config:
-        import yaml
-
-        try:
-            with open(args.config, encoding="utf-8") as fh:
-                cfg.update(yaml.safe_load(fh) or {})
-        except OSError as exc:
-            raise EpaError(f"cannot read: {exc.strerror}", path=args.config) from None
-        except yaml.YAMLError as exc:
-            raise EpaError(f"not valid YAML: {str(exc).splitlines()[0]}", path=args.config) from None
+        cfg.update(settings.load_yaml(args.config))
     overrides = {
         ("mode",): args.mode, ("align", "method"): args.align, ("align", "first_n"): args.first_n,
         ("sync", "policy"): args.policy, ("sync", "max_diff"): args.max_diff, ("sync", "offset"): args.offset,

@@ -19,11 +19,12 @@ import logging
 import re
 import threading
 import traceback
+import warnings
 import zlib
 from contextlib import contextmanager
 from pathlib import Path
 
-from epa import io
+from epa import chain, io
 from epa.errors import EpaError
 
 log = logging.getLogger("epa")
@@ -46,10 +47,6 @@ def _batch_id(key: str) -> str:
     shell or a cluster would trip on; then a readable stand-in with a hash of the key."""
     safe = re.sub(r"[^A-Za-z0-9._/+-]", "_", key)
     return key if safe == key else f"{safe}~{zlib.crc32(key.encode()):08x}"
-
-
-def case_dir(results_dir, key: str) -> Path:
-    return Path(results_dir) / "cases" / key
 
 
 # ----------------------------------------------------------------------------- per-case logs
@@ -98,15 +95,11 @@ def case_log(path):
 def run_cases(stage: str, cases: list[dict], results_dir, cfg: dict, upstream: dict[str, str]) -> dict[str, dict]:
     """Run ``stage`` on each case ({key, truth, estimate}); never raises for a case's failure.
     ``upstream``: key -> reason for cases whose previous stage failed. Returns key -> status."""
-    import warnings
-
-    from epa import chain
-
     st = chain.BY_NAME[stage]
     status: dict[str, dict] = {}
     for c in cases:
         key = c["key"]
-        case = chain.CaseFolder(case_dir(results_dir, key), c.get("truth"), c.get("estimate"))
+        case = chain.CaseFolder(chain.case_dir(results_dir, key), c.get("truth"), c.get("estimate"))
         reason = upstream.get(key)
         with case_log(case.log(stage)):
             if reason is not None:
@@ -155,7 +148,7 @@ def _pool(workers: int):
 
             # forkserver: Snakemake's process has threads, which fork() must not copy
             ctx = multiprocessing.get_context("forkserver")
-            ctx.set_forkserver_preload(["epa.chain", "epa.grid"])
+            ctx.set_forkserver_preload(["epa.grid"])
             _POOL = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
         return _POOL
 

@@ -195,11 +195,11 @@ def _finish(tab: _Table, t: np.ndarray, p: np.ndarray, q_xyzw: np.ndarray, *, ti
         t = _sec_nsec(tab)
     elif time_unit == "ns" or (time_unit == "auto" and (header_ns or np.median(np.abs(t)) > NS_THRESHOLD)):
         if time_unit == "auto" and not header_ns:  # decided by the median: all must agree
-            _check_one_unit(tab, t)
+            _check_one_unit(tab, t, ns=True)
             tab.notes.append("stamps read as nanoseconds (above 1e12, so not seconds)")
         t = t / 1e9
     elif time_unit == "auto":
-        _check_seconds(tab, t)
+        _check_one_unit(tab, t, ns=False)
     _check_positions(tab, p)
     norms = np.linalg.norm(q_xyzw, axis=1)
     zero = norms < 1e-6
@@ -210,19 +210,15 @@ def _finish(tab: _Table, t: np.ndarray, p: np.ndarray, q_xyzw: np.ndarray, *, ti
     return _check_order(traj, tab, on_unsorted)
 
 
-def _check_one_unit(tab: _Table, t: np.ndarray) -> None:
-    """Nanosecond stamps: every one must be (a mix with seconds would be sorted into nonsense)."""
-    small = np.abs(t) <= NS_THRESHOLD
-    if small.any():
-        k = int(np.argmax(small))
-        tab.fail(k, f"timestamp {float(t[k])!r} is in seconds but most stamps are nanoseconds: the file mixes units"
-                    " (set load.time_unit if every stamp is in one unit)")
-
-
-def _check_seconds(tab: _Table, t: np.ndarray) -> None:
-    big = np.abs(t) > NS_THRESHOLD
-    if big.any():
-        k = int(np.argmax(big))
+def _check_one_unit(tab: _Table, t: np.ndarray, *, ns: bool) -> None:
+    """Stamps whose unit was told from their median: every one must be in that unit (a mix of
+    seconds and nanoseconds would be sorted into nonsense)."""
+    odd = (np.abs(t) <= NS_THRESHOLD) if ns else (np.abs(t) > NS_THRESHOLD)
+    if odd.any():
+        k = int(np.argmax(odd))
+        if ns:
+            tab.fail(k, f"timestamp {float(t[k])!r} is in seconds but most stamps are nanoseconds: the file mixes"
+                        " units (set load.time_unit if every stamp is in one unit)")
         tab.fail(k, f"timestamp {float(t[k]):.0f} is in nanoseconds but most stamps are seconds: the file mixes units")
 
 
@@ -370,9 +366,10 @@ def read_trajectory(path, fmt: str = "auto", *, time_unit: str = "auto", on_unso
     if fmt not in FORMATS:
         raise EpaError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}", path=str(path))
     tab = _read_table(path)
+    detected = []  # a detected format is a note, not a warning: it is routine
     if fmt == "auto":
         fmt = detect_format(path, tab)
-        tab.notes.append(f"format {fmt} ({tab.rows.shape[1]} columns{', header names them' if fmt == 'csv' else ''})")
+        detected.append(f"format {fmt} ({tab.rows.shape[1]} columns{', header names them' if fmt == 'csv' else ''})")
     times = None
     if fmt == "kitti":
         tpath = Path(kitti_times) if kitti_times else kitti_times_for(path)
@@ -385,10 +382,9 @@ def read_trajectory(path, fmt: str = "auto", *, time_unit: str = "auto", on_unso
     if len(traj) < 2:
         raise EpaError(f"only {len(traj)} pose(s); at least 2 are needed", path=str(path))
     for note in tab.notes:
-        if not note.startswith("format "):  # a detected format is routine; the rest deserves a look
-            log.warning("%s: %s", path, note)
+        log.warning("%s: %s", path, note)
     if notes is not None:
-        notes.extend(tab.notes)
+        notes.extend(detected + tab.notes)
     return traj
 
 

@@ -58,7 +58,8 @@ def apply_mode(cfg: dict, given: dict) -> dict:
     import logging
 
     for (section, key), value in OV_EVAL_SETTINGS.items():
-        user = (given.get(section) or {}).get(key, value) if isinstance(given.get(section), dict) else value
+        given_section = given.get(section)
+        user = given_section.get(key, value) if isinstance(given_section, dict) else value
         if user != value:
             logging.getLogger("epa").warning("mode ov_eval overrides %s.%s: %r -> %r", section, key, user, value)
         cfg[section][key] = value
@@ -73,25 +74,32 @@ def defaults() -> dict:
 GRID_FOLDERS = ("truth_dir", "algorithms_dir")
 
 
+def load_yaml(path) -> dict:
+    """A config file as a mapping (safe-loaded: nothing in it is executed); empty is {}."""
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh)
+    except OSError as exc:
+        raise EpaError(f"cannot read: {exc.strerror}", path=str(path)) from None
+    except yaml.YAMLError as exc:
+        raise EpaError(f"not valid YAML: {str(exc).splitlines()[0]}", path=str(path)) from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise EpaError(f"a config must be a mapping of settings, not a {type(data).__name__}", path=str(path))
+    return data
+
+
 def check_user_configs(configfiles, overrides: dict | None) -> None:
     """A grid given with ``--configfile`` must name its own folders: the workflow's config/config.yaml
     (the bundled example) is merged underneath, and its folders must never stand in silently."""
-    import yaml
-
     if not configfiles:
         return
     named = set((overrides or {}).keys())
     for path in configfiles:
-        try:
-            with open(path, encoding="utf-8") as fh:
-                data = yaml.safe_load(fh)
-        except OSError as exc:
-            raise EpaError(f"cannot read: {exc.strerror}", path=str(path)) from None
-        except yaml.YAMLError as exc:
-            raise EpaError(f"not valid YAML: {str(exc).splitlines()[0]}", path=str(path)) from None
-        if not isinstance(data, dict):
-            raise EpaError(f"a config must be a mapping of settings, not a {type(data).__name__}", path=str(path))
-        named |= data.keys()
+        named |= load_yaml(path).keys()
     missing = [k for k in GRID_FOLDERS if k not in named]
     if missing:
         raise EpaError(f"names no {' or '.join(missing)} (the bundled example's would be used)",

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from epa import io
-from epa.chain import CaseFolder, failure_of
+from epa.chain import CaseFolder, case_dir, read_record
 from epa.metrics import segment_key
 
 RULE_SHORT = "=" * 38
@@ -27,6 +27,11 @@ _LATEX_SPECIAL = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$",
 
 def latex_escape(text: str) -> str:
     return "".join(_LATEX_SPECIAL.get(ch, ch) for ch in str(text))
+
+
+def has_result(status: str) -> bool:
+    """Whether a case's status carries numbers (a globally failed case still has them)."""
+    return status == "ok" or status.startswith("globally failed")
 
 
 @dataclass
@@ -43,7 +48,7 @@ class CaseResult:
 
     @property
     def ok(self) -> bool:
-        return self.status == "ok" or self.status.startswith("globally failed")
+        return has_result(self.status)
 
 
 def collect(keys: list[str], results_dir) -> list[CaseResult]:
@@ -51,16 +56,17 @@ def collect(keys: list[str], results_dir) -> list[CaseResult]:
     out = []
     for key in keys:
         alg, ds, run = key.split("/")
-        case = CaseFolder(Path(results_dir) / "cases" / key)
+        case = CaseFolder(case_dir(results_dir, key))
         res = CaseResult(alg, ds, run)
-        if failure_of(case.path("load", "load.json")) is None:
-            res.load = io.read_json(case.path("load", "load.json"))
-        reason = failure_of(case.path("drift", "drift.json"))
+        load, load_failed = read_record(case.path("load", "load.json"))
+        if load_failed is None:
+            res.load = load
+        drift, reason = read_record(case.path("drift", "drift.json"))
         if reason is not None:
             res.status = reason if reason.startswith("internal error") else "failed: " + reason
         else:
             res.metrics = io.read_json(case.path("metrics", "metrics.json"))
-            res.drift = io.read_json(case.path("drift", "drift.json"))
+            res.drift = drift
             res.segments = {**io.read_csv(case.path("metrics", "rpe_segments.csv")),
                             **io.read_csv(case.path("drift", "rpe_segments_valid.csv"))}
             res.time = {**io.read_csv(case.path("metrics", "rpe_time.csv")),
@@ -341,7 +347,7 @@ def failure_report(summary_path, most: int = 20) -> str:
     """A short end-of-run list of the cases without a result (empty when every case has one)."""
     with open(summary_path, encoding="utf-8", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    bad = [r for r in rows if r["status"] != "ok" and not r["status"].startswith("globally failed")]
+    bad = [r for r in rows if not has_result(r["status"])]
     if not bad:
         return ""
     lines = [f"epica: {len(bad)} of {len(rows)} cases have no result (see {summary_path}):"]
