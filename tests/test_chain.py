@@ -131,3 +131,26 @@ def test_epa_eval_failure_writes_markers_not_results(tmp_path):
         chain.run_case(bad, bad, tmp_path / "out", resolved())
     assert chain.failure_of(tmp_path / "out/01_load/load.json").startswith("load: ")
     assert not (tmp_path / "out/06_metrics").exists()
+
+
+def test_the_library_imports_no_workflow_glue():
+    import subprocess
+    import sys
+
+    code = ("import pkgutil, importlib, sys, epa\n"
+            "for m in pkgutil.iter_modules(epa.__path__): importlib.import_module('epa.' + m.name)\n"
+            "print(sorted(n for n in sys.modules if n.split('.')[0] in ('snakemake', 'matplotlib', 'scipy', 'pandas')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_every_rule_declares_log_benchmark_threads_and_resources():
+    from pathlib import Path
+
+    rules = Path(__file__).resolve().parents[1] / "rules"
+    for smk in sorted(rules.glob("*.smk")):
+        text = smk.read_text()
+        if "rule " not in text:
+            continue
+        for directive in ("log:", "benchmark:", "threads:", "resources:", "params:"):
+            assert text.count(directive) == text.count("\nrule ") + text.startswith("rule "), (smk.name, directive)
