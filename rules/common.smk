@@ -10,8 +10,9 @@ from epa import cases as epa_cases, chain as epa_chain, grid as epa_grid, settin
 
 try:  # a mistake in the config or the folders is one line, not a traceback
     epa_settings.check_user_configs(workflow.overwrite_configfiles, workflow.config_settings.overwrite_config)
-    EPA = epa_settings.resolve(config, source=", ".join(map(str, workflow.configfiles)) or "config")
-    TRUTH, CASES = epa_cases.discover(EPA["truth_dir"], EPA["algorithms_dir"])
+    CONFIG_SOURCE = ", ".join(map(str, workflow.configfiles)) or "config"
+    EPA = epa_settings.resolve(config, source=CONFIG_SOURCE)
+    TRUTH, CASES = epa_cases.discover(EPA["truth_dir"], EPA["algorithms_dir"], source=CONFIG_SOURCE)
 except EpaError as exc:
     raise WorkflowError("epa: error: " + exc.one_line()) from None
 EPA_VERSION = epa.__version__

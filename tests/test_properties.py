@@ -2,7 +2,7 @@
 import numpy as np
 from hypothesis import HealthCheck, given, settings as hsettings, strategies as st
 
-from epa import io
+from epa import alignment, geometry, io, metrics, sync
 from epa.errors import EpaError
 from epa.trajectory import Trajectory
 
@@ -66,3 +66,108 @@ def test_table_shaped_garbage_is_read_or_refused_cleanly(tmp_path, rows, sep, he
         assert "\n" not in exc.one_line() and exc.one_line().startswith(str(path))
         return
     assert len(traj) >= 2 and np.all(np.diff(traj.t) > 0) and np.isfinite(traj.p).all()
+
+
+# ----------------------------------------------------------------------------- every format round trips
+def random_trajectory(rng, n, with_cov=False, ns_exact=False):
+    t = np.cumsum(rng.uniform(1e-3, 1.0, n)) + rng.uniform(0, 2e9)
+    if ns_exact:  # EuRoC stores integer nanoseconds
+        t = np.round(t * 1e9) / 1e9
+    q = rng.normal(size=(n, 4))
+    cov = {}
+    if with_cov:
+        a, b = rng.normal(size=(n, 3, 3)), rng.normal(size=(n, 3, 3))
+        cov = {"cov_rot": a @ a.transpose(0, 2, 1) * 1e-4, "cov_pos": b @ b.transpose(0, 2, 1) * 1e-2}
+    return Trajectory(t, rng.uniform(-1e4, 1e4, (n, 3)), q / np.linalg.norm(q, axis=1, keepdims=True), **cov)
+
+
+@hsettings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(n=st.integers(2, 30), seed=st.integers(0, 2**32 - 1),
+       fmt=st.sampled_from(["tum", "kitti", "euroc", "openvins", "csv"]), with_cov=st.booleans())
+def test_every_format_round_trips(tmp_path, n, seed, fmt, with_cov):
+    traj = random_trajectory(np.random.default_rng(seed), n, with_cov=with_cov or fmt == "openvins",
+                             ns_exact=fmt == "euroc")
+    path = tmp_path / ("a.csv" if fmt in ("euroc", "csv") else "a.txt")
+    io.write_trajectory(path, traj, fmt)
+    back = io.read_trajectory(path)
+    np.testing.assert_allclose(back.t, traj.t, rtol=0, atol=3e-7 if fmt == "euroc" else 0)  # ns in float64
+    np.testing.assert_array_equal(back.p, traj.p)
+    # same rotation (q and -q are one rotation; KITTI stores the matrix)
+    np.testing.assert_allclose(np.abs(np.sum(back.q * traj.q, axis=1)), 1.0, rtol=0, atol=1e-12)
+    if traj.cov_rot is not None and fmt in ("openvins", "csv"):
+        np.testing.assert_array_equal(back.cov_rot, traj.cov_rot)
+        np.testing.assert_array_equal(back.cov_pos, traj.cov_pos)
+
+
+# ----------------------------------------------------------------------------- invariances and recoveries
+def smooth_motion(rng, t):
+    """Random smooth 3-D motion: a few sinusoids per axis, for position and rotation vector."""
+    def signal(scale):
+        f = rng.uniform(0.05, 0.6, (3, 4))
+        a = rng.normal(0, scale, (3, 4))
+        ph = rng.uniform(0, 2 * np.pi, (3, 4))
+        return np.einsum("ck,ckn->nc", a, np.sin(2 * np.pi * f[:, :, None] * t[None, None, :] + ph[:, :, None]))
+    return geometry.so3_exp(signal(0.6)), signal(4.0) + np.outer(t, rng.normal(0, 0.3, 3))
+
+
+def random_rigid(rng, scale=False):
+    return alignment.Similarity(geometry.so3_exp(rng.normal(0, 1.5, 3)), rng.normal(0, 50, 3),
+                                float(rng.uniform(0.2, 5)) if scale else 1.0)
+
+
+PROPS = hsettings(max_examples=25, deadline=None)
+
+
+@PROPS
+@given(seed=st.integers(0, 2**32 - 1))
+def test_metrics_are_invariant_under_a_common_rigid_transform(seed):
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, 60, 0.1)
+    r, p = smooth_motion(rng, t)
+    ref = Trajectory.from_rp(t, r, p)
+    noisy = Trajectory.from_rp(t, r @ geometry.so3_exp(rng.normal(0, 0.02, (len(t), 3))), p + rng.normal(0, 0.1, p.shape))
+    est = random_rigid(rng).apply(noisy)  # the estimate in its own world frame
+    g = random_rigid(rng)  # moved together: nothing the metrics report may change
+
+    def evaluate(ref, est):
+        aligned = alignment.fit(ref, est, method="se3").apply(est)
+        return metrics.evaluate(ref, aligned, segments=(8, 16))[0]
+
+    a, b = evaluate(ref, est), evaluate(g.apply(ref), g.apply(est))
+    for key in ("ate", "rpe_time_1s"):
+        for part in ("trans_m", "rot_deg"):
+            assert np.isclose(a[key][part]["rmse"], b[key][part]["rmse"], rtol=1e-7, atol=1e-9)
+    for seg in ("8", "16"):
+        assert a["rpe_distance"][seg]["trans_m"]["n"] == b["rpe_distance"][seg]["trans_m"]["n"]
+        assert np.isclose(a["rpe_distance"][seg]["trans_m"]["mean"], b["rpe_distance"][seg]["trans_m"]["mean"],
+                          rtol=1e-7, atol=1e-9, equal_nan=True)
+
+
+@PROPS
+@given(seed=st.integers(0, 2**32 - 1), method=st.sampled_from(["se3", "sim3"]))
+def test_alignment_recovers_a_random_transform(seed, method):
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, 30, 0.1)
+    r, p = smooth_motion(rng, t)
+    ref = Trajectory.from_rp(t, r, p)
+    g = random_rigid(rng, scale=method == "sim3")
+    inverse = alignment.Similarity(g.R.T, -g.R.T @ g.t / g.s, 1 / g.s)
+    fit = alignment.fit(ref, inverse.apply(ref), method=method)
+    np.testing.assert_allclose(fit.R, g.R, atol=1e-9)
+    np.testing.assert_allclose(fit.t, g.t, atol=1e-7)
+    assert np.isclose(fit.s, g.s, rtol=1e-9)
+
+
+@hsettings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), offset=st.floats(-1.5, 1.5))
+def test_step1_recovers_a_random_offset_on_random_smooth_motion(seed, offset):
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, 60, 1 / 100)
+    r, p = smooth_motion(rng, t)
+    ref = Trajectory.from_rp(t, r, p)
+    te = np.arange(2, 58, 1 / 20)
+    re, pe = smooth_motion(np.random.default_rng(seed), te + offset)  # same motion, read offset later
+    est = Trajectory.from_rp(te, re, pe)
+    out = sync.estimate_offset(ref, est, window=2.0)
+    assert out.used, out.reason
+    assert abs(out.offset - offset) < 2e-3

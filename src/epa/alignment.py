@@ -75,6 +75,30 @@ def fit(ref: Trajectory, est: Trajectory, *, method: str = "se3", first_n: int =
         what = f"align.first_n is {first_n} ({len(ref)} poses matched)" if n < len(ref) else f"only {n} poses matched"
         raise EpaError(f"align {method} needs at least {need} poses: {what}")
     src, dst = est.p[:n], ref.p[:n]
+    _check_determined(src, dst, method, n)
     if method == "posyaw":
         return posyaw(src, dst)
     return umeyama(src, dst, with_scale=method == "sim3")
+
+
+# Below this spread (m) the points are one point; below this ratio of the cross-covariance's second
+# to first singular value they are one line, and the rotation about that line is arbitrary.
+STILL_M = 1e-6
+COLLINEAR = 1e-10
+
+
+def _check_determined(src: np.ndarray, dst: np.ndarray, method: str, n: int) -> None:
+    """An alignment that the data do not determine would give an arbitrary rotation (and rotation
+    error) presented as a result: refuse it, naming what is degenerate."""
+    axes = slice(0, 2) if method == "posyaw" else slice(0, 3)  # posyaw rotates about z only
+    for name, pts in (("reference", dst), ("estimate", src)):
+        spread = float(np.sqrt(np.mean(np.sum((pts[:, axes] - pts[:, axes].mean(axis=0)) ** 2, axis=1))))
+        if spread < STILL_M:
+            plane = " horizontally" if method == "posyaw" else ""
+            raise EpaError(f"the {name} does not move{plane} over the {n} poses used by align {method}"
+                           f" (spread {spread:.3g} m): the alignment is undetermined")
+    if method in ("se3", "sim3"):
+        d = np.linalg.svd((dst - dst.mean(axis=0)).T @ (src - src.mean(axis=0)), compute_uv=False)
+        if d[1] <= COLLINEAR * d[0]:
+            raise EpaError(f"the {n} poses used by align {method} lie on one straight line: the rotation about"
+                           " it is undetermined (use align.method: posyaw, or more poses via align.first_n)")

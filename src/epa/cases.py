@@ -25,30 +25,60 @@ class Case:
         return f"{self.algorithm}/{self.dataset}/{self.run}"
 
 
-def _trajectory_files(folder: Path):
+def _trajectory_files(folder: Path, skipped: list[Path]):
     # a dangling link is kept: its case then fails with "file not found" instead of vanishing
-    return sorted(p for p in folder.iterdir() if (p.is_file() or p.is_symlink()) and not p.name.startswith(".")
-                  and not p.name.endswith(SIDE_FILES))
+    files = []
+    for p in sorted(folder.iterdir()):
+        if p.name.startswith("."):
+            continue  # hidden (.DS_Store, editor swap files): never data
+        if (p.is_file() or p.is_symlink()) and not p.name.endswith(SIDE_FILES):
+            files.append(p)
+        else:
+            skipped.append(p)
+    return files
 
 
-def discover(truth_dir, algorithms_dir) -> tuple[dict[str, Path], list[Case]]:
+def discover(truth_dir, algorithms_dir, *, source: str | None = None) -> tuple[dict[str, Path], list[Case]]:
+    """The reference per dataset and the cases. Everything not taken as a run or a reference (side
+    files, stray files and folders at the wrong level, datasets without a reference) is named in a
+    warning."""
     truth_dir, algorithms_dir = Path(truth_dir), Path(algorithms_dir)
     for d, key in ((truth_dir, "truth_dir"), (algorithms_dir, "algorithms_dir")):
         if not d.is_dir():
-            raise EpaError(f"{key} is not a folder", path=str(d))
+            where = "" if d.is_absolute() else f"; relative paths start at {Path.cwd()}"
+            raise EpaError(f"{key} {str(d)!r} is not a folder{where}", path=source or str(d))
+    skipped: list[Path] = []
     truth: dict[str, Path] = {}
-    for p in _trajectory_files(truth_dir):
+    for p in _trajectory_files(truth_dir, skipped):
         if p.stem in truth:
             raise EpaError(f"two reference files for dataset {p.stem!r} ({truth[p.stem].name}, {p.name})", path=str(p))
         truth[p.stem] = p
     cases = []
-    for alg in sorted(d for d in algorithms_dir.iterdir() if d.is_dir() and not d.name.startswith(".")):
-        for ds in sorted(d for d in alg.iterdir() if d.is_dir()):
+    for alg in sorted(algorithms_dir.iterdir()):
+        if alg.name.startswith("."):
+            continue
+        if not alg.is_dir():
+            skipped.append(alg)
+            continue
+        for ds in sorted(alg.iterdir()):
+            if ds.name.startswith("."):
+                continue
+            if not ds.is_dir():
+                skipped.append(ds)
+                continue
             if ds.name not in truth:
                 log.warning("%s: no reference %s/%s.* - skipped", ds, truth_dir, ds.name)
                 continue
-            for run in _trajectory_files(ds):
+            runs: dict[str, Path] = {}
+            for run in _trajectory_files(ds, skipped):
+                if run.stem in runs:
+                    raise EpaError(f"two runs named {run.stem!r} ({runs[run.stem].name}, {run.name}): rename one",
+                                   path=str(run))
+                runs[run.stem] = run
                 cases.append(Case(alg.name, ds.name, run.stem, run, truth[ds.name]))
+    if skipped:
+        shown = ", ".join(str(p) for p in skipped[:5]) + (f" and {len(skipped) - 5} more" if len(skipped) > 5 else "")
+        log.warning("%d file(s) or folder(s) taken as neither a run nor a reference: %s", len(skipped), shown)
     if not cases:
         raise EpaError("no estimate matches a reference (expected <algorithm>/<dataset>/<run>.<ext>)",
                        path=str(algorithms_dir))

@@ -55,7 +55,11 @@ class CaseFolder:
 
 
 def case_dir(results_dir, key: str) -> Path:
-    """Where a case's artifacts live: ``<results_dir>/cases/<algorithm>/<dataset>/<run>``."""
+    """Where a case's artifacts live: ``<results_dir>/cases/<algorithm>/<dataset>/<run>``. A key is
+    three plain names (discovery makes them from file names), so nothing escapes ``results_dir``."""
+    parts = key.split("/")
+    if len(parts) != 3 or any(part in ("", ".", "..") or "\\" in part for part in parts):
+        raise EpaError(f"case {key!r} is not <algorithm>/<dataset>/<run> with plain names")
     return Path(results_dir) / "cases" / key
 
 
@@ -172,11 +176,14 @@ def _record(case, values, stage, name):
 
 
 def _load(case, values, cfg, write_tables):
-    st = os.stat(case.truth)
-    source = (os.path.abspath(case.truth), st.st_mtime_ns, st.st_size, repr(cfg["load"]))
-    if source not in _LOADED:
+    try:
+        st = os.stat(case.truth)
+    except OSError:  # the reader says what is wrong with it, in its words
+        st = None
+    source = st and (os.path.abspath(case.truth), st.st_mtime_ns, st.st_size, repr(cfg["load"]))
+    if source and source not in _LOADED:
         _remember(_LOADED, source, pipeline.load_reference(case.truth, cfg))
-    ref, est, info = pipeline.load(case.truth, case.estimate, cfg, reference=_LOADED[source])
+    ref, est, info = pipeline.load(case.truth, case.estimate, cfg, reference=_LOADED.get(source) if source else None)
     values["load"], values["load/load.json"] = (ref, est), info
     if write_tables:
         _write_reference(case.path("load", "ref.tum"), ref, source)
@@ -322,6 +329,8 @@ def run_case(ref_path, est_path, out_dir, cfg: dict, *, write_tables: bool = Fal
             run_stage(st.name, case, cfg, values, write_tables=write_tables)
         except EpaError as exc:
             write_failure(case, st, f"{st.name}: {exc.one_line()}", tables=write_tables)
+            if exc.path is None:  # a stage's finding about the case: name the estimate it is about
+                raise EpaError(f"{st.name}: {exc.message}", path=str(est_path)) from None
             raise
     return {"metrics": values["metrics/metrics.json"], "drift": values["drift/drift.json"]}
 

@@ -67,28 +67,50 @@ class _ThreadFileHandler(logging.Handler):
 _HANDLER = _ThreadFileHandler()
 
 
-def _install_handler() -> None:
-    for name in ("epa", "py.warnings"):
-        logger = logging.getLogger(name)
-        if _HANDLER not in logger.handlers:
-            logger.addHandler(_HANDLER)
-            logger.propagate = False  # a grid's warnings go to the case logs, not the terminal
-    logging.getLogger("epa").setLevel(logging.INFO)
-    logging.captureWarnings(True)
+_INSIDE = {"n": 0, "saved": None}
+_INSIDE_LOCK = threading.Lock()
+
+
+def _enter_logging() -> None:
+    """While any thread is inside a case log, epa's records and Python warnings go to the case logs
+    only (not the terminal); the previous logging setup is restored when the last one leaves."""
+    with _INSIDE_LOCK:
+        _INSIDE["n"] += 1
+        if _INSIDE["n"] > 1:
+            return
+        loggers = [logging.getLogger(name) for name in ("epa", "py.warnings")]
+        _INSIDE["saved"] = [(lg, lg.propagate, lg.level) for lg in loggers]
+        for lg in loggers:
+            lg.addHandler(_HANDLER)
+            lg.propagate = False
+        loggers[0].setLevel(logging.INFO)
+        logging.captureWarnings(True)
+
+
+def _leave_logging() -> None:
+    with _INSIDE_LOCK:
+        _INSIDE["n"] -= 1
+        if _INSIDE["n"] > 0:
+            return
+        for lg, propagate, level in _INSIDE["saved"]:
+            lg.removeHandler(_HANDLER)
+            lg.propagate, lg.level = propagate, level
+        logging.captureWarnings(False)
 
 
 @contextmanager
 def case_log(path):
     """Log records of this thread go to ``path`` (replaced) while inside."""
-    _install_handler()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", encoding="utf-8") as fh:
+        _enter_logging()
         _HANDLER.local.fh = fh
         try:
             yield
         finally:
             _HANDLER.local.fh = None
+            _leave_logging()
 
 
 # ----------------------------------------------------------------------------- one stage, many cases

@@ -30,6 +30,8 @@ NS_THRESHOLD = 1e12
 # Farther than this from the origin is no trajectory (the Moon is 4e8 m away); squares of it still fit
 # a float64 comfortably, so metrics never overflow.
 MAX_POSITION_M = 1e9
+# A quaternion printed with 4+ digits is unit to ~1e-4; beyond this it was not meant to be unit.
+QUAT_NORM_TOL = 1e-2
 
 
 # ----------------------------------------------------------------------------- text parsing
@@ -79,34 +81,44 @@ def _is_number(tok: str) -> bool:
 
 def _read_table(path: Path) -> _Table:
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        data = path.read_bytes()
     except FileNotFoundError:
         raise EpaError("file not found", path=str(path)) from None
     except IsADirectoryError:
         raise EpaError("is a directory, expected a trajectory file", path=str(path)) from None
     except OSError as exc:
         raise EpaError(f"cannot read: {exc.strerror}", path=str(path)) from None
-    if "\x00" in text[:4096] or text[:4096].count("\ufffd") > 8:
-        raise EpaError("binary data, not a text trajectory file", path=str(path))
+    _check_text(path, data[:4096])
+    text = data.decode("utf-8", errors="replace")
     text = text.removeprefix("\ufeff")  # a byte-order mark (spreadsheet exports) is not part of the data
     raw = text.splitlines()
     header: list[str] | None = None
     start = 0
+    header_line = None  # the one uncommented header line a file may have
     for start, line in enumerate(raw):  # leading comments and a header line; the last one names the columns
         s = line.strip()
         if not s:
             continue
         if s[0] not in "#%" and not _split(s):
             raise EpaError("a row of empty fields", path=str(path), line=start + 1)
-        if s[0] in "#%" or not _is_number(_split(s)[0]):
+        if s[0] in "#%":
             header = _header_names(s)
+            continue
+        if not _is_number(_split(s)[0]):
+            if header_line is not None:  # two header rows (units, a pasted file): not a guess we make
+                raise EpaError(f"not a number: {_split(s)[0]!r} (a second header line; line {header_line} was"
+                               " taken as the header)", path=str(path), line=start + 1)
+            header, header_line = _header_names(s), start + 1
             continue
         break
     else:
         start = len(raw)
     body = raw[start:]
-    tab = _Table(path, np.zeros((0, 0)), body, start + 1, header)
     first = body[0] if body else ""
+    if ";" in first and "," in first:
+        raise EpaError("fields separated by ';' with ',' inside: decimal commas are not supported (export"
+                       " with '.' as the decimal separator)", path=str(path), line=start + 1)
+    tab = _Table(path, np.zeros((0, 0)), body, start + 1, header)
     parse = [line.replace(",", " ").replace(";", " ") for line in body] if ("," in first or ";" in first) else body
     try:
         with warnings.catch_warnings():
@@ -118,11 +130,30 @@ def _read_table(path: Path) -> _Table:
         _diagnose(tab)
     if rows.size == 0:
         raise EpaError("no data rows (the file is empty or holds only comments)", path=str(path))
+    if header_line is not None and len(header) != rows.shape[1]:
+        raise EpaError(f"the header names {len(header)} columns but the rows have {rows.shape[1]}",
+                       path=str(path), line=header_line)
     bad = ~np.isfinite(rows)
     if bad.any():
         tab.fail(int(np.argmax(bad.any(axis=1))), "non-finite value (nan or inf)")
     tab.rows = rows
     return tab
+
+
+# Files that are not text trajectories, by their first bytes: say what they are.
+_MAGIC = {b"\x1f\x8b": "gzip-compressed (decompress it first)", b"PK\x03\x04": "a zip archive (extract it first)",
+          b"#ROSBAG": "a ROS 1 bag (give it as a bag source with a topic)",
+          b"SQLite format 3": "an SQLite database (a ROS 2 bag's .db3: give the bag folder with a topic)",
+          b"\x89MCAP": "an MCAP file (give it as a bag source with a topic)",
+          b"\xff\xfe": "UTF-16 text (save it as UTF-8)", b"\xfe\xff": "UTF-16 text (save it as UTF-8)"}
+
+
+def _check_text(path: Path, head: bytes) -> None:
+    for magic, what in _MAGIC.items():
+        if head.startswith(magic):
+            raise EpaError(f"{what}, not a text trajectory file", path=str(path))
+    if b"\x00" in head or head.decode("utf-8", errors="replace").count("\ufffd") > 8:
+        raise EpaError("binary data, not a text trajectory file", path=str(path))
 
 
 def _diagnose(tab: _Table):
@@ -131,12 +162,12 @@ def _diagnose(tab: _Table):
     width = len(_split(data[0]))
     for s, no in zip(data, numbers):
         toks = _split(s)
+        for tok in toks:  # a word says more than a column count ("oops", a pasted header)
+            if not _is_number(tok):
+                raise EpaError(f"not a number: {tok!r}", path=str(tab.path), line=no)
         if len(toks) != width:
             raise EpaError(f"expected {width} columns like the first data row, found {len(toks)}",
                            path=str(tab.path), line=no)
-        for tok in toks:
-            if not _is_number(tok):
-                raise EpaError(f"not a number: {tok!r}", path=str(tab.path), line=no)
     raise EpaError("could not parse the numeric rows", path=str(tab.path))
 
 
@@ -205,6 +236,9 @@ def _finish(tab: _Table, t: np.ndarray, p: np.ndarray, q_xyzw: np.ndarray, *, ti
     zero = norms < 1e-6
     if zero.any():
         tab.fail(int(np.argmax(zero)), "zero quaternion")
+    off = np.abs(norms - 1).max()
+    if off > QUAT_NORM_TOL:  # printed quaternions are unit to their digits; far off hints at wrong columns
+        tab.notes.append(f"quaternions normalised (norm off by up to {off:.3g}; check the column order)")
     q = q_xyzw / norms[:, None]
     traj = Trajectory(t, p, q, cov_rot=cov_rot, cov_pos=cov_pos)
     return _check_order(traj, tab, on_unsorted)
@@ -249,7 +283,7 @@ def _check_order(traj: Trajectory, tab: _Table, on_unsorted: str) -> Trajectory:
     k = int(np.argmax(bad)) + 1
     what = "repeats" if dt[k - 1] == 0 else "goes backwards"
     if on_unsorted != "sort":
-        tab.fail(k, f"timestamp {traj.t[k]:.9f} {what} (set load.unsorted: sort to sort and drop duplicates)")
+        tab.fail(k, f"timestamp {float(traj.t[k])!r} {what} (set load.unsorted: sort to sort and drop duplicates)")
     order = np.argsort(traj.t, kind="stable")
     t_sorted = traj.t[order]
     keep = np.concatenate([[True], np.diff(t_sorted) > 0])
@@ -352,8 +386,11 @@ def detect_format(path: Path, tab: _Table) -> str:
 def kitti_times_for(path: Path) -> Path | None:
     """evo's naming: ``X_times.txt`` beside ``X.txt``; else ``times.txt`` in the same folder."""
     for cand in (path.with_name(path.stem + "_times.txt"), path.with_name("times.txt")):
-        if cand.is_file():
-            return cand
+        try:
+            if cand.is_file():
+                return cand
+        except OSError:  # an unusable path (too long): the trajectory's own read reports it
+            return None
     return None
 
 
@@ -450,6 +487,46 @@ EXACT = "%.17g"
 def write_tum(path, traj: Trajectory) -> None:
     data = np.column_stack([traj.t, traj.p, traj.q])
     _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=EXACT, header=TUM_HEADER[2:]))
+
+
+_UPPER = ([0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2])  # 11 12 13 22 23 33
+EUROC_HEADER = ("#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []")
+COV_HEADER = ["pr11", "pr12", "pr13", "pr22", "pr23", "pr33", "pt11", "pt12", "pt13", "pt22", "pt23", "pt33"]
+
+
+def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
+    """Write a trajectory in one of the formats the readers take (lossless ``%.17g`` numbers):
+    ``tum``; ``euroc`` (integer nanoseconds, ``qw`` first); ``kitti`` (3x4 poses, stamps in
+    ``<name>_times.txt`` beside it, evo's naming); ``openvins`` (TUM + the orientation and position
+    covariance upper triangles; only for a trajectory with covariance); ``csv`` (named columns, with
+    covariance columns when it has them)."""
+    path = Path(path)
+    if fmt == "tum":
+        return write_tum(path, traj)
+    if fmt == "kitti":
+        m = np.concatenate([traj.r, traj.p[:, :, None]], axis=2).reshape(len(traj), 12)
+        _atomic_write(path.with_name(path.stem + "_times.txt"), lambda fh: np.savetxt(fh, traj.t, fmt=EXACT))
+        return _atomic_write(path, lambda fh: np.savetxt(fh, m, fmt=EXACT))
+    if fmt == "euroc":
+        ns = np.round(traj.t * 1e9).astype(np.int64)
+        rows = np.column_stack([traj.p, traj.q[:, [3, 0, 1, 2]]])
+        return _atomic_write(path, lambda fh: fh.write(EUROC_HEADER + "\n" + "".join(
+            f"{a}," + ",".join(EXACT % v for v in row) + "\n" for a, row in zip(ns, rows))))
+    cov = None
+    if traj.cov_rot is not None and traj.cov_pos is not None:
+        cov = np.column_stack([traj.cov_rot[:, _UPPER[0], _UPPER[1]], traj.cov_pos[:, _UPPER[0], _UPPER[1]]])
+    elif fmt == "openvins":  # never invent an uncertainty the estimator did not report
+        raise EpaError("the OpenVINS format holds covariance and this trajectory has none; write tum or csv",
+                       path=str(path))
+    data = np.column_stack([traj.t, traj.p, traj.q] + ([] if cov is None else [cov]))
+    if fmt == "openvins":
+        return _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=EXACT, header=TUM_HEADER[2:] + " " +
+                                                         " ".join(COV_HEADER)))
+    if fmt == "csv":
+        names = ["t", "x", "y", "z", "qx", "qy", "qz", "qw"] + ([] if cov is None else COV_HEADER)
+        return _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=EXACT, delimiter=",", header=",".join(names),
+                                                         comments=""))
+    raise EpaError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS[1:])}", path=str(path))
 
 
 def read_tum_file(path) -> Trajectory:

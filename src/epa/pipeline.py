@@ -93,8 +93,12 @@ def associate(ref: Trajectory, est: Trajectory, c: dict, offset: float):
     i_ref, i_est = sync.associate(ref, est, policy=c["policy"], max_diff=c["max_diff"], offset=offset)
     max_diff = sync.POLICIES[c["policy"]] if c["max_diff"] is None else c["max_diff"]
     if len(i_ref) < c["min_pairs"]:
+        lo, hi = max(ref.t[0], est.t[0] + offset), min(ref.t[-1], est.t[-1] + offset)
+        why = ("the stamps do not overlap: reference {:.3f}..{:.3f} s, estimate {:.3f}..{:.3f} s"
+               .format(ref.t[0], ref.t[-1], est.t[0] + offset, est.t[-1] + offset) if lo >= hi else
+               f"they overlap for {hi - lo:.3f} s")
         raise EpaError(f"only {len(i_ref)} poses matched within {max_diff} s (offset {offset:.6f} s);"
-                       f" {c['min_pairs']} needed: check the time unit, the offset or the files")
+                       f" {c['min_pairs']} needed; {why} (check the time unit, sync.offset or the files)")
     info = {"offset_s": offset, "max_diff_s": max_diff, "n_matched": int(len(i_ref)), "n_ref": len(ref),
             "n_est": len(est)}
     return i_ref, i_est, info
@@ -176,8 +180,14 @@ def metrics_stage(ref: Trajectory, est: Trajectory, cfg: dict):
     if length < MIN_PATH_M:
         raise EpaError(f"the reference does not move ({length:.3g} m over the matched poses): distance RPE,"
                        " drift rate and success rate are undefined")
-    return metrics.evaluate(ref, est, segments=c["segments"], segment_tol=c["segment_tol"],
-                            time_delta=c["time_delta"], time_tol=c["time_tol"], rpe=c["rpe"])
+    summary, tables = metrics.evaluate(ref, est, segments=c["segments"], segment_tol=c["segment_tol"],
+                                       time_delta=c["time_delta"], time_tol=c["time_tol"], rpe=c["rpe"])
+    # an empty segment length is shown as empty, never as a number; say why once, here
+    summary["notes"] = [f"no {key} m segment fits in the {length:.3f} m matched path: its RPE and drift rate are empty"
+                        for key, rpe in summary["rpe_distance"].items() if rpe["trans_m"]["n"] == 0]
+    for note in summary["notes"]:
+        log.warning("%s", note)
+    return summary, tables
 
 
 def drift_stage(tables: dict, cfg: dict):

@@ -42,8 +42,15 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
     if errors:
         err = errors[0]
         key = ".".join(str(p) for p in err.path) or "(top level)"
-        raise EpaError(f"{key}: {err.message}", path=source)
-    return apply_mode(_fill(cfg, schema()), given=config or {})
+        what = err.message
+        if err.validator == "not":
+            what = f"{err.instance!r} is not allowed: {err.schema.get('description', '')}".rstrip(": ")
+        raise EpaError(f"{key}: {what}", path=source)
+    cfg = apply_mode(_fill(cfg, schema()), given=config or {})
+    crop = cfg["crop"]
+    if crop["start"] is not None and crop["end"] is not None and crop["end"] <= crop["start"]:
+        raise EpaError(f"crop.end ({crop['end']}) must be after crop.start ({crop['start']})", path=source)
+    return cfg
 
 
 # What `mode: ov_eval` means for the stages, so that no stage has to test the mode.
@@ -74,17 +81,39 @@ def defaults() -> dict:
 GRID_FOLDERS = ("truth_dir", "algorithms_dir")
 
 
+def _strict_loader():
+    """PyYAML's safe loader, except that a key given twice is an error (PyYAML keeps the last one)."""
+    import yaml
+
+    class StrictLoader(yaml.SafeLoader):
+        def construct_mapping(self, node, deep=False):
+            seen = set()
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=deep)
+                if key in seen:
+                    raise EpaError(f"{key!r} is given twice (the second would silently win)",
+                                   line=key_node.start_mark.line + 1)
+                seen.add(key)
+            return super().construct_mapping(node, deep=deep)
+
+    return StrictLoader
+
+
 def load_yaml(path) -> dict:
     """A config file as a mapping (safe-loaded: nothing in it is executed); empty is {}."""
     import yaml
 
     try:
         with open(path, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
+            data = yaml.load(fh, Loader=_strict_loader())  # noqa: S506 - a SafeLoader subclass
+    except EpaError as exc:
+        raise EpaError(exc.message, path=str(path), line=exc.line) from None
     except OSError as exc:
         raise EpaError(f"cannot read: {exc.strerror}", path=str(path)) from None
     except yaml.YAMLError as exc:
-        raise EpaError(f"not valid YAML: {str(exc).splitlines()[0]}", path=str(path)) from None
+        mark = getattr(exc, "problem_mark", None)
+        what = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise EpaError(f"not valid YAML: {what}", path=str(path), line=mark.line + 1 if mark else None) from None
     if data is None:
         return {}
     if not isinstance(data, dict):

@@ -153,6 +153,9 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     if min(motion_a, motion_b) < min_motion:
         return fail(f"too little rotational motion (std of angular speed {min(motion_a, motion_b):.3g}"
                     f" rad/s < {min_motion})", ref_motion_rad_s=motion_a, est_motion_rad_s=motion_b)
+    if t_b[0] > t_a[-1] + window or t_b[-1] < t_a[0] - window:
+        return fail(f"the stamps do not overlap within the ±{window} s search window",
+                    ref_motion_rad_s=motion_a, est_motion_rad_s=motion_b)
     w_a, w_b = _clip_spikes(w_a), _clip_spikes(w_b)
     start = min(t_a[0], t_b[0]) - window
     end = max(t_a[-1], t_b[-1]) + window
@@ -167,6 +170,9 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
 
     a, in_a = on_grid(t_a, w_a)
     b, in_b = on_grid(t_b, w_b)
+    if in_a.sum() < 4 or in_b.sum() < 4:
+        return fail(f"too few samples on the {dt:.3g} s correlation grid", ref_motion_rad_s=motion_a,
+                    est_motion_rad_s=motion_b)
     n = len(grid)
     nfft = 1 << int(np.ceil(np.log2(2 * n)))
     # corr[k] = sum_m a[m + k] b[m]: the estimate signal shifted later by k samples matches the reference.

@@ -1,0 +1,292 @@
+"""The catalogue of bad inputs: every row is a situation a user can create, the one-line error (or the
+note on a correct result) they get, and a test (``tests/test_catalogue.py`` runs every row).
+
+``python tests/catalogue.py > docs/bad-inputs.md`` writes the documentation from these rows; a test
+checks that the page is current, so a row cannot be documented without being tested.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def _rows(t, p, q=None, fmt="{:.9f}", sep=" ") -> str:
+    q = np.tile([0, 0, 0, 1.0], (len(t), 1)) if q is None else q
+    return "".join(sep.join(fmt.format(v) for v in (a, *b, *c)) + "\n" for a, b, c in zip(t, p, q))
+
+
+def motion(n=600, dt=0.05, t0=1403636580.0):
+    """Curved 3-D motion with rotation, the shape a VIO run has."""
+    t = t0 + np.arange(n) * dt
+    s = t - t0
+    p = np.column_stack([5 * np.sin(s / 5), 3 * np.cos(s / 3), 0.1 * s])
+    yaw, pitch = 0.6 * np.sin(s / 2), 0.3 * np.sin(s / 1.3)
+    q = np.column_stack([np.zeros(n), np.sin(pitch / 2) * np.cos(yaw / 2), np.sin(yaw / 2) * np.cos(pitch / 2),
+                         np.cos(yaw / 2) * np.cos(pitch / 2)])
+    return t, p, q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+T, P, Q = motion()
+GOOD = _rows(T, P, Q)
+GOOD_CSV = "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []\n" + "".join(
+    f"{int(round(a * 1e9))},{b[0]:.9f},{b[1]:.9f},{b[2]:.9f},{c[3]:.9f},{c[0]:.9f},{c[1]:.9f},{c[2]:.9f}\n"
+    for a, b, c in zip(T, P, Q))
+
+
+def _replace_line(text: str, k: int, line: str) -> str:
+    lines = text.splitlines(keepends=True)
+    lines[k] = line + "\n"
+    return "".join(lines)
+
+
+def _kitti(n=300, bad_row=None) -> str:
+    _, p, q = motion(n)
+    from scipy.spatial.transform import Rotation
+
+    r = Rotation.from_quat(q).as_matrix()
+    m = np.concatenate([r, p[:, :, None]], axis=2).reshape(n, 12)
+    if bad_row is not None:
+        m[bad_row, :3] *= 2  # a rotation block that is no rotation
+    return "".join(" ".join(f"{v:.9e}" for v in row) + "\n" for row in m)
+
+
+@dataclass
+class Bad:
+    """One situation. ``where``: how it is run (eval: ``epa eval REF EST``; config: ``epa eval
+    --config``; grid: a grid with one good case beside it; workflow: ``snakemake -n``)."""
+
+    id: str
+    where: str
+    situation: str
+    expect: str  # a fragment of the one-line error; for ``ok`` rows, of the note on the result
+    est: str | bytes | None = None
+    ref: str | bytes = GOOD
+    est_name: str = "est.txt"
+    ref_name: str = "ref.txt"
+    args: tuple = ()
+    config: str | None = None
+    ok: bool = False  # a correct result (with a note saying what was inferred), not an error
+    setup: str | None = None  # a named special setup done by the runner (links, folders, names)
+    blame: str = "est"  # whose path the error line names: est, ref, config or none (the command line)
+
+
+S = GOOD.splitlines(keepends=True)
+CATALOGUE: list[Bad] = [
+    # ------------------------------------------------------------------ readers: what the file is
+    Bad("empty-file", "eval", "an empty estimate file", "no data rows (the file is empty or holds only comments)", est=""),
+    Bad("only-comments", "eval", "only comment lines", "no data rows", est="# t x y z qx qy qz qw\n# nothing\n"),
+    Bad("only-header", "eval", "a CSV header and no rows", "no data rows", est="t,x,y,z,qx,qy,qz,qw\n", est_name="est.csv"),
+    Bad("binary", "eval", "binary garbage", "binary data, not a text trajectory file", est=bytes(range(256)) * 8),
+    Bad("gzip", "eval", "a gzip-compressed trajectory", "gzip-compressed (decompress it first)",
+        est=b"\x1f\x8b\x08\x00" + bytes(60)),
+    Bad("zip", "eval", "a zip archive", "a zip archive (extract it first)", est=b"PK\x03\x04" + bytes(60), est_name="est.zip"),
+    Bad("utf16", "eval", "UTF-16 text (a Windows export)", "UTF-16 text (save it as UTF-8)",
+        est=b"\xff\xfe" + GOOD.encode("utf-16-le")),
+    Bad("png", "eval", "an image given by mistake", "binary data", est=b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4,
+        est_name="est.png"),
+    Bad("bom-headerless", "eval", "a byte-order mark before headerless TUM rows", "format tum (8 columns)",
+        est=b"\xef\xbb\xbf" + GOOD.encode(), ok=True),
+    Bad("bom-header", "eval", "a byte-order mark before a CSV header with qw first", "format csv",
+        est=b"\xef\xbb\xbf" + ("t,x,y,z,qw,qx,qy,qz\n" + "".join(
+            f"{a:.9f},{b[0]:.9f},{b[1]:.9f},{b[2]:.9f},{c[3]:.9f},{c[0]:.9f},{c[1]:.9f},{c[2]:.9f}\n"
+            for a, b, c in zip(T, P, Q))).encode(), est_name="est.csv", ok=True),
+    Bad("crlf", "eval", "Windows line endings", "format tum", est=GOOD.replace("\n", "\r\n"), ok=True),
+    Bad("tabs", "eval", "tab-separated columns", "format tum", est=GOOD.replace(" ", "\t"), ok=True),
+    Bad("latin1-comment", "eval", "a Latin-1 comment (é) above the rows", "format tum",
+        est=b"# r\xe9sultat\n" + GOOD.encode(), ok=True),
+    Bad("inline-comment", "eval", "a comment at the end of a row", "format tum",
+        est=_replace_line(GOOD, 3, S[3].rstrip() + "  # keyframe"), ok=True),
+    # ------------------------------------------------------------------ readers: rows
+    Bad("empty-fields", "eval", "a row of empty fields (`,,,,,,,`) before the data", "est.csv:2: a row of empty fields",
+        est="t,x,y,z,qx,qy,qz,qw\n,,,,,,,\n" + GOOD.replace(" ", ","), est_name="est.csv"),
+    Bad("ragged", "eval", "a row with a missing column", "est.txt:6: expected 8 columns like the first data row, found 7",
+        est=_replace_line(GOOD, 5, " ".join(S[5].split()[:7]))),
+    Bad("truncated", "eval", "a file cut off mid-row (a crashed run)", "expected 8 columns like the first data row, found 3",
+        est=GOOD + "1403636610.0 1.2 3.4"),
+    Bad("word", "eval", "a word in a number column", "est.txt:4: not a number: 'nope'",
+        est=_replace_line(GOOD, 3, S[3].replace(S[3].split()[2], "nope", 1))),
+    Bad("nan", "eval", "nan after a divergence", "est.txt:11: non-finite value (nan or inf)",
+        est=_replace_line(GOOD, 10, " ".join(S[10].split()[:1] + ["nan"] * 7))),
+    Bad("inf", "eval", "an infinite position", "est.txt:3: non-finite value", est=_replace_line(GOOD, 2, S[2].replace(
+        S[2].split()[1], "inf", 1))),
+    Bad("huge", "eval", "positions of 1e300", "est.txt:2: position 1e+300 m is beyond 1e+09 m",
+        est=_replace_line(GOOD, 1, S[1].replace(S[1].split()[1], "1e300", 1))),
+    Bad("zero-quat", "eval", "an all-zero quaternion", "est.txt:5: zero quaternion",
+        est=_replace_line(GOOD, 4, " ".join(S[4].split()[:4] + ["0", "0", "0", "0"]))),
+    Bad("quat-norm", "eval", "quaternions far from unit norm (columns scaled or swapped)",
+        "quaternions normalised (norm off by up to 1", est=_rows(T, P, 2 * Q), ok=True),
+    Bad("concatenated", "eval", "two files pasted together (a header line mid-file)", "est.txt:601: not a number: 't'",
+        est=GOOD + "t x y z qx qy qz qw\n" + GOOD),
+    Bad("one-pose", "eval", "a single pose", "only 1 pose(s); at least 2 are needed", est=S[0]),
+    Bad("two-headers", "eval", "two header rows (names, then units)", "est.csv:2: not a number: 's' (a second header line",
+        est="t,x,y,z,qx,qy,qz,qw\ns,m,m,m,-,-,-,-\n" + GOOD.replace(" ", ","), est_name="est.csv"),
+    Bad("header-width", "eval", "a header naming 8 columns above 9-column rows", "est.csv:1: the header names 8 columns but the rows have 9",
+        est="t,x,y,z,qx,qy,qz,qw\n" + GOOD.replace(" ", ",").replace("\n", ",0\n"), est_name="est.csv"),
+    Bad("decimal-comma", "eval", "a spreadsheet export with decimal commas", "decimal commas are not supported",
+        est=GOOD.replace(".", ",").replace(" ", ";"), est_name="est.csv"),
+    Bad("no-header-csv-7", "eval", "a headerless CSV of 7 columns", "cannot tell the format from 7 columns",
+        est="".join(",".join(line.split()[:7]) + "\n" for line in S), est_name="est.csv"),
+    # ------------------------------------------------------------------ readers: format detection
+    Bad("unknown-width", "eval", "rows of 10 numbers", "cannot tell the format from 10 columns: expected 8 (TUM), 12 (KITTI), 20 (OpenVINS)",
+        est=GOOD.replace("\n", " 0 0\n")),
+    Bad("unnamed-time", "eval", "a CSV header whose time column is `t_s`",
+        "cannot tell the columns from the header (t_s, x, y, z, qx, qy, qz, qw)",
+        est="t_s,x,y,z,qx,qy,qz,qw\n" + GOOD.replace(" ", ","), est_name="est.csv"),
+    Bad("foreign-header", "eval", "a header in another language", "cannot tell the columns from the header (zeit,",
+        est="zeit,px,py,pz,a,b,c,d\n" + GOOD.replace(" ", ","), est_name="est.csv"),
+    Bad("euroc-guess", "eval", "a headerless `.csv` of 8 columns (EuRoC order by extension and width)", "format euroc (8 columns)",
+        est="".join(",".join(line.split()[:4] + [line.split()[7]] + line.split()[4:7]) + "\n" for line in S),
+        est_name="est.csv", ok=True),
+    Bad("named-csv", "eval", "a CSV whose header names the columns in any order", "format csv (8 columns, header names them)",
+        est="qw,qx,qy,qz,x,y,z,timestamp\n" + "".join(
+            ",".join(line.split()[7:8] + line.split()[4:7] + line.split()[1:4] + line.split()[:1]) + "\n" for line in S),
+        est_name="est.csv", ok=True),
+    Bad("euroc-gt", "eval", "EuRoC ground truth (`#timestamp [ns]` header, `qw` first)", "format csv (8 columns, header names them)",
+        est=GOOD_CSV, est_name="est.csv", ok=True),
+    Bad("bad-format-setting", "eval", "`--est-format tumm`", "command line: load.estimate_format: 'tumm' is not one of",
+        est=GOOD, args=("--est-format", "tumm"), blame="none"),
+    Bad("wrong-format-setting", "eval", "`--est-format kitti` on a TUM file", "KITTI needs 12 columns (3x4 row-major pose), found 8",
+        est=GOOD, args=("--est-format", "kitti")),
+    Bad("kitti-not-rotation", "eval", "a KITTI row whose rotation block is not a rotation", "est.txt:8: rotation block is not a rotation",
+        est=_kitti(bad_row=7), ref=_kitti(), args=("--no-offset-estimate", "--no-calibrate")),
+    Bad("kitti-times", "eval", "a KITTI `times.txt` with fewer stamps than poses", "times file has 5 stamps for 300 poses",
+        est=_kitti(), ref=_kitti(), setup="kitti-times"),
+    Bad("kitti-rate", "eval", "KITTI poses without a times file", "KITTI stamps at 10.0 Hz (no times file; load.kitti_rate)",
+        est=_kitti(), ref=_kitti(), args=("--no-offset-estimate", "--no-calibrate"), ok=True),
+    Bad("openvins-20", "eval", "OpenVINS 20 columns (pose + covariance)", "format openvins (20 columns)",
+        est=GOOD.replace("\n", " 1 0 0 1 0 1 1 0 0 1 0 1\n"), ok=True),
+    # ------------------------------------------------------------------ readers: time stamps
+    Bad("mixed-units", "eval", "seconds and nanoseconds mixed in one file",
+        "is in nanoseconds but most stamps are seconds: the file mixes units",
+        est=_replace_line(GOOD, 6, S[6].replace(S[6].split()[0], str(int(float(S[6].split()[0]) * 1e9)), 1))),
+    Bad("ns-inferred", "eval", "nanosecond stamps in a headerless file", "stamps read as nanoseconds (above 1e12, so not seconds)",
+        est="".join(f"{int(round(a * 1e9))} " + " ".join(line.split()[1:]) + "\n" for a, line in zip(T, S)), ok=True),
+    Bad("ns-as-float", "eval", "nanosecond stamps printed as floats (`1.4036e+18`)", "stamps read as nanoseconds",
+        est="".join(f"{a * 1e9:.15e} " + " ".join(line.split()[1:]) + "\n" for a, line in zip(T, S)), ok=True),
+    Bad("sec-nsec-bad", "eval", "`--time-unit sec_nsec` on a stamp that is not sec.nsec", "is not of the form sec.nsec",
+        est=_replace_line(GOOD, 2, S[2].replace(S[2].split()[0], "-5", 1)), args=("--time-unit", "sec_nsec")),
+    Bad("repeated", "eval", "a repeated timestamp", "est.txt:11: timestamp 1403636580.45 repeats (set load.unsorted: sort",
+        est=_replace_line(GOOD, 10, S[9].rstrip())),
+    Bad("backwards", "eval", "a timestamp that goes backwards", "est.txt:21: timestamp 1403636580.1 goes backwards",
+        est=_replace_line(GOOD, 20, S[2].rstrip())),
+    Bad("sorted-on-request", "eval", "repeated stamps with `--unsorted sort`", "0 backward and 1 repeated timestamps: sorted",
+        est=_replace_line(GOOD, 10, S[9].rstrip()), args=("--unsorted", "sort"), ok=True),
+    Bad("different-clock", "eval", "an estimate stamped from 0 while the reference uses Unix time",
+        "the stamps do not overlap: reference 1403636580.000..1403636609.950 s, estimate 0.000..29.950 s",
+        est=_rows(T - T[0], P, Q)),
+    # ------------------------------------------------------------------ paths
+    Bad("missing-file", "eval", "an estimate path that does not exist", "est.txt: file not found", setup="missing"),
+    Bad("directory", "eval", "a folder given as the estimate", "is a directory, expected a trajectory file", setup="directory"),
+    Bad("dangling-link", "eval", "a symbolic link to a deleted file", "file not found", setup="dangling"),
+    Bad("not-a-folder", "eval", "a path through a file (`est.txt/x.txt`)", "cannot read: Not a directory", setup="through-file"),
+    Bad("name-too-long", "eval", "a file name longer than the file system allows", "cannot read: File name too long",
+        setup="long-name"),
+    Bad("missing-ref", "eval", "a reference path that does not exist", "ref.txt: file not found", setup="missing-ref",
+        blame="ref"),
+    Bad("bad-ref", "eval", "a broken reference (a row of text)", "ref.txt:3: not a number: 'oops'",
+        ref=_replace_line(GOOD, 2, "oops"), est=GOOD, blame="ref"),
+    # ------------------------------------------------------------------ stages
+    Bad("no-overlap", "stage", "estimate and reference that do not overlap in time", "sync: only 0 poses matched within 0.02 s",
+        est=_rows(T + 1000, P, Q)),
+    Bad("too-few-matched", "stage", "an estimate at 0.2 Hz (6 poses)", "sync: only 6 poses matched within 0.02 s (offset 0.000000 s); 10 needed",
+        est=_rows(T[::100], P[::100], Q[::100])),
+    Bad("static-est", "stage", "an estimate that never moves", "align: the estimate does not move over the 600 poses used by align se3",
+        est=_rows(T, 0 * P, Q), args=("--no-calibrate",)),
+    Bad("static-ref", "stage", "a reference that never moves", "the reference does not move",
+        ref=_rows(T, 0 * P, Q), est=_rows(T, 0 * P, Q), args=("--no-offset-estimate", "--no-calibrate")),
+    Bad("static-ref-no-align", "stage", "a static reference with `--align none`", "metrics: the reference does not move",
+        ref=_rows(T, 0 * P, Q), est=_rows(T, 0 * P, Q), args=("--no-offset-estimate", "--no-calibrate", "--align", "none")),
+    Bad("collinear", "stage", "a straight-line estimate aligned with se3", "lie on one straight line: the rotation about it is undetermined",
+        est=_rows(T, np.column_stack([T - T[0], 0 * T, 0 * T]), Q), args=("--no-calibrate",)),
+    Bad("first-n-2", "stage", "`--first-n 2`", "command line: align.first_n: 2 is not allowed", est=GOOD,
+        args=("--first-n", "2"), blame="none"),
+    Bad("first-n-big", "stage", "`--first-n` beyond the matched poses (all are used)", "poses matched", est=GOOD,
+        args=("--first-n", "100000"), ok=True),
+    Bad("long-segment", "stage", "a segment length longer than the path", "no 1000 m segment fits in the",
+        est=GOOD, args=("--segments", "8", "1000"), ok=True),
+    Bad("offset-untrusted", "stage", "too little rotation for Step 1 (estimate held still in rotation)", "Step 1 not used",
+        est=_rows(T, P), ref=_rows(T, P), ok=True),
+    # ------------------------------------------------------------------ config
+    Bad("cfg-list", "config", "a config that is a YAML list", "a config must be a mapping of settings, not a list",
+        est=GOOD, config="- sync\n- align\n"),
+    Bad("cfg-yaml", "config", "a config that is not YAML", "cfg.yaml:3: not valid YAML", est=GOOD, config="sync:\n  - [\n"),
+    Bad("cfg-duplicate", "config", "a key given twice", "cfg.yaml:3: 'sync' is given twice", est=GOOD,
+        config="sync:\n  policy: evo\nsync:\n  max_diff: 0.1\n"),
+    Bad("cfg-typo", "config", "a misspelt key (`algin`)", "Additional properties are not allowed ('algin' was unexpected)",
+        est=GOOD, config="algin:\n  method: sim3\n"),
+    Bad("cfg-enum", "config", "an unknown alignment method", "align.method: 'sim4' is not one of", est=GOOD,
+        config="align:\n  method: sim4\n"),
+    Bad("cfg-negative", "config", "a negative tolerance", "sync.max_diff: -0.01 is less than or equal to the minimum of 0",
+        est=GOOD, config="sync:\n  max_diff: -0.01\n"),
+    Bad("cfg-type", "config", "a segment length with a unit (`8m`)", "metrics.segments.0: '8m' is not of type 'number'",
+        est=GOOD, config="metrics:\n  segments: [8m]\n"),
+    Bad("cfg-empty-list", "config", "no segment lengths", "metrics.segments: [] should be non-empty", est=GOOD,
+        config="metrics:\n  segments: []\n"),
+    Bad("cfg-crop", "config", "a crop that ends before it starts", "crop.end (5) must be after crop.start (10)", est=GOOD,
+        config="crop:\n  start: 10\n  end: 5\n"),
+    Bad("cfg-missing", "config", "`--config` naming a missing file", "cannot read: No such file or directory", est=GOOD,
+        setup="missing-config"),
+    Bad("cfg-python", "config", "a YAML tag that would run code", "not valid YAML", est=GOOD,
+        config="sync: !!python/object/apply:os.system ['touch HACKED']\n"),
+    Bad("cfg-mode-override", "config", "`mode: ov_eval` with `sync.policy: evo`", "mode ov_eval overrides sync.policy: 'evo' -> 'ov_eval'",
+        est=GOOD, config="mode: ov_eval\nsync:\n  policy: evo\n", ok=True),
+    # ------------------------------------------------------------------ grids
+    Bad("grid-bad-run", "grid", "one run with a broken row among good runs", "load: ", setup="grid-bad-run"),
+    Bad("grid-bad-truth", "grid", "a broken reference: its dataset's cases fail, others finish", "not a number: 'oops'",
+        setup="grid-bad-truth"),
+    Bad("grid-dangling", "grid", "a run that is a dangling link", "file not found", setup="grid-dangling"),
+    Bad("grid-static", "grid", "a run that never moves", "does not move", setup="grid-static"),
+    Bad("grid-names", "grid", "run names with spaces, unicode, `%`, `&`, `..`, braces", "ok", setup="grid-names", ok=True),
+    Bad("grid-two-runs", "grid", "`run1.txt` and `run1.csv` in one folder", "two runs named 'run1' (run1.csv, run1.txt)",
+        setup="grid-two-runs"),
+    Bad("grid-two-refs", "grid", "two reference files for one dataset", "two reference files for dataset 'seq'",
+        setup="grid-two-refs"),
+    Bad("grid-no-cases", "grid", "an algorithms folder whose datasets match no reference",
+        "no estimate matches a reference (expected <algorithm>/<dataset>/<run>.<ext>)", setup="grid-no-cases"),
+    Bad("grid-stray", "grid", "stray files and folders at the wrong level", "taken as neither a run nor a reference",
+        setup="grid-stray", ok=True),
+    Bad("grid-no-truth", "grid", "a dataset folder without a reference", "no reference", setup="grid-no-truth", ok=True),
+    # ------------------------------------------------------------------ workflow (snakemake)
+    Bad("wf-no-algorithms", "workflow", "`--configfile` naming no `algorithms_dir`",
+        "names no algorithms_dir (the bundled example's would be used)", config="truth_dir: truth\n"),
+    Bad("wf-truth-missing", "workflow", "a `truth_dir` that does not exist", "truth_dir 'nowhere' is not a folder; relative paths start at",
+        config="truth_dir: nowhere\nalgorithms_dir: algorithms\n"),
+    Bad("wf-schema", "workflow", "a schema error in the grid config", "align.method: 'sim4' is not one of",
+        config="truth_dir: truth\nalgorithms_dir: algorithms\nalign:\n  method: sim4\n"),
+    Bad("wf-list", "workflow", "a grid config that is a YAML list (Snakemake's own message, without the file)",
+        "Config file must be given as JSON or YAML with keys at top level", config="- truth_dir\n", blame="none"),
+    Bad("wf-python-tag", "workflow", "a grid config with a YAML tag that would run code (nothing runs)",
+        "Config file is not valid JSON or YAML", config="truth_dir: !!python/object/apply:os.system ['touch HACKED']\n",
+        blame="none"),
+]
+
+
+def markdown() -> str:
+    titles = {"eval": "Reading a file (`epa eval`, and the load stage of a grid)",
+              "stage": "Stages: numbers that cannot be computed", "config": "Settings (`--config`, config files)",
+              "grid": "Grids (discovery, one bad case among good ones)", "workflow": "Snakemake (parse time)"}
+    out = ["# Bad inputs", "",
+           "What the tool does with inputs it cannot or must not take at face value. Each row is run by",
+           "`tests/test_catalogue.py` (this page is generated from `tests/catalogue.py`, and a test checks it",
+           "is current). An error is one line, `epa: error: <file>[:<line>]: <what is wrong>`, the exit status",
+           "is 2 and no partial output is left; in a grid the case is marked failed in `summary.csv` and",
+           "the report, and every other case finishes. A row marked *result* is read correctly and what was",
+           "inferred is a warning and a note in `load.json` (or `metrics.json`).", ""]
+    n = 0
+    for where, title in titles.items():
+        out += [f"## {title}", "", "| # | Input | Outcome |", "|---|---|---|"]
+        for b in CATALOGUE:
+            if b.where != where:
+                continue
+            n += 1
+            what = f"*result*, note: `{b.expect}`" if b.ok else f"`…{b.expect}…`"
+            cell = what.replace("|", "\\|")
+            out.append(f"| {n} | {b.situation} | {cell} |")
+        out.append("")
+    return "\n".join(out)
+
+
+if __name__ == "__main__":
+    print(markdown(), end="")
