@@ -180,6 +180,8 @@ CATALOGUE: list[Bad] = [
     Bad("missing-file", "eval", "an estimate path that does not exist", "est.txt: file not found", setup="missing"),
     Bad("directory", "eval", "a folder given as the estimate", "is a directory, expected a trajectory file", setup="directory"),
     Bad("dangling-link", "eval", "a symbolic link to a deleted file", "file not found", setup="dangling"),
+    Bad("device", "eval", "a link to `/dev/zero` (would never end)", "not a regular file (a device, pipe or socket)",
+        setup="device"),
     Bad("not-a-folder", "eval", "a path through a file (`est.txt/x.txt`)", "cannot read: Not a directory", setup="through-file"),
     Bad("name-too-long", "eval", "a file name longer than the file system allows", "cannot read: File name too long",
         setup="long-name"),

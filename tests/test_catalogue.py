@@ -44,6 +44,8 @@ def _eval_paths(tmp: Path, b: catalogue.Bad) -> tuple[Path, Path, list[str]]:
         _write(est, catalogue.GOOD)
     elif b.setup == "directory":
         est.mkdir()
+    elif b.setup == "device":
+        est.symlink_to("/dev/zero")
     elif b.setup == "dangling":
         est.symlink_to(tmp / "deleted.txt")
     elif b.setup == "through-file":

@@ -11,6 +11,7 @@ import json
 import logging
 import os
 import re
+import stat
 import tempfile
 import warnings
 from pathlib import Path
@@ -81,6 +82,8 @@ def _is_number(tok: str) -> bool:
 
 def _read_table(path: Path) -> _Table:
     try:
+        if not stat.S_ISREG(path.stat().st_mode) and not path.is_dir():  # a pipe or /dev/zero would never end
+            raise EpaError("not a regular file (a device, pipe or socket)", path=str(path))
         data = path.read_bytes()
     except FileNotFoundError:
         raise EpaError("file not found", path=str(path)) from None
