@@ -6,7 +6,8 @@ import os
 import epa
 from epa.errors import EpaError
 from snakemake.exceptions import WorkflowError
-from epa import cases as epa_cases, chain as epa_chain, grid as epa_grid, settings as epa_settings, tables as epa_tables
+from epa import bags as epa_bags, cases as epa_cases, chain as epa_chain, grid as epa_grid, settings as epa_settings
+from epa import sources as epa_sources, tables as epa_tables
 
 try:  # a mistake in the config or the folders is one line, not a traceback
     epa_settings.check_user_configs(workflow.overwrite_configfiles, workflow.config_settings.overwrite_config)
@@ -42,17 +43,26 @@ def batch_sources(batch):
     """The user's files a load job reads. One that does not exist (a dangling link) is left out, so
     its case fails with "file not found" instead of stopping the whole grid; so is one whose path has
     braces, which Snakemake cannot take literally (it is still read; an edit to it is not noticed)."""
-    paths = {str(p) for k in BATCHES[batch] for p in (CASE_BY_KEY[k].truth, CASE_BY_KEY[k].estimate)}
+    paths = {str(f) for k in BATCHES[batch] for p in (CASE_BY_KEY[k].truth, CASE_BY_KEY[k].estimate)
+             for f in epa_bags.bag_files(p)}  # a ROS 2 bag folder: its files
     return sorted(p for p in paths if os.path.exists(p) and "{" not in p and "}" not in p)
+
+
+def load_case(c):
+    """What the load stage needs of one case: its files and each side's source settings."""
+    return {
+        "key": c.key,
+        "truth": str(c.truth),
+        "estimate": str(c.estimate),
+        "truth_source": epa_sources.options(EPA, "reference", dataset=c.dataset),
+        "estimate_source": epa_sources.options(EPA, "estimate", algorithm=c.algorithm),
+    }
 
 
 def stage_params(stage):
     """Everything a stage's result depends on, so a change re-runs exactly what it affects."""
-    if stage == "load":  # only load reads the user's files: a moved file re-runs load onward
-        cases = lambda wc: [
-            {"key": k, "truth": str(CASE_BY_KEY[k].truth), "estimate": str(CASE_BY_KEY[k].estimate)}
-            for k in BATCHES[wc.batch]
-        ]
+    if stage == "load":  # only load reads the user's files: a moved file or a source's settings re-run load onward
+        cases = lambda wc: [load_case(CASE_BY_KEY[k]) for k in BATCHES[wc.batch]]
     else:
         cases = lambda wc: [{"key": k} for k in BATCHES[wc.batch]]
     return {"cases": cases, "settings": epa_chain.settings_for(stage, EPA), "version": EPA_VERSION}

@@ -40,6 +40,10 @@ def _eval_paths(tmp: Path, b: catalogue.Bad) -> tuple[Path, Path, list[str]]:
         _write(tmp / "run" / "times.txt", "0\n0.1\n0.2\n0.3\n0.4\n")
     if b.est is not None:
         _write(est, b.est)
+    if b.setup and b.setup.startswith("bag"):
+        est = _bag(tmp, est, b.setup)
+        if b.setup == "bag-same":
+            ref = est
     if b.setup == "missing-ref":
         _write(est, catalogue.GOOD)
     elif b.setup == "directory":
@@ -59,6 +63,42 @@ def _eval_paths(tmp: Path, b: catalogue.Bad) -> tuple[Path, Path, list[str]]:
     elif b.setup == "missing-config":
         extra = ["--config", str(tmp / "cfg.yaml")]
     return ref, est, extra
+
+
+def _traj(t, p, q):
+    from epa.trajectory import Trajectory
+
+    return Trajectory(t, p, q)
+
+
+def _bag(tmp: Path, est: Path, setup: str) -> Path:
+    """The catalogue's bag: /pose and /gt (PoseStamped), /tf (world -> body), /chatter (String), /empty."""
+    from epa import bags
+
+    good = _traj(catalogue.T, catalogue.P, catalogue.Q)
+    storage = {"bag-sqlite3": "sqlite3", "bag-mcap": "mcap", "bag-no-db": "sqlite3"}.get(setup, "ros1")
+    if setup == "bag-one":
+        bags.write_bag(est, {"/pose": ("geometry_msgs/msg/PoseStamped", good)})
+        return est
+    if setup == "bag-repeated":
+        t = catalogue.T.copy()
+        t[10] = t[9]
+        bags.write_bag(est, {"/pose": ("geometry_msgs/msg/PoseStamped", _traj(t, catalogue.P, catalogue.Q))})
+        return est
+    from rosbags.typesys import Stores, get_typestore
+
+    string = get_typestore(Stores.ROS1_NOETIC if storage == "ros1" else Stores.ROS2_HUMBLE).types["std_msgs/msg/String"]
+    bags.write_bag(est, {"/pose": ("geometry_msgs/msg/PoseStamped", good), "/gt": ("geometry_msgs/msg/PoseStamped", good),
+                         "/tf": ("tf2_msgs/msg/TFMessage", good),
+                         "/empty": ("geometry_msgs/msg/PoseStamped", _traj(good.t[:0], good.p[:0], good.q[:0]))},
+                   storage=storage, extra={"/chatter": ("std_msgs/msg/String", [(1, string(data="hello"))])})
+    if setup == "bag-truncated":
+        data = est.read_bytes()
+        est.write_bytes(data[: len(data) // 2])
+    elif setup == "bag-no-db":
+        for f in est.glob("*.db3"):
+            f.unlink()
+    return est
 
 
 EVAL_ROWS = [b for b in catalogue.CATALOGUE if b.where in ("eval", "stage", "config")]
@@ -113,6 +153,20 @@ def _grid_folders(tmp: Path, setup: str) -> tuple[Path, Path, str | None]:
         for name in ("run 1", "rün_ü", "50%", "a&b", "x..y", "x..", "{r}", "r$HOME"):
             _write(algs / "we ird&%" / "seq" / f"{name}.txt", good)
         bad = None
+    elif setup in ("grid-bag-ref", "grid-bag-truncated"):
+        from epa import bags
+
+        good_traj = _traj(catalogue.T, catalogue.P, catalogue.Q)
+        if setup == "grid-bag-ref":
+            for ds in ("seq", "other"):
+                (truth / f"{ds}.txt").unlink()
+                bags.write_bag(truth / ds, {"/gt": ("geometry_msgs/msg/PoseStamped", good_traj)}, storage="sqlite3")
+            bad = None
+        else:
+            (algs / "bad" / "seq").mkdir(parents=True)
+            bags.write_bag(algs / "bad" / "seq" / "run1.bag", {"/pose": ("geometry_msgs/msg/PoseStamped", good_traj)})
+            data = (algs / "bad" / "seq" / "run1.bag").read_bytes()
+            (algs / "bad" / "seq" / "run1.bag").write_bytes(data[: len(data) // 2])
     elif setup == "grid-two-runs":
         _write(algs / "bad" / "seq" / "run1.txt", good)
         _write(algs / "bad" / "seq" / "run1.csv", good)

@@ -1,4 +1,9 @@
-"""Case discovery in the OpenVINS layout: truth/<dataset>.<ext>, algorithms/<algorithm>/<dataset>/<run>.<ext>."""
+"""Case discovery in the OpenVINS layout: truth/<dataset>.<ext>, algorithms/<algorithm>/<dataset>/<run>.<ext>.
+
+A run or a reference is a file or a ROS 2 bag folder (holding ``metadata.yaml``); its name without
+the extension names it. Side files are never runs: ``<run>_times.txt`` / ``times.txt`` (KITTI
+stamps), ``<run>_timing.*`` (per-frame timing), and ``.yaml``, ``.yml``, ``.md``, ``.json`` files.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +14,7 @@ from pathlib import Path
 from epa.errors import EpaError
 
 log = logging.getLogger("epa")
-SIDE_FILES = ("_times.txt", "times.txt", ".yaml", ".yml", ".md", ".json")  # not trajectories
+SIDE_FILES = ("_times.txt", "times.txt", "_timing.txt", "_timing.csv", ".yaml", ".yml", ".md", ".json")  # not runs
 
 
 @dataclass(frozen=True)
@@ -31,7 +36,9 @@ def _trajectory_files(folder: Path, skipped: list[Path]):
     for p in sorted(folder.iterdir()):
         if p.name.startswith("."):
             continue  # hidden (.DS_Store, editor swap files): never data
-        if (p.is_file() or p.is_symlink()) and not p.name.endswith(SIDE_FILES):
+        if p.is_dir():
+            (files if (p / "metadata.yaml").is_file() else skipped).append(p)  # a ROS 2 bag is a folder
+        elif (p.is_file() or p.is_symlink()) and not p.name.endswith(SIDE_FILES):
             files.append(p)
         else:
             skipped.append(p)

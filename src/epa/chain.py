@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from epa import io, pipeline
+from epa import io, pipeline, sources
 from epa.errors import EpaError
 
 log = logging.getLogger("epa")
@@ -43,9 +43,12 @@ class Stage:
 class CaseFolder:
     """Paths of one case's artifacts: ``<root>/<NN_stage>/<file>``."""
 
-    def __init__(self, root, truth=None, estimate=None):
+    def __init__(self, root, truth=None, estimate=None, truth_source: dict | None = None,
+                 estimate_source: dict | None = None):
         self.root = Path(root)
         self.truth, self.estimate = truth, estimate
+        # each side's source settings (epa.sources.options); None: the load section's
+        self.truth_source, self.estimate_source = truth_source, estimate_source
 
     def path(self, stage: str, name: str) -> Path:
         return self.root / BY_NAME[stage].folder / name
@@ -176,14 +179,17 @@ def _record(case, values, stage, name):
 
 
 def _load(case, values, cfg, write_tables):
+    ref_opts = case.truth_source or sources.options(cfg, "reference")
+    est_opts = case.estimate_source or sources.options(cfg, "estimate")
     try:
         st = os.stat(case.truth)
     except OSError:  # the reader says what is wrong with it, in its words
         st = None
-    source = st and (os.path.abspath(case.truth), st.st_mtime_ns, st.st_size, repr(cfg["load"]))
+    source = st and (os.path.abspath(case.truth), st.st_mtime_ns, st.st_size, repr(ref_opts))
     if source and source not in _LOADED:
-        _remember(_LOADED, source, pipeline.load_reference(case.truth, cfg))
-    ref, est, info = pipeline.load(case.truth, case.estimate, cfg, reference=_LOADED.get(source) if source else None)
+        _remember(_LOADED, source, pipeline.load_reference(case.truth, cfg, ref_opts))
+    ref, est, info = pipeline.load(case.truth, case.estimate, cfg, reference=_LOADED.get(source) if source else None,
+                                   ref_opts=ref_opts, est_opts=est_opts)
     values["load"], values["load/load.json"] = (ref, est), info
     if write_tables:
         _write_reference(case.path("load", "ref.tum"), ref, source)
@@ -317,10 +323,11 @@ def run_stage(stage: str, case: CaseFolder, cfg: dict, values: dict | None = Non
 
 
 def run_case(ref_path, est_path, out_dir, cfg: dict, *, write_tables: bool = False,
-             on_stage: Callable[[str], None] | None = None) -> dict:
+             on_stage: Callable[[str], None] | None = None, ref_source: dict | None = None,
+             est_source: dict | None = None) -> dict:
     """Every stage for one case in this process (``epa eval``); returns metrics.json and drift.json.
     A user mistake raises EpaError after the failed stage's markers are written."""
-    case = CaseFolder(out_dir, ref_path, est_path)
+    case = CaseFolder(out_dir, ref_path, est_path, ref_source, est_source)
     values: dict = {}
     for st in STAGES:
         if on_stage is not None:

@@ -39,6 +39,19 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--est-format", help="estimate format")
     e.add_argument("--unsorted", choices=["error", "sort"], help="repeated/backward stamps")
     e.add_argument("--time-unit", choices=["auto", "s", "ns", "sec_nsec"])
+    e.add_argument("--ref-topic", help="reference bag topic")
+    e.add_argument("--est-topic", help="estimate bag topic (may be another topic of the same bag)")
+    e.add_argument("--ref-frames", nargs=2, metavar=("PARENT", "CHILD"), help="reference TF frames")
+    e.add_argument("--est-frames", nargs=2, metavar=("PARENT", "CHILD"), help="estimate TF frames")
+    e.add_argument("--stamp", choices=["header", "record"], help="bag stamps: message header (default) or record time")
+
+    tr = sub.add_parser("traj", help="what is in a trajectory file or bag; export a topic to TUM or CSV")
+    tr.add_argument("source", help="text trajectory file, .bag, .mcap or ROS 2 bag folder")
+    tr.add_argument("--topic", help="bag topic to read (without: list the bag's topics)")
+    tr.add_argument("--frames", nargs=2, metavar=("PARENT", "CHILD"), help="TF frames (with --topic /tf)")
+    tr.add_argument("--stamp", choices=["header", "record"], default="header")
+    tr.add_argument("--format", default="auto", help="text format (auto, tum, kitti, euroc, openvins, csv)")
+    tr.add_argument("--export", help="write the trajectory to FILE: TUM (.txt, .tum) or CSV (.csv)")
 
     s = sub.add_parser("simulate", help="write the deterministic example grid")
     s.add_argument("out", help="folder to write truth/, algorithms/ and manifest.json into")
@@ -62,6 +75,16 @@ def _eval_config(args) -> dict:
         ("calibrate", "enabled"): False if args.no_calibrate else None,
         ("calibrate", "scale"): True if args.scale else None,
     }
+    for side, topic, frames in (("reference", args.ref_topic, args.ref_frames),
+                                ("algorithms", args.est_topic, args.est_frames)):
+        src = {k: v for k, v in (("topic", topic), ("frames", frames)) if v}
+        if src:
+            node = cfg.setdefault("sources", {})
+            if side == "reference":
+                node.setdefault("reference", {}).update(src)
+            else:
+                node.setdefault("algorithms", {}).setdefault(EVAL_ALGORITHM, {}).update(src)
+    overrides[("load", "stamp")] = args.stamp
     for keys, value in overrides.items():
         if value is None:
             continue
@@ -70,6 +93,9 @@ def _eval_config(args) -> dict:
             node = node.setdefault(k, {})
         node[keys[-1]] = value
     return settings.resolve(cfg, source=args.config or "command line")
+
+
+EVAL_ALGORITHM = "estimate"  # the name `epa eval` gives its one estimate in `sources.algorithms`
 
 
 def _eval(args) -> None:
@@ -88,12 +114,43 @@ def _eval(args) -> None:
             print(f"epa: {clock['stage']:<9} {now - clock['t']:7.3f} s", file=sys.stderr)
         clock.update(stage=name, t=now)
 
-    result = chain.run_case(args.ref, args.est, args.out, cfg, write_tables=args.artifacts, on_stage=on_stage)
+    from epa import sources
+
+    result = chain.run_case(args.ref, args.est, args.out, cfg, write_tables=args.artifacts, on_stage=on_stage,
+                            ref_source=sources.options(cfg, "reference"),
+                            est_source=sources.options(cfg, "estimate", algorithm=EVAL_ALGORITHM))
     on_stage(None)
     record = result["metrics"]
     ate = record["ate"]["trans_m"]["rmse"]
     print(f"{record['n_matched']} poses matched, eval_source {record['eval_source']}, "
           f"ATE rmse {ate:.4f} m -> {out.path('metrics', 'metrics.json')}")
+
+
+def _traj(args) -> None:
+    from epa import bags, io, sources
+
+    if bags.is_bag(args.source) and not args.topic and not args.frames:
+        infos = bags.topics(args.source)
+        print(f"{args.source}: {len(infos)} topics")
+        width = max([len(i.topic) for i in infos] + [5])
+        for i in infos:
+            span = "" if i.start_s is None else f"{i.end_s - i.start_s:9.3f} s  {i.start_s:.6f} .. {i.end_s:.6f}"
+            mark = "*" if i.supported else " "
+            print(f" {mark} {i.topic:<{width}}  {i.msgtype:<45} {i.count:8d} msgs  {span}".rstrip())
+        print("   (* a pose type: read it with --topic, TF with --topic /tf --frames PARENT CHILD)")
+        return
+    opts = {"format": args.format, "topic": args.topic, "frames": args.frames, "stamp": args.stamp,
+            "time_unit": "auto", "unsorted": "error", "kitti_rate": 10.0, "static_topic": "/tf_static"}
+    notes: list[str] = []
+    traj = sources.read(args.source, opts, notes=notes)
+    print(sources.describe(args.source, traj, notes))
+    if args.export:
+        out = args.export
+        fmt = {".txt": "tum", ".tum": "tum", ".csv": "csv"}.get(Path(out).suffix.lower())
+        if fmt is None:
+            raise EpaError("export to .txt or .tum (TUM) or .csv (CSV with named columns)", path=out)
+        io.write_trajectory(out, traj, fmt)
+        print(f"wrote {len(traj)} poses to {out} ({fmt})")
 
 
 def main(argv=None) -> int:
@@ -102,6 +159,8 @@ def main(argv=None) -> int:
     try:
         if args.command == "eval":
             _eval(args)
+        elif args.command == "traj":
+            _traj(args)
         elif args.command == "simulate":
             from epa import simulate
 

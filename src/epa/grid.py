@@ -121,7 +121,8 @@ def run_cases(stage: str, cases: list[dict], results_dir, cfg: dict, upstream: d
     status: dict[str, dict] = {}
     for c in cases:
         key = c["key"]
-        case = chain.CaseFolder(chain.case_dir(results_dir, key), c.get("truth"), c.get("estimate"))
+        case = chain.CaseFolder(chain.case_dir(results_dir, key), c.get("truth"), c.get("estimate"),
+                                c.get("truth_source"), c.get("estimate_source"))
         reason = upstream.get(key)
         with case_log(case.log(stage)):
             if reason is not None:

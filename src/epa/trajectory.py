@@ -18,6 +18,8 @@ class Trajectory:
     # orientation (N, 3, 3) rad^2 and position (N, 3, 3) m^2.
     cov_rot: np.ndarray | None = field(default=None, repr=False)
     cov_pos: np.ndarray | None = field(default=None, repr=False)
+    # The full 6x6 pose covariance as ROS gives it (x y z, rotation about x y z), when the source is ROS.
+    cov_ros: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.t)
@@ -34,6 +36,7 @@ class Trajectory:
             q=self.q[idx],
             cov_rot=None if self.cov_rot is None else self.cov_rot[idx],
             cov_pos=None if self.cov_pos is None else self.cov_pos[idx],
+            cov_ros=None if self.cov_ros is None else self.cov_ros[idx],
         )
 
     def shifted(self, dt: float) -> "Trajectory":

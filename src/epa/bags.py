@@ -1,0 +1,414 @@
+"""ROS bags as trajectory sources: ROS 1 ``.bag``, ROS 2 bag folders (``metadata.yaml`` + ``.db3`` or
+``.mcap``) and bare ``.mcap`` files, read with ``rosbags`` (no ROS installation).
+
+Only the chosen topic's messages are deserialised (and ``/tf_static`` for TF). Poses are stamped
+with the message header (``stamp: record`` uses the bag's record time). A ``nav_msgs/Path`` topic
+gives the poses of its *last* message, the final (most optimised) path. TF poses are those of the
+chosen parent -> child chain at the stamps of its dynamic transforms, composed through
+``/tf_static``; no resampling.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from epa import geometry
+from epa.errors import EpaError
+from epa.trajectory import Trajectory
+
+log = logging.getLogger("epa")
+
+POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
+              "geometry_msgs/msg/TransformStamped", "nav_msgs/msg/Odometry", "nav_msgs/msg/Path",
+              "tf2_msgs/msg/TFMessage")
+BAG_SUFFIXES = (".bag", ".mcap")
+
+
+def is_bag(path) -> bool:
+    """A ROS 1 bag, a bare MCAP file or a ROS 2 bag folder (judged by name, so a missing bag is still
+    reported as a missing bag)."""
+    path = Path(path)
+    try:
+        return path.suffix.lower() in BAG_SUFFIXES or (path.is_dir() and (path / "metadata.yaml").is_file())
+    except OSError:  # an unusable path: the text reader reports it
+        return False
+
+
+def bag_files(path) -> list[Path]:
+    """The files a bag consists of (a folder's metadata and storage files; else the file itself)."""
+    path = Path(path)
+    if path.is_dir():
+        return sorted(p for p in path.iterdir() if p.is_file() and not p.name.startswith("."))
+    return [path]
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    topic: str
+    msgtype: str
+    count: int
+    start_s: float | None  # record time of the first and last message (None without an index)
+    end_s: float | None
+
+    @property
+    def supported(self) -> bool:
+        return self.msgtype in POSE_TYPES
+
+
+class _Open:
+    """An open bag whose errors are one line naming it."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+
+    def __enter__(self):
+        from rosbags.highlevel import AnyReader
+
+        if not self.path.exists():
+            raise EpaError("file not found" if self.path.suffix else "bag folder not found", path=str(self.path))
+        try:
+            self.reader = AnyReader([self.path])
+            self.reader.open()
+        except EpaError:
+            raise
+        except Exception as exc:  # rosbags raises its own types for every kind of damage
+            raise EpaError(f"cannot read the bag: {_reason(exc)}", path=str(self.path)) from None
+        return self.reader
+
+    def __exit__(self, *exc):
+        try:
+            self.reader.close()
+        except Exception:
+            pass
+        return False
+
+
+def _reason(exc: Exception) -> str:
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return f"{type(exc).__name__}: {text}" if type(exc).__name__ not in text else text
+
+
+def topics(path) -> list[TopicInfo]:
+    """Every topic of a bag with its type, message count and record-time span."""
+    with _Open(path) as reader:
+        out = []
+        for topic in sorted(reader.topics):
+            conns = [c for c in reader.connections if c.topic == topic]
+            count = sum(c.msgcount for c in conns)
+            out.append(TopicInfo(topic, conns[0].msgtype, count, *_span(reader, conns, count)))
+        return out
+
+
+def _span(reader, conns, count) -> tuple[float | None, float | None]:
+    if not count:
+        return None, None
+    first = last = None
+    for _, stamp, _ in reader.messages(connections=conns):
+        first = stamp if first is None else first
+        last = stamp
+    return first / 1e9, last / 1e9
+
+
+def _stamp(header) -> float:
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
+def read_bag(path, topic: str | None = None, *, frames: tuple[str, str] | list | None = None,
+             stamp: str = "header", static_topic: str = "/tf_static", notes: list | None = None) -> Trajectory:
+    """The trajectory of one topic of a bag (or one TF chain, given ``frames`` parent, child)."""
+    path = Path(path)
+    with _Open(path) as reader:
+        available = {t: reader.topics[t].msgtype for t in reader.topics}
+        if topic is None:
+            topic = _only_pose_topic(path, available, frames)
+            if notes is not None:
+                notes.append(f"topic {topic} (the bag's only pose topic)")
+            log.warning("%s: reading topic %s (the bag's only pose topic; set topic to choose)", path, topic)
+        where = f"{path} topic {topic}"
+        if topic not in available:
+            raise EpaError(f"no topic {topic!r}; the bag has {_listing(available)}", path=str(path))
+        msgtype = available[topic]
+        if msgtype not in POSE_TYPES:
+            raise EpaError(f"topic {topic} is {msgtype}, not a pose type ({', '.join(t.split('/')[-1] for t in POSE_TYPES)})",
+                           path=str(path))
+        if msgtype == "tf2_msgs/msg/TFMessage":
+            if not frames or len(frames) != 2:
+                raise EpaError(f"topic {topic} is TF: give the parent and child frame (frames: [parent, child])",
+                               path=str(path))
+            return _read_tf(reader, path, topic, static_topic, tuple(frames), stamp, notes)
+        conns = [c for c in reader.connections if c.topic == topic]
+        try:
+            traj = _read_poses(reader, conns, msgtype, stamp)
+        except EpaError as exc:
+            raise EpaError(exc.message, path=where) from None
+        except Exception as exc:
+            raise EpaError(f"cannot read the messages: {_reason(exc)}", path=where) from None
+    if len(traj) == 0:
+        raise EpaError(f"topic {topic} has no messages", path=str(path))
+    if notes is not None:
+        notes.append(f"bag topic {topic} ({msgtype.split('/')[-1]}, {stamp} stamps)")
+    return traj
+
+
+def _listing(available: dict) -> str:
+    return ", ".join(f"{t} ({m.split('/')[-1]})" for t, m in sorted(available.items())) or "no topics"
+
+
+def _only_pose_topic(path, available: dict, frames) -> str:
+    poses = sorted(t for t, m in available.items() if m in POSE_TYPES and (frames or m != "tf2_msgs/msg/TFMessage"))
+    if frames and "/tf" in available:
+        return "/tf"
+    if len(poses) != 1:
+        raise EpaError(f"choose a topic: the bag has {_listing(available)}", path=str(path))
+    return poses[0]
+
+
+def _pose_of(msg, msgtype: str):
+    """(position, orientation xyzw, 6x6 covariance or None) of one message."""
+    if msgtype == "geometry_msgs/msg/TransformStamped":
+        tr, ro = msg.transform.translation, msg.transform.rotation
+        return (tr.x, tr.y, tr.z), (ro.x, ro.y, ro.z, ro.w), None
+    pose, cov = msg.pose, None
+    if msgtype in ("geometry_msgs/msg/PoseWithCovarianceStamped", "nav_msgs/msg/Odometry"):
+        pose, cov = msg.pose.pose, msg.pose.covariance
+    po, ro = pose.position, pose.orientation
+    return (po.x, po.y, po.z), (ro.x, ro.y, ro.z, ro.w), cov
+
+
+def _read_poses(reader, conns, msgtype: str, stamp: str) -> Trajectory:
+    if msgtype == "nav_msgs/msg/Path":
+        last = None
+        for conn, record_ns, raw in reader.messages(connections=conns):
+            last = (conn, record_ns, raw)
+        if last is None:
+            return Trajectory(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)))
+        msg = reader.deserialize(last[2], last[0].msgtype)
+        n = len(msg.poses)
+        t, p, q = np.empty(n), np.empty((n, 3)), np.empty((n, 4))
+        for k, ps in enumerate(msg.poses):
+            t[k] = _stamp(ps.header) if stamp == "header" else last[1] / 1e9
+            (p[k], q[k], _) = _pose_of(ps, "geometry_msgs/msg/PoseStamped")
+        return _finish(t, p, q, None)
+    count = sum(c.msgcount for c in conns)
+    t, p, q = np.empty(count), np.empty((count, 3)), np.empty((count, 4))
+    cov = np.empty((count, 36)) if msgtype in ("geometry_msgs/msg/PoseWithCovarianceStamped",
+                                                "nav_msgs/msg/Odometry") else None
+    k = 0
+    for conn, record_ns, raw in reader.messages(connections=conns):
+        if k == count:  # the index undercounted: grow
+            t, p, q = np.resize(t, 2 * count + 1), np.resize(p, (2 * count + 1, 3)), np.resize(q, (2 * count + 1, 4))
+            cov = None if cov is None else np.resize(cov, (2 * count + 1, 36))
+            count = 2 * count + 1
+        msg = reader.deserialize(raw, conn.msgtype)
+        t[k] = _stamp(msg.header) if stamp == "header" else record_ns / 1e9
+        p[k], q[k], c = _pose_of(msg, msgtype)
+        if cov is not None:
+            cov[k] = c
+        k += 1
+    return _finish(t[:k], p[:k], q[:k], None if cov is None else cov[:k])
+
+
+def _finish(t, p, q, cov36) -> Trajectory:
+    if len(t) and (not np.isfinite(p).all() or not np.isfinite(q).all()):
+        k = int(np.argmax(~(np.isfinite(p).all(axis=1) & np.isfinite(q).all(axis=1))))
+        raise EpaError(f"message {k + 1}: non-finite pose (nan or inf)")
+    norms = np.linalg.norm(q, axis=1)
+    if len(t) and (norms < 1e-6).any():
+        raise EpaError(f"message {int(np.argmax(norms < 1e-6)) + 1}: zero quaternion")
+    q = q / norms[:, None] if len(t) else q
+    extra = {}
+    if cov36 is not None:
+        c = cov36.reshape(-1, 6, 6)  # ROS order: x y z, rotation about x y z
+        extra = {"cov_pos": c[:, :3, :3].copy(), "cov_rot": c[:, 3:, 3:].copy(), "cov_ros": c.copy()}
+    return Trajectory(t, p, q, **extra)
+
+
+# ----------------------------------------------------------------------------- TF
+def _tf_edges(reader, topic: str, stamp: str) -> dict[tuple[str, str], list]:
+    conns = [c for c in reader.connections if c.topic == topic]
+    edges: dict[tuple[str, str], list] = {}
+    for conn, record_ns, raw in reader.messages(connections=conns):
+        msg = reader.deserialize(raw, conn.msgtype)
+        for tf in msg.transforms:
+            (pos, quat, _) = _pose_of(tf, "geometry_msgs/msg/TransformStamped")
+            t = _stamp(tf.header) if stamp == "header" else record_ns / 1e9
+            edges.setdefault((tf.header.frame_id.lstrip("/"), tf.child_frame_id.lstrip("/")), []).append((t, *pos, *quat))
+    return edges
+
+
+def _chain(edges: set[tuple[str, str]], parent: str, child: str) -> list[tuple[str, str, bool]] | None:
+    """The path parent -> child in the frame tree as (frame_id, child_frame_id, inverted) steps."""
+    nbrs: dict[str, list] = {}
+    for a, b in edges:
+        nbrs.setdefault(a, []).append((b, (a, b), False))
+        nbrs.setdefault(b, []).append((a, (a, b), True))
+    prev: dict[str, tuple] = {parent: None}
+    queue = [parent]
+    while queue:
+        f = queue.pop(0)
+        if f == child:
+            break
+        for g, edge, inv in nbrs.get(f, []):
+            if g not in prev:
+                prev[g] = (f, edge, inv)
+                queue.append(g)
+    if child not in prev:
+        return None
+    steps = []
+    f = child
+    while prev[f] is not None:
+        f0, edge, inv = prev[f]
+        steps.append((edge[0], edge[1], inv))
+        f = f0
+    return steps[::-1]
+
+
+def _interp(rows: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (linear) and rotations (slerp) of a transform's time series at ``t``."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    if len(rows) == 1:
+        return np.repeat(rows[:, 1:4], len(t), axis=0), np.repeat(rows[:, 4:8], len(t), axis=0)
+    p = np.column_stack([np.interp(t, rows[:, 0], rows[:, k]) for k in (1, 2, 3)])
+    q = Slerp(rows[:, 0], Rotation.from_quat(rows[:, 4:8]))(t).as_quat()
+    return p, q
+
+
+def _read_tf(reader, path: Path, topic: str, static_topic: str, frames: tuple[str, str], stamp: str, notes):
+    parent, child = (f.lstrip("/") for f in frames)
+    dynamic = _tf_edges(reader, topic, stamp)
+    static = _tf_edges(reader, static_topic, stamp) if static_topic in reader.topics else {}
+    steps = _chain(set(dynamic) | set(static), parent, child)
+    if steps is None:
+        known = sorted({f for e in set(dynamic) | set(static) for f in e})
+        missing = [f for f in (parent, child) if f not in known]
+        what = f"unknown frame {', '.join(map(repr, missing))}" if missing else f"no chain from {parent!r} to {child!r}"
+        raise EpaError(f"{what}; the TF frames are {', '.join(known) or 'none'}", path=f"{path} topic {topic}")
+    series = {}
+    for a, b, _ in steps:
+        rows = np.array(dynamic.get((a, b)) or static[(a, b)], float)
+        rows = rows[np.argsort(rows[:, 0], kind="stable")]
+        series[(a, b)] = (rows, (a, b) not in dynamic)
+    moving = [e for e, (_, is_static) in series.items() if not is_static]
+    if not moving:
+        raise EpaError(f"the chain {parent} -> {child} is static (only {static_topic}): no trajectory",
+                       path=f"{path} topic {topic}")
+    # the stamps of the dynamic link with most messages; the others are interpolated within their span
+    t = series[max(moving, key=lambda e: len(series[e][0]))][0][:, 0]
+    for e in moving:
+        rows = series[e][0]
+        t = t[(t >= rows[0, 0]) & (t <= rows[-1, 0])]
+    t = np.unique(t)
+    if len(steps) == 1 and not steps[0][2]:  # one direct link: its own poses, bit for bit
+        rows = series[(steps[0][0], steps[0][1])][0]
+        rows = rows[np.concatenate([[True], np.diff(rows[:, 0]) > 0])]
+        if notes is not None:
+            notes.append(f"bag TF {parent} -> {child} ({len(rows)} poses of {topic}, {stamp} stamps)")
+        q = rows[:, 4:8]
+        return Trajectory(rows[:, 0], rows[:, 1:4], q / np.linalg.norm(q, axis=1, keepdims=True))
+    r_total, p_total = np.broadcast_to(np.eye(3), (len(t), 3, 3)).copy(), np.zeros((len(t), 3))
+    for a, b, inverted in steps:
+        rows, is_static = series[(a, b)]
+        if is_static:
+            rows = rows[-1:]
+        p_e, q_e = _interp(rows, t)
+        r_e = geometry.quat_to_rot(q_e / np.linalg.norm(q_e, axis=1, keepdims=True))
+        if inverted:
+            r_e = r_e.transpose(0, 2, 1)
+            p_e = -np.einsum("nab,nb->na", r_e, p_e)
+        p_total = p_total + np.einsum("nab,nb->na", r_total, p_e)
+        r_total = r_total @ r_e
+    if notes is not None:
+        chain_text = " -> ".join([parent] + [b if not inv else a for a, b, inv in steps])
+        notes.append(f"bag TF {chain_text} ({len(t)} poses at the stamps of {topic}, {stamp} stamps)")
+    if len(t) == 0:
+        raise EpaError(f"the transforms of {parent} -> {child} never overlap in time", path=f"{path} topic {topic}")
+    return Trajectory.from_rp(t, r_total, p_total)
+
+
+# ----------------------------------------------------------------------------- writing (tests, benchmarks)
+def write_bag(path, topics: dict[str, tuple[str, Trajectory]], *, storage: str = "ros1",
+              frames: tuple[str, str] = ("world", "body"), extra: dict[str, tuple[str, list]] | None = None) -> None:
+    """Write trajectories as bag topics: ``topics`` maps topic -> (message type, trajectory).
+    ``storage``: ``ros1`` (.bag), ``sqlite3`` or ``mcap`` (ROS 2 bag folder). TFMessage topics carry
+    ``frames`` (parent, child); a Path topic is one message holding every pose. ``extra`` adds raw
+    topics: topic -> (message type, [(record_ns, message)])."""
+    from rosbags.typesys import Stores, get_typestore
+
+    path = Path(path)
+    ros1 = storage == "ros1"
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    if "tf2_msgs/msg/TFMessage" not in ts.types:  # the Noetic store lacks tf2_msgs
+        from rosbags.typesys import get_types_from_msg
+
+        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    T = ts.types
+    if ros1:
+        from rosbags.rosbag1 import Writer
+
+        writer = Writer(path)
+    else:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
+
+    def header(t, frame):
+        sec = int(np.floor(t))
+        stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((t - sec) * 1e9)))
+        return T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame) if ros1 else \
+            T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+
+    def pose(p, q):
+        return T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
+                                           orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))
+
+    def cov(traj, k):
+        if traj.cov_ros is not None:
+            return traj.cov_ros[k].reshape(36).astype(float)
+        c = np.zeros((6, 6))
+        if traj.cov_pos is not None:
+            c[:3, :3], c[3:, 3:] = traj.cov_pos[k], traj.cov_rot[k]
+        return c.reshape(36)
+
+    def messages(msgtype, traj):
+        parent, child = frames
+        for k in range(len(traj)):
+            t, p, q = traj.t[k], traj.p[k], traj.q[k]
+            if msgtype == "geometry_msgs/msg/PoseStamped":
+                yield t, T[msgtype](header=header(t, parent), pose=pose(p, q))
+            elif msgtype == "geometry_msgs/msg/PoseWithCovarianceStamped":
+                pwc = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose(p, q), covariance=cov(traj, k))
+                yield t, T[msgtype](header=header(t, parent), pose=pwc)
+            elif msgtype == "nav_msgs/msg/Odometry":
+                pwc = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose(p, q), covariance=cov(traj, k))
+                tw = T["geometry_msgs/msg/TwistWithCovariance"](
+                    twist=T["geometry_msgs/msg/Twist"](linear=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
+                                                       angular=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0)),
+                    covariance=np.zeros(36))
+                yield t, T[msgtype](header=header(t, parent), child_frame_id=child, pose=pwc, twist=tw)
+            elif msgtype in ("geometry_msgs/msg/TransformStamped", "tf2_msgs/msg/TFMessage"):
+                tf = T["geometry_msgs/msg/TransformStamped"](
+                    header=header(t, parent), child_frame_id=child,
+                    transform=T["geometry_msgs/msg/Transform"](
+                        translation=T["geometry_msgs/msg/Vector3"](x=p[0], y=p[1], z=p[2]),
+                        rotation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])))
+                yield t, (tf if msgtype.endswith("TransformStamped") else T[msgtype](transforms=[tf]))
+        if msgtype == "nav_msgs/msg/Path":
+            poses = [T["geometry_msgs/msg/PoseStamped"](header=header(traj.t[k], parent), pose=pose(traj.p[k], traj.q[k]))
+                     for k in range(len(traj))]
+            yield traj.t[-1], T[msgtype](header=header(traj.t[-1], parent), poses=poses)
+
+    serialize = ts.serialize_ros1 if ros1 else ts.serialize_cdr
+    with writer:
+        for topic, (msgtype, traj) in topics.items():
+            conn = writer.add_connection(topic, msgtype, typestore=ts)
+            for t, msg in messages(msgtype, traj):
+                writer.write(conn, int(round(t * 1e9)), serialize(msg, msgtype))
+        for topic, (msgtype, items) in (extra or {}).items():
+            conn = writer.add_connection(topic, msgtype, typestore=ts)
+            for record_ns, msg in items:
+                writer.write(conn, record_ns, serialize(msg, msgtype))
