@@ -159,3 +159,17 @@ def test_per_source_settings_override_the_load_section():
     assert sources.options(cfg, "estimate", algorithm="vins")["topic"] is None
     with pytest.raises(EpaError, match="sources.algorithms.okvis: Additional properties are not allowed"):
         settings.resolve({"truth_dir": "t", "algorithms_dir": "a", "sources": {"algorithms": {"okvis": {"topik": "/x"}}}})
+
+
+@pytest.mark.parametrize("storage", ["ros1", "mcap"])
+def test_the_all_at_once_decoder_equals_message_by_message(tmp_path, storage, monkeypatch):
+    traj = known(200, seed=5)
+    path = tmp_path / STORAGES[storage]
+    kinds = TYPES[:4]
+    bags.write_bag(path, {f"/t{k}": (m, traj) for k, m in enumerate(kinds)}, storage=storage)
+    fast = [bags.read_bag(path, f"/t{k}") for k in range(len(kinds))]
+    monkeypatch.setattr(bags, "_decode_all", lambda *a, **k: None)
+    for k, f in enumerate(fast):
+        slow = bags.read_bag(path, f"/t{k}")
+        for name in ("t", "p", "q", "cov_ros"):
+            np.testing.assert_array_equal(getattr(f, name), getattr(slow, name))

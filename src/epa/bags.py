@@ -193,23 +193,72 @@ def _read_poses(reader, conns, msgtype: str, stamp: str) -> Trajectory:
             t[k] = _stamp(ps.header) if stamp == "header" else last[1] / 1e9
             (p[k], q[k], _) = _pose_of(ps, "geometry_msgs/msg/PoseStamped")
         return _finish(t, p, q, None)
-    count = sum(c.msgcount for c in conns)
+    raws, records = [], []
+    for _, record_ns, raw in reader.messages(connections=conns):
+        raws.append(raw)
+        records.append(record_ns)
+    fast = _decode_all(reader, raws, conns[0].msgtype, msgtype, ros1=not reader.is2)
+    if fast is not None:  # every message decoded at once from fixed offsets (checked against rosbags)
+        t, p, q, cov = fast
+        if stamp == "record":
+            t = np.asarray(records, float) / 1e9
+        return _finish(t, p, q, cov)
+    count = len(raws)
     t, p, q = np.empty(count), np.empty((count, 3)), np.empty((count, 4))
     cov = np.empty((count, 36)) if msgtype in ("geometry_msgs/msg/PoseWithCovarianceStamped",
                                                 "nav_msgs/msg/Odometry") else None
-    k = 0
-    for conn, record_ns, raw in reader.messages(connections=conns):
-        if k == count:  # the index undercounted: grow
-            t, p, q = np.resize(t, 2 * count + 1), np.resize(p, (2 * count + 1, 3)), np.resize(q, (2 * count + 1, 4))
-            cov = None if cov is None else np.resize(cov, (2 * count + 1, 36))
-            count = 2 * count + 1
-        msg = reader.deserialize(raw, conn.msgtype)
+    for k, (record_ns, raw) in enumerate(zip(records, raws)):
+        msg = reader.deserialize(raw, conns[0].msgtype)
         t[k] = _stamp(msg.header) if stamp == "header" else record_ns / 1e9
         p[k], q[k], c = _pose_of(msg, msgtype)
         if cov is not None:
             cov[k] = c
-        k += 1
-    return _finish(t[:k], p[:k], q[:k], None if cov is None else cov[:k])
+    return _finish(t, p, q, cov)
+
+
+# Doubles after the header (and child frame id) of each fixed-layout type: pose (7), covariance (36).
+_LAYOUT = {"geometry_msgs/msg/PoseStamped": (False, 7), "geometry_msgs/msg/PoseWithCovarianceStamped": (False, 43),
+           "nav_msgs/msg/Odometry": (True, 43), "geometry_msgs/msg/TransformStamped": (True, 7)}
+
+
+def _decode_all(reader, raws: list, conn_type: str, msgtype: str, ros1: bool):
+    """Stamps, poses and covariances of all messages at once, when every message has the same length
+    (the frame ids do not change): the fields sit at the same offsets, found from the first message.
+    Verified against rosbags' own deserialisation of the first and last message; else None."""
+    if msgtype not in _LAYOUT or not raws or len({len(r) for r in raws}) != 1:
+        return None
+    child, n_doubles = _LAYOUT[msgtype]
+    first = raws[0]
+    u32 = lambda off: int.from_bytes(first[off:off + 4], "little")
+    if ros1:  # seq, sec, nsec, frame_id; no alignment
+        sec_at, off = 4, 16 + u32(12)
+        if child:
+            off += 4 + u32(off)
+    else:  # CDR: 4-byte encapsulation header; fields aligned to their size, counted after it
+        if first[1] != 1:  # not little-endian CDR
+            return None
+        sec_at, off = 4, 16 + u32(12)
+        if child:
+            off = 4 + ((off - 4 + 3) & ~3)
+            off += 4 + u32(off)
+        off = 4 + ((off - 4 + 7) & ~7)
+    size = len(first)
+    if off + 8 * n_doubles > size:
+        return None
+    rows = np.frombuffer(b"".join(raws), np.uint8).reshape(len(raws), size)
+    sec = rows[:, sec_at:sec_at + 4].copy().view("<u4" if ros1 else "<i4")[:, 0].astype(float)
+    nsec = rows[:, sec_at + 4:sec_at + 8].copy().view("<u4")[:, 0].astype(float)
+    doubles = rows[:, off:off + 8 * n_doubles].copy().view("<f8")
+    t = sec + nsec * 1e-9
+    p, q = doubles[:, 0:3], doubles[:, 3:7]
+    cov = doubles[:, 7:43] if n_doubles == 43 else None
+    for k in (0, len(raws) - 1):
+        msg = reader.deserialize(raws[k], conn_type)
+        pos, quat, c = _pose_of(msg, msgtype)
+        if (_stamp(msg.header) != t[k] or tuple(p[k]) != tuple(pos) or tuple(q[k]) != tuple(quat)
+                or (cov is not None and not np.array_equal(cov[k], np.asarray(c, float)))):
+            return None
+    return t, p, q, cov
 
 
 def _finish(t, p, q, cov36) -> Trajectory:
