@@ -88,6 +88,7 @@ def in_pairs(cmds, workers=2) -> float:
 
 def bench_euroc(tmp: Path, skip_evo: bool) -> dict:
     from epa import io
+    from epa.readers import text
 
     cwd = tmp / "euroc"
     pairs = euroc_grid(cwd)
@@ -100,7 +101,7 @@ def bench_euroc(tmp: Path, skip_evo: bool) -> dict:
         for k, (r, e) in enumerate(pairs):
             tum = tmp / "evo" / f"{k}.tum"  # evo reads TUM; the OpenVINS CSV is converted once, outside the timing
             tum.parent.mkdir(exist_ok=True)
-            io.write_tum(tum, io.read_trajectory(e))
+            io.write_tum(tum, text.read_trajectory(e))
             evo_cmds += [["evo_ape", "tum", str(r), str(tum), "-a"],
                          ["evo_rpe", "tum", str(r), str(tum), "-a", "--delta", "8", "--delta_unit", "m", "--all_pairs"]]
         out["evo_loop_s"] = in_pairs(evo_cmds)

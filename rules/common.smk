@@ -6,8 +6,9 @@ import os
 import epa
 from epa.errors import EpaError
 from snakemake.exceptions import WorkflowError
-from epa import bags as epa_bags, cases as epa_cases, chain as epa_chain, grid as epa_grid, settings as epa_settings
-from epa import sources as epa_sources, tables as epa_tables
+from epa import cases as epa_cases, chain as epa_chain, grid as epa_grid, readers as epa_readers
+from epa import settings as epa_settings, tables as epa_tables
+from epa.readers import bags as epa_bags
 
 try:  # a mistake in the config or the folders is one line, not a traceback
     epa_settings.check_user_configs(workflow.overwrite_configfiles, workflow.config_settings.overwrite_config)
@@ -54,8 +55,8 @@ def load_case(c):
         "key": c.key,
         "truth": str(c.truth),
         "estimate": str(c.estimate),
-        "truth_source": epa_sources.options(EPA, "reference", dataset=c.dataset),
-        "estimate_source": epa_sources.options(EPA, "estimate", algorithm=c.algorithm),
+        "truth_source": epa_readers.options(EPA, "reference", dataset=c.dataset),
+        "estimate_source": epa_readers.options(EPA, "estimate", algorithm=c.algorithm),
     }
 
 

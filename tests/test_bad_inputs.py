@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 
 from epa import alignment, cases, chain, io, pipeline, settings
+from epa.readers import text
 from epa.errors import EpaError
 from epa.trajectory import Trajectory
+from epa.readers import text
 
 POSES = "1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0 1\n3.0 2 1 0 0 0 0 1\n"
 
@@ -17,7 +19,7 @@ def read_error(tmp_path, name, content: str | bytes) -> str:
     path = tmp_path / name
     path.write_bytes(content if isinstance(content, bytes) else content.encode())
     with pytest.raises(EpaError) as err:
-        io.read_trajectory(path)
+        text.read_trajectory(path)
     message = err.value.one_line()
     assert "\n" not in message and message.startswith(str(path))
     return message
@@ -25,14 +27,14 @@ def read_error(tmp_path, name, content: str | bytes) -> str:
 
 def test_byte_order_mark_on_a_headerless_file_keeps_the_first_pose(tmp_path):
     (tmp_path / "a.txt").write_bytes(b"\xef\xbb\xbf" + POSES.encode())
-    assert len(io.read_trajectory(tmp_path / "a.txt")) == 3
+    assert len(text.read_trajectory(tmp_path / "a.txt")) == 3
 
 
 def test_byte_order_mark_before_a_csv_header_still_names_the_columns(tmp_path):
     # qw first in the file: read by name, not in EuRoC order
     body = "t,x,y,z,qw,qx,qy,qz\n1,0,0,0,0.5,0.5,0.5,0.5\n2,1,0,0,0.5,0.5,0.5,0.5\n"
     (tmp_path / "a.csv").write_bytes(b"\xef\xbb\xbf" + body.encode())
-    traj = io.read_trajectory(tmp_path / "a.csv")
+    traj = text.read_trajectory(tmp_path / "a.csv")
     np.testing.assert_allclose(traj.q[0], [0.5, 0.5, 0.5, 0.5])
     np.testing.assert_allclose(traj.t, [1, 2])
 
@@ -84,7 +86,7 @@ def test_a_dangling_link_is_a_failed_case_not_a_missing_one(tmp_path):
     _, found = cases.discover(tmp_path / "truth", tmp_path / "algs")
     assert [c.key for c in found] == ["a/seq/run1"]
     with pytest.raises(EpaError, match="run1.txt: file not found"):
-        io.read_trajectory(found[0].estimate)
+        text.read_trajectory(found[0].estimate)
 
 
 @pytest.mark.parametrize("content,message", [
@@ -127,7 +129,7 @@ def test_every_inference_is_a_note_in_load_json(tmp_path):
     (tmp_path / "est.txt").write_text(rows)
     cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": ".", "load": {"unsorted": "sort"}})
     notes: list = []
-    traj = io.read_trajectory(tmp_path / "est.txt", on_unsorted="sort", notes=notes)
+    traj = text.read_trajectory(tmp_path / "est.txt", on_unsorted="sort", notes=notes)
     assert len(traj) == 400
     assert notes == ["format tum (8 columns)", "stamps read as nanoseconds (above 1e12, so not seconds)",
                      "0 backward and 1 repeated timestamps: sorted, kept the first of each repeat"]

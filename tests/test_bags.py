@@ -3,7 +3,8 @@ TF chains composed; evo 1.38.1's reading of the shared bags reproduced; damage i
 import numpy as np
 import pytest
 
-from epa import bags, geometry, sources
+from epa import geometry, readers
+from epa.readers import bags
 from epa.errors import EpaError
 from epa.trajectory import Trajectory
 
@@ -143,7 +144,7 @@ def test_tf_example_bags_ros1_and_ros2_agree_and_match_sources_md(data):
 def test_a_topic_on_a_text_file_is_refused(tmp_path):
     (tmp_path / "a.txt").write_text("1 0 0 0 0 0 0 1\n2 1 0 0 0 0 0 1\n")
     with pytest.raises(EpaError, match="a topic is set for this source but it is not a bag"):
-        sources.read(tmp_path / "a.txt", {"topic": "/x"})
+        readers.read(tmp_path / "a.txt", {"topic": "/x"})
 
 
 def test_per_source_settings_override_the_load_section():
@@ -152,11 +153,11 @@ def test_per_source_settings_override_the_load_section():
     cfg = settings.resolve({"truth_dir": "t", "algorithms_dir": "a", "load": {"unsorted": "sort"},
                             "sources": {"reference": {"topic": "/gt"}, "datasets": {"V102": {"topic": "/vicon"}},
                                         "algorithms": {"okvis": {"topic": "/okvis/odom", "stamp": "record"}}}})
-    assert sources.options(cfg, "reference", dataset="MH01")["topic"] == "/gt"
-    assert sources.options(cfg, "reference", dataset="V102")["topic"] == "/vicon"
-    est = sources.options(cfg, "estimate", algorithm="okvis")
+    assert readers.options(cfg, "reference", dataset="MH01")["topic"] == "/gt"
+    assert readers.options(cfg, "reference", dataset="V102")["topic"] == "/vicon"
+    est = readers.options(cfg, "estimate", algorithm="okvis")
     assert est["topic"] == "/okvis/odom" and est["stamp"] == "record" and est["unsorted"] == "sort"
-    assert sources.options(cfg, "estimate", algorithm="vins")["topic"] is None
+    assert readers.options(cfg, "estimate", algorithm="vins")["topic"] is None
     with pytest.raises(EpaError, match="sources.algorithms.okvis: Additional properties are not allowed"):
         settings.resolve({"truth_dir": "t", "algorithms_dir": "a", "sources": {"algorithms": {"okvis": {"topik": "/x"}}}})
 

@@ -4,19 +4,20 @@ import pytest
 import yaml
 
 from epa import calibration, geometry, io, sync
+from epa.readers import text
 
 
 @pytest.fixture(scope="module")
 def euroc(data):
-    text = (data / "rpng_open_vins/config/euroc_mav/kalibr_imucam_chain.yaml").read_text().split("\n", 1)[1]
-    chain = yaml.safe_load(text)
+    kalibr = (data / "rpng_open_vins/config/euroc_mav/kalibr_imucam_chain.yaml").read_text().split("\n", 1)[1]
+    chain = yaml.safe_load(kalibr)
     t0, t1 = np.array(chain["cam0"]["T_imu_cam"]), np.array(chain["cam1"]["T_imu_cam"])
-    gt = io.read_trajectory(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt")
+    gt = text.read_trajectory(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt")
     return gt, t0, t1
 
 
 def solve(data, gt, name, **kw):
-    est = io.read_trajectory(data / "spsingh37_ORB_SLAM3_ubuntu22" / name)
+    est = text.read_trajectory(data / "spsingh37_ORB_SLAM3_ubuntu22" / name)
     off = sync.estimate_offset(gt, est)
     ir, ie = sync.associate(gt, est, offset=off.offset)
     return calibration.solve(gt.select(ir), est.select(ie), **kw)
@@ -56,7 +57,7 @@ def test_mono_recovers_extrinsic_and_scale(data, euroc):
 
 def test_body_frame_estimate_gives_near_identity(data, euroc):
     gt, _, _ = euroc
-    est = io.read_trajectory(data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv")
+    est = text.read_trajectory(data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv")
     ir, ie = sync.associate(gt, est, offset=sync.estimate_offset(gt, est).offset)
     ext = calibration.solve(gt.select(ir), est.select(ie))
     assert ext.trusted and np.degrees(geometry.rotation_angle(ext.R)) < 1.0 and np.linalg.norm(ext.t) < 0.03

@@ -73,7 +73,7 @@ def _traj(t, p, q):
 
 def _bag(tmp: Path, est: Path, setup: str) -> Path:
     """The catalogue's bag: /pose and /gt (PoseStamped), /tf (world -> body), /chatter (String), /empty."""
-    from epa import bags
+    from epa.readers import bags
 
     good = _traj(catalogue.T, catalogue.P, catalogue.Q)
     storage = {"bag-sqlite3": "sqlite3", "bag-mcap": "mcap", "bag-no-db": "sqlite3"}.get(setup, "ros1")
@@ -154,7 +154,7 @@ def _grid_folders(tmp: Path, setup: str) -> tuple[Path, Path, str | None]:
             _write(algs / "we ird&%" / "seq" / f"{name}.txt", good)
         bad = None
     elif setup in ("grid-bag-ref", "grid-bag-truncated"):
-        from epa import bags
+        from epa.readers import bags
 
         good_traj = _traj(catalogue.T, catalogue.P, catalogue.Q)
         if setup == "grid-bag-ref":

@@ -9,6 +9,7 @@ from evo.core import metrics as em  # noqa: E402
 from evo.tools import file_interface  # noqa: E402
 
 from epa import alignment, io, metrics, sync  # noqa: E402
+from epa.readers import text
 
 REL = 1e-6
 
@@ -53,18 +54,18 @@ def test_tum_fr1_xyz(data):
     d = data / "MichaelGrupp_evo/test/data"
     check(file_interface.read_tum_trajectory_file(d / "freiburg1_xyz-groundtruth.txt"),
           file_interface.read_tum_trajectory_file(d / "freiburg1_xyz-rgbdslam.txt"),
-          io.read_trajectory(d / "freiburg1_xyz-groundtruth.txt"), io.read_trajectory(d / "freiburg1_xyz-rgbdslam.txt"))
+          text.read_trajectory(d / "freiburg1_xyz-groundtruth.txt"), text.read_trajectory(d / "freiburg1_xyz-rgbdslam.txt"))
 
 
 def test_v102_sim3_with_duplicates_dropped_on_both_sides(data):
     d = data / "MichaelGrupp_evo/test/data"
-    est = io.read_trajectory(d / "V102.txt", on_unsorted="sort")
+    est = text.read_trajectory(d / "V102.txt", on_unsorted="sort")
     eest = file_interface.read_tum_trajectory_file(d / "V102.txt")
     keep = np.concatenate([[True], np.diff(eest.timestamps) > 0])  # the same rows our sort mode keeps
     eest.reduce_to_ids(np.flatnonzero(keep))
     assert len(est) == eest.num_poses == 803
     check(file_interface.read_euroc_csv_trajectory(d / "V102_groundtruth.csv"), eest,
-          io.read_trajectory(d / "V102_groundtruth.csv"), est, scale=True)
+          text.read_trajectory(d / "V102_groundtruth.csv"), est, scale=True)
 
 
 @pytest.mark.parametrize("name", ["KITTI_00_ORB.txt", "KITTI_00_SPTAM.txt"])
@@ -78,5 +79,5 @@ def test_kitti_00(data, name):
     eref = PoseTrajectory3D(poses_se3=eref.poses_se3, timestamps=times)
     eest = PoseTrajectory3D(poses_se3=eest.poses_se3, timestamps=times)
     times_file = d / "KITTI_00_gt_times.txt"
-    check(eref, eest, io.read_trajectory(d / "KITTI_00_gt.txt", kitti_times=times_file),
-          io.read_trajectory(d / name, kitti_times=times_file))
+    check(eref, eest, text.read_trajectory(d / "KITTI_00_gt.txt", kitti_times=times_file),
+          text.read_trajectory(d / name, kitti_times=times_file))

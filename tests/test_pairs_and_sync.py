@@ -5,6 +5,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from epa import geometry, io, metrics, sync
+from epa.readers import text
 
 
 def brute_segment_pairs(d, length, tol=0.5):
@@ -39,11 +40,11 @@ def brute_ov_eval_assoc(t_ref, t_est, max_diff):
 
 
 def test_segment_pairs_match_brute_force_on_euroc_grid(data):
-    gt = io.read_trajectory(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt")
+    gt = text.read_trajectory(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt")
     files = sorted(glob.glob(str(data / "uzh-rpg_rpg_trajectory_evaluation/results/**/*MH_01*/*.txt"), recursive=True))
     assert len(files) >= 12
     for f in files[:12]:
-        est = io.read_trajectory(f)
+        est = text.read_trajectory(f)
         ir, _ = sync.associate(gt, est, max_diff=0.02)
         d = geometry.path_distances(gt.p[ir])
         for length in (8, 16, 48):
@@ -71,7 +72,7 @@ def test_ov_eval_association_matches_greedy(dr, de, max_diff):
 
 
 def test_step1_recovers_injected_shifts_on_real_euroc_estimates(data):
-    gts = {s: io.read_trajectory(data / f"rpng_open_vins/ov_data/euroc_mav/{f}") for s, f in
+    gts = {s: text.read_trajectory(data / f"rpng_open_vins/ov_data/euroc_mav/{f}") for s, f in
            [("MH_01", "MH_01_easy.txt"), ("MH_03", "MH_03_medium.txt"), ("MH_04", "MH_04_difficult.txt"),
             ("MH_05", "MH_05_difficult.txt")]}
     files = [(next(s for s in gts if s in f), f, {}) for f in
@@ -84,7 +85,7 @@ def test_step1_recovers_injected_shifts_on_real_euroc_estimates(data):
     rng = np.random.default_rng(3)
     errors = []
     for seq, f, kw in files:
-        est = io.read_trajectory(f, **kw)
+        est = text.read_trajectory(f, **kw)
         base = sync.estimate_offset(gts[seq], est)
         shift = rng.uniform(-1, 1)
         moved = sync.estimate_offset(gts[seq], est.shifted(-shift))

@@ -5,6 +5,7 @@ from hypothesis import HealthCheck, given, settings as hsettings, strategies as 
 from epa import alignment, geometry, io, metrics, sync
 from epa.errors import EpaError
 from epa.trajectory import Trajectory
+from epa.readers import text
 
 FUZZ = hsettings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 ROW = "1.5 0 0 0 0 0 0 1\n"
@@ -17,12 +18,12 @@ numberish = st.lists(st.sampled_from(["1", "2.5", "-3", "1e9", "1e300", "nan", "
 
 @FUZZ
 @given(content=st.one_of(st.binary(max_size=400), numberish), suffix=st.sampled_from([".txt", ".csv", ".tum"]),
-       fmt=st.sampled_from(io.FORMATS), time_unit=st.sampled_from(io.TIME_UNITS))
+       fmt=st.sampled_from(text.FORMATS), time_unit=st.sampled_from(text.TIME_UNITS))
 def test_no_byte_string_makes_a_reader_raise_anything_but_epa_error(tmp_path, content, suffix, fmt, time_unit):
     path = tmp_path / f"f{suffix}"
     path.write_bytes(content)
     try:
-        traj = io.read_trajectory(path, fmt, time_unit=time_unit)
+        traj = text.read_trajectory(path, fmt, time_unit=time_unit)
     except EpaError as exc:
         assert "\n" not in exc.one_line() and exc.one_line().startswith(str(path))
         return
@@ -42,8 +43,8 @@ def test_tum_write_read_round_trip_is_exact(tmp_path, n, seed):
     q = rng.normal(size=(n, 4))
     traj = Trajectory(t, rng.uniform(-1e4, 1e4, (n, 3)), q / np.linalg.norm(q, axis=1, keepdims=True))
     io.write_tum(tmp_path / "a.tum", traj)
-    back = io.read_trajectory(tmp_path / "a.tum")
-    np.testing.assert_array_equal(back.t, traj.t if t.max() < io.NS_THRESHOLD else back.t)
+    back = text.read_trajectory(tmp_path / "a.tum")
+    np.testing.assert_array_equal(back.t, traj.t if t.max() < text.NS_THRESHOLD else back.t)
     np.testing.assert_array_equal(back.p, traj.p)
     np.testing.assert_allclose(back.q, traj.q, rtol=0, atol=1e-15)
 
@@ -55,13 +56,13 @@ token = st.sampled_from(["1", "2.5", "-3", "1e9", "1e13", "1e300", "nan", "inf",
 @given(rows=st.lists(st.lists(token, min_size=1, max_size=21), min_size=0, max_size=12),
        sep=st.sampled_from([" ", ",", "\t", ";"]), header=st.sampled_from(["", "# t x y z qx qy qz qw\n",
                                                                          "t,x,y,z,qw,qx,qy,qz\n", "#timestamp [ns],a\n"]),
-       suffix=st.sampled_from([".txt", ".csv"]), fmt=st.sampled_from(io.FORMATS),
-       time_unit=st.sampled_from(io.TIME_UNITS), unsorted=st.sampled_from(["error", "sort"]))
+       suffix=st.sampled_from([".txt", ".csv"]), fmt=st.sampled_from(text.FORMATS),
+       time_unit=st.sampled_from(text.TIME_UNITS), unsorted=st.sampled_from(["error", "sort"]))
 def test_table_shaped_garbage_is_read_or_refused_cleanly(tmp_path, rows, sep, header, suffix, fmt, time_unit, unsorted):
     path = tmp_path / f"f{suffix}"
     path.write_text(header + "".join(sep.join(r) + "\n" for r in rows))
     try:
-        traj = io.read_trajectory(path, fmt, time_unit=time_unit, on_unsorted=unsorted)
+        traj = text.read_trajectory(path, fmt, time_unit=time_unit, on_unsorted=unsorted)
     except EpaError as exc:
         assert "\n" not in exc.one_line() and exc.one_line().startswith(str(path))
         return
@@ -89,7 +90,7 @@ def test_every_format_round_trips(tmp_path, n, seed, fmt, with_cov):
                              ns_exact=fmt == "euroc")
     path = tmp_path / ("a.csv" if fmt in ("euroc", "csv") else "a.txt")
     io.write_trajectory(path, traj, fmt)
-    back = io.read_trajectory(path)
+    back = text.read_trajectory(path)
     np.testing.assert_allclose(back.t, traj.t, rtol=0, atol=3e-7 if fmt == "euroc" else 0)  # ns in float64
     np.testing.assert_array_equal(back.p, traj.p)
     # same rotation (q and -q are one rotation; KITTI stores the matrix)

@@ -233,13 +233,13 @@ def test_bag_grid_with_per_source_settings(tmp_path):
     """References in bags (a ROS 2 folder; a ROS 1 bag whose second topic is an estimate), text
     estimates of another algorithm, settings per source; changing one algorithm's settings re-runs
     only its cases."""
-    from epa import bags, io
-    from epa.trajectory import Trajectory
+    from epa import io
+    from epa.readers import bags, text as text_reader
 
     simulate.simulate(tmp_path / "sim")
     sim = tmp_path / "sim"
-    ref = io.read_trajectory(sim / "truth/handheld_office.txt")
-    est = io.read_trajectory(sim / "algorithms/vio_body/handheld_office/run1.txt")
+    ref = text_reader.read_trajectory(sim / "truth/handheld_office.txt")
+    est = text_reader.read_trajectory(sim / "algorithms/vio_body/handheld_office/run1.txt")
     (tmp_path / "truth").mkdir()
     bags.write_bag(tmp_path / "truth/office_ros2", {"/vicon": ("geometry_msgs/msg/PoseStamped", ref)}, storage="sqlite3")
     # one ROS 1 bag holding ground truth and an estimate: the reference of one dataset and a run

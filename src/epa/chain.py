@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from epa import io, pipeline, sources
+from epa import io, pipeline, readers
 from epa.errors import EpaError
 
 log = logging.getLogger("epa")
@@ -47,7 +47,7 @@ class CaseFolder:
                  estimate_source: dict | None = None):
         self.root = Path(root)
         self.truth, self.estimate = truth, estimate
-        # each side's source settings (epa.sources.options); None: the load section's
+        # each side's source settings (epa.readers.options); None: the load section's
         self.truth_source, self.estimate_source = truth_source, estimate_source
 
     def path(self, stage: str, name: str) -> Path:
@@ -179,8 +179,8 @@ def _record(case, values, stage, name):
 
 
 def _load(case, values, cfg, write_tables):
-    ref_opts = case.truth_source or sources.options(cfg, "reference")
-    est_opts = case.estimate_source or sources.options(cfg, "estimate")
+    ref_opts = case.truth_source or readers.options(cfg, "reference")
+    est_opts = case.estimate_source or readers.options(cfg, "estimate")
     try:
         st = os.stat(case.truth)
     except OSError:  # the reader says what is wrong with it, in its words

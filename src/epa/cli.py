@@ -114,11 +114,11 @@ def _eval(args) -> None:
             print(f"epa: {clock['stage']:<9} {now - clock['t']:7.3f} s", file=sys.stderr)
         clock.update(stage=name, t=now)
 
-    from epa import sources
+    from epa import readers
 
     result = chain.run_case(args.ref, args.est, args.out, cfg, write_tables=args.artifacts, on_stage=on_stage,
-                            ref_source=sources.options(cfg, "reference"),
-                            est_source=sources.options(cfg, "estimate", algorithm=EVAL_ALGORITHM))
+                            ref_source=readers.options(cfg, "reference"),
+                            est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM))
     on_stage(None)
     record = result["metrics"]
     ate = record["ate"]["trans_m"]["rmse"]
@@ -127,7 +127,8 @@ def _eval(args) -> None:
 
 
 def _traj(args) -> None:
-    from epa import bags, io, sources
+    from epa import io, readers
+    from epa.readers import bags
 
     if bags.is_bag(args.source) and not args.topic and not args.frames:
         infos = bags.topics(args.source)
@@ -142,8 +143,8 @@ def _traj(args) -> None:
     opts = {"format": args.format, "topic": args.topic, "frames": args.frames, "stamp": args.stamp,
             "time_unit": "auto", "unsorted": "error", "kitti_rate": 10.0, "static_topic": "/tf_static"}
     notes: list[str] = []
-    traj = sources.read(args.source, opts, notes=notes)
-    print(sources.describe(args.source, traj, notes))
+    traj = readers.read(args.source, opts, notes=notes)
+    print(readers.describe(args.source, traj, notes))
     if args.export:
         out = args.export
         fmt = {".txt": "tum", ".tum": "tum", ".csv": "csv"}.get(Path(out).suffix.lower())

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import alignment, bags, calibration, io, metrics, sources, sync
+from epa import alignment, calibration, metrics, readers, sync
+from epa.readers import bags, text
 from epa.errors import EpaError
 from epa.trajectory import Trajectory
 
@@ -17,25 +18,25 @@ log = logging.getLogger("epa")
 
 def load_reference(ref_path, cfg: dict, opts: dict | None = None) -> tuple[Trajectory, list[str]]:
     notes: list[str] = []
-    opts = sources.options(cfg, "reference") if opts is None else opts
-    return sources.read(ref_path, opts, notes=notes), notes
+    opts = readers.options(cfg, "reference") if opts is None else opts
+    return readers.read(ref_path, opts, notes=notes), notes
 
 
 def load(ref_path, est_path, cfg: dict, reference: tuple[Trajectory, list[str]] | None = None, *,
          ref_opts: dict | None = None, est_opts: dict | None = None):
     """Read the reference (unless already read: ``reference``, as load_reference returns it) and the
-    estimate, each with its source settings (:func:`epa.sources.options`). ``ref_notes`` /
+    estimate, each with its source settings (:func:`epa.readers.options`). ``ref_notes`` /
     ``est_notes`` in the record list what was inferred rather than read."""
-    ref_opts = sources.options(cfg, "reference") if ref_opts is None else ref_opts
-    est_opts = sources.options(cfg, "estimate") if est_opts is None else est_opts
+    ref_opts = readers.options(cfg, "reference") if ref_opts is None else ref_opts
+    est_opts = readers.options(cfg, "estimate") if est_opts is None else est_opts
     ref, ref_notes = load_reference(ref_path, cfg, ref_opts) if reference is None else reference
     # KITTI estimates rarely ship their own times file: they are index-aligned with the reference's.
     est_times = None
     if not bags.is_bag(est_path):
-        est_times = io.kitti_times_for(Path(est_path)) or (None if bags.is_bag(ref_path) else
-                                                            io.kitti_times_for(Path(ref_path)))
+        est_times = text.kitti_times_for(Path(est_path)) or (None if bags.is_bag(ref_path) else
+                                                            text.kitti_times_for(Path(ref_path)))
     est_notes: list[str] = []
-    est = sources.read(est_path, est_opts, notes=est_notes, kitti_times=est_times)
+    est = readers.read(est_path, est_opts, notes=est_notes, kitti_times=est_times)
     info = {"ref_file": Path(ref_path).name, "est_file": Path(est_path).name, "n_ref": len(ref), "n_est": len(est),
             "ref_length_m": ref.length(), "est_length_m": est.length(),
             "ref_span_s": [float(ref.t[0]), float(ref.t[-1])], "est_span_s": [float(est.t[0]), float(est.t[-1])],

@@ -1,4 +1,8 @@
-"""Trajectory sources: a text file or a bag topic, read with the settings that apply to it.
+"""Readers: every way a trajectory comes in.
+
+- :mod:`epa.readers.text`: text files (TUM, KITTI, EuRoC, OpenVINS, named CSV), format detection.
+- :mod:`epa.readers.bags`: ROS 1 / ROS 2 bags (topics, TF chains), read with ``rosbags``.
+- here: a *source* (a text file or a bag topic) read with the settings that apply to it.
 
 A source's settings are the ``load`` section's, overridden by ``sources.reference`` /
 ``sources.datasets.<dataset>`` for a reference and ``sources.algorithms.<algorithm>`` for an
@@ -13,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import bags, io
+from epa.readers import bags, text
 from epa.errors import EpaError
 from epa.trajectory import Trajectory
 
@@ -55,7 +59,7 @@ def read(path, opts: dict, *, notes: list | None = None, kitti_times=None) -> Tr
     if opts.get("topic") or opts.get("frames"):
         raise EpaError("a topic is set for this source but it is not a bag (.bag, .mcap or a ROS 2 bag folder)",
                        path=str(path))
-    return io.read_trajectory(path, opts.get("format", "auto"), time_unit=opts.get("time_unit", "auto"),
+    return text.read_trajectory(path, opts.get("format", "auto"), time_unit=opts.get("time_unit", "auto"),
                               on_unsorted=opts.get("unsorted", "error"), kitti_rate=opts.get("kitti_rate", 10.0),
                               kitti_times=kitti_times, notes=notes)
 
@@ -64,9 +68,9 @@ def _bag_order(traj: Trajectory, path: Path, opts: dict, notes: list) -> Traject
     """Bag stamps follow the same rules as a file's: repeats and backward steps stop, unless sorting
     was asked for; every repair is a note."""
     where = f"{path} topic {opts.get('topic') or '(auto)'}"
-    if np.abs(traj.p).max(initial=0) > io.MAX_POSITION_M:
-        k = int(np.argmax(np.abs(traj.p).max(axis=1) > io.MAX_POSITION_M))
-        raise EpaError(f"message {k + 1}: position beyond {io.MAX_POSITION_M:.0e} m", path=where)
+    if np.abs(traj.p).max(initial=0) > text.MAX_POSITION_M:
+        k = int(np.argmax(np.abs(traj.p).max(axis=1) > text.MAX_POSITION_M))
+        raise EpaError(f"message {k + 1}: position beyond {text.MAX_POSITION_M:.0e} m", path=where)
     dt = np.diff(traj.t)
     if (dt <= 0).any():
         k = int(np.argmax(dt <= 0)) + 1
