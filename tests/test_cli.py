@@ -25,3 +25,49 @@ def test_bad_input_exits_nonzero_with_one_line(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "bad.txt" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "o" / "06_metrics").exists()
+
+
+def test_traj_lists_a_bags_topics_and_exports_one(tmp_path, capsys):
+    import numpy as np
+
+    from epa.readers import bags, text
+    from epa.trajectory import Trajectory
+
+    t = 1_700_000_000 + np.arange(50) * 0.1
+    traj = Trajectory(t, np.column_stack([t - t[0], np.zeros(50), np.zeros(50)]), np.tile([0, 0, 0, 1.0], (50, 1)))
+    bags.write_bag(tmp_path / "b.bag", {"/odom": ("nav_msgs/msg/Odometry", traj), "/tf": ("tf2_msgs/msg/TFMessage", traj)},
+                   frames=("map", "base"))
+    assert cli.main(["traj", str(tmp_path / "b.bag")]) == 0
+    listing = capsys.readouterr().out
+    assert "2 topics" in listing
+    assert "/odom  nav_msgs/msg/Odometry" in listing and "50 msgs      4.900 s  1700000000.000000" in listing
+    assert cli.main(["traj", str(tmp_path / "b.bag"), "--topic", "/tf", "--frames", "map", "base",
+                     "--export", str(tmp_path / "tf.tum")]) == 0
+    shown = capsys.readouterr().out
+    assert "bag TF map -> base (50 poses of /tf, header stamps)" in shown
+    assert "50 poses, 4.900 s" in shown and "10.00 Hz, path length 4.900 m" in shown
+    back = text.read_trajectory(tmp_path / "tf.tum")
+    np.testing.assert_array_equal(back.t, traj.t) and np.testing.assert_array_equal(back.p, traj.p)
+    # a text file: what it was read as, and its numbers
+    assert cli.main(["traj", str(tmp_path / "tf.tum")]) == 0
+    assert "format csv (8 columns, header names them)" in capsys.readouterr().out
+    assert cli.main(["traj", str(tmp_path / "b.bag"), "--topic", "/odom", "--export", str(tmp_path / "x.kitti")]) == 2
+    assert "x.kitti: export to .txt or .tum (TUM) or .csv" in capsys.readouterr().err
+
+
+def test_a_ros2_bag_folder_is_a_run(tmp_path):
+    import numpy as np
+
+    from epa import cases
+    from epa.readers import bags
+    from epa.trajectory import Trajectory
+
+    t = np.arange(20) * 0.1
+    traj = Trajectory(t, np.zeros((20, 3)), np.tile([0, 0, 0, 1.0], (20, 1)))
+    (tmp_path / "truth").mkdir()
+    (tmp_path / "truth/seq.txt").write_text("1 0 0 0 0 0 0 1\n")
+    (tmp_path / "algs/a/seq").mkdir(parents=True)
+    bags.write_bag(tmp_path / "algs/a/seq/run1", {"/p": ("geometry_msgs/msg/PoseStamped", traj)}, storage="mcap")
+    (tmp_path / "algs/a/seq/run1_timing.txt").write_text("0 12\n")
+    _, found = cases.discover(tmp_path / "truth", tmp_path / "algs")
+    assert [(c.key, c.estimate.name) for c in found] == [("a/seq/run1", "run1")]
