@@ -16,6 +16,8 @@ include: "rules/calibrate.smk"
 include: "rules/align.smk"
 include: "rules/metrics.smk"
 include: "rules/drift.smk"
+include: "rules/consistency.smk"
+include: "rules/efficiency.smk"
 include: "rules/tables.smk"
 
 

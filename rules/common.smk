@@ -46,7 +46,17 @@ def batch_sources(batch):
     braces, which Snakemake cannot take literally (it is still read; an edit to it is not noticed)."""
     paths = {str(f) for k in BATCHES[batch] for p in (CASE_BY_KEY[k].truth, CASE_BY_KEY[k].estimate)
              for f in epa_bags.bag_files(p)}  # a ROS 2 bag folder: its files
+    paths |= {p for k in BATCHES[batch] if (p := timing_of(CASE_BY_KEY[k]))}
     return sorted(p for p in paths if os.path.exists(p) and "{" not in p and "}" not in p)
+
+
+def timing_of(c):
+    """A run's timing file (an edit re-runs its case); a configured one that is missing is the case's error."""
+    try:
+        path = epa_readers.timing_file(c.estimate, epa_readers.options(EPA, "estimate", algorithm=c.algorithm))
+    except EpaError:
+        return None
+    return None if path is None else str(path)
 
 
 def load_case(c):

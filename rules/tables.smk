@@ -1,14 +1,15 @@
 # error_comparison.txt, one .tex per LaTeX table, summary.csv: every case, failed ones marked.
 rule tables:
     input:
-        expand(manifest("drift"), batch=BATCHES),
+        expand(manifest("efficiency"), batch=BATCHES),
     output:
         text=report(f"{RESULTS}/error_comparison.txt", caption="../docs/report_caption.rst", category="Tables"),
         summary=report(f"{RESULTS}/summary.csv", caption="../docs/report_caption.rst", category="Tables"),
         tex=[f"{RESULTS}/tables/{name}.tex" for name in epa_tables.TABLE_NAMES],
+        across_runs=f"{RESULTS}/consistency/summary.csv",
     params:
         cases=lambda wc: sorted(CASE_BY_KEY),  # a function: braces in a name are not wildcards
-        settings={"tables": EPA["tables"], "metrics": EPA["metrics"]},
+        settings={"tables": EPA["tables"], "metrics": EPA["metrics"], "efficiency": EPA["efficiency"]},
         version=EPA_VERSION,
     log:
         f"{RESULTS}/logs/tables.log",

@@ -70,6 +70,8 @@ class Bad:
     ok: bool = False  # a correct result (with a note saying what was inferred), not an error
     setup: str | None = None  # a named special setup done by the runner (links, folders, names)
     blame: str = "est"  # whose path the error line names: est, ref, config or none (the command line)
+    timing: str | None = None  # content of est's <run>_timing.txt
+    keeps_accuracy: bool = False  # the error is a later stage's: metrics.json stands
 
 
 S = GOOD.splitlines(keepends=True)
@@ -229,6 +231,26 @@ CATALOGUE: list[Bad] = [
         est=GOOD, args=("--est-topic", "/pose")),
     Bad("bag-repeated", "eval", "a bag topic with a repeated header stamp", "topic /pose: message 11: stamp 1403636580.45 repeats",
         est_name="est.bag", setup="bag-repeated", args=("--est-topic", "/pose")),
+    # ------------------------------------------------------------------ covariance and timing
+    Bad("timing-columns", "eval", "a timing file with 3 columns",
+        "est_timing.txt: a timing file has 2 columns (<timestamp> <milliseconds>) or an OpenVINS header with 'total'; found 3",
+        est=GOOD, timing="1 2 3\n4 5 6\n", blame="timing", keeps_accuracy=True),
+    Bad("timing-negative", "eval", "a negative frame time", "est_timing.txt:2: negative frame time -3 ms", est=GOOD,
+        timing="1403636580.0 12\n1403636580.05 -3\n", blame="timing", keeps_accuracy=True),
+    Bad("timing-word", "eval", "a word in a timing file", "est_timing.txt:2: not a number: 'slow'", est=GOOD,
+        timing="1403636580.0 12\n1403636580.05 slow\n", blame="timing", keeps_accuracy=True),
+    Bad("timing-missing", "eval", "`--timing` naming a missing file", "timing file not found", est=GOOD,
+        args=("--timing", "nowhere_timing.txt"), blame="timing-arg", keeps_accuracy=True),
+    Bad("timing-other-clock", "eval", "a timing file on another clock (no pose has an entry)",
+        "no pose has a timing entry within 0.01 s", est=GOOD, timing="5.0 12\n5.05 13\n", ok=True),
+    Bad("timing-partial", "eval", "a timing file covering part of the run", "poses have no timing entry within 0.01 s",
+        est=GOOD, timing="".join(f"{t:.9f} 20\n" for t in T[:300]), ok=True),
+    Bad("timing-rate-guessed", "eval", "no sensor rate configured", "sensor rate 20.000 Hz from the timing file's stamps",
+        est=GOOD, timing="".join(f"{t:.9f} 20\n" for t in T), ok=True),
+    Bad("cov-not-pd", "eval", "a covariance that is not positive definite", '"n_not_positive_definite": 1',
+        est=_replace_line(GOOD.replace("\n", " 1 0 0 1 0 1 1 0 0 1 0 1\n"), 4, " ".join(S[4].split() + ["-1", "0", "0", "1", "0", "1"] * 2)),
+        ok=True),
+    Bad("cov-none", "eval", "an estimate without covariance", "the estimate has no covariance", est=GOOD, ok=True),
     # ------------------------------------------------------------------ stages
     Bad("no-overlap", "stage", "estimate and reference that do not overlap in time", "sync: only 0 poses matched within 0.02 s",
         est=_rows(T + 1000, P, Q)),

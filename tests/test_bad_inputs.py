@@ -133,5 +133,5 @@ def test_every_inference_is_a_note_in_load_json(tmp_path):
     assert len(traj) == 400
     assert notes == ["format tum (8 columns)", "stamps read as nanoseconds (above 1e12, so not seconds)",
                      "0 backward and 1 repeated timestamps: sorted, kept the first of each repeat"]
-    _, _, info = pipeline.load(tmp_path / "est.txt", tmp_path / "est.txt", cfg)
+    _, _, info, _ = pipeline.load(tmp_path / "est.txt", tmp_path / "est.txt", cfg)
     assert info["est_notes"] == notes and info["ref_notes"] == notes

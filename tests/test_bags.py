@@ -38,7 +38,10 @@ def test_every_message_type_reads_back_exactly(tmp_path, storage):
         if msgtype.endswith(("PoseWithCovarianceStamped", "Odometry")):
             np.testing.assert_array_equal(back.cov_ros, traj.cov_ros)  # 6x6, ROS order
             np.testing.assert_array_equal(back.cov_pos, traj.cov_ros[:, :3, :3])
-            np.testing.assert_array_equal(back.cov_rot, traj.cov_ros[:, 3:, 3:])
+            # ROS's orientation covariance is about the parent's axes; epica's is the local error
+            r = traj.r
+            np.testing.assert_allclose(back.cov_rot, np.einsum("nba,nbc,ncd->nad", r, traj.cov_ros[:, 3:, 3:], r),
+                                       rtol=1e-12, atol=1e-12)
         else:
             assert back.cov_ros is None
 

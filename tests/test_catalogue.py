@@ -23,11 +23,13 @@ def _write(path: Path, content) -> None:
     path.write_bytes(content if isinstance(content, bytes) else content.encode())
 
 
-def _no_partial_output(out: Path) -> None:
+def _no_partial_output(out: Path, metrics_stand: bool = False) -> None:
     for p in out.rglob("*"):
         assert not p.name.startswith("."), f"temporary file left behind: {p}"
     metrics = out / "06_metrics" / "metrics.json"
-    if metrics.exists():
+    if metrics_stand:  # a later stage's error: the accuracy is complete and stays
+        assert "ate" in json.loads(metrics.read_text())
+    elif metrics.exists():
         assert json.loads(metrics.read_text()).get("status") == "failed", "a failed case has a metrics result"
 
 
@@ -40,6 +42,8 @@ def _eval_paths(tmp: Path, b: catalogue.Bad) -> tuple[Path, Path, list[str]]:
         _write(tmp / "run" / "times.txt", "0\n0.1\n0.2\n0.3\n0.4\n")
     if b.est is not None:
         _write(est, b.est)
+    if b.timing is not None:
+        _write(est.with_name(est.stem + "_timing.txt"), b.timing)
     if b.setup and b.setup.startswith("bag"):
         est = _bag(tmp, est, b.setup)
         if b.setup == "bag-same":
@@ -122,11 +126,12 @@ def test_epa_eval(tmp_path, capsys, caplog, monkeypatch, b):
     lines = [line for line in err.splitlines() if line.startswith("epa: error: ")]
     assert rc == 2 and len(lines) == 1, err
     assert b.expect in lines[0]
-    blamed = {"est": est, "ref": ref, "config": tmp_path / "cfg.yaml", "none": "command line"}
+    blamed = {"est": est, "ref": ref, "config": tmp_path / "cfg.yaml", "none": "command line",
+              "timing": est.with_name(est.stem + "_timing.txt"), "timing-arg": tmp_path / "nowhere_timing.txt"}
     who = "config" if b.where == "config" else b.blame
     assert lines[0].startswith(f"epa: error: {blamed[who]}"), lines[0]
     if out.exists():
-        _no_partial_output(out)
+        _no_partial_output(out, metrics_stand=b.keeps_accuracy)
 
 
 # ----------------------------------------------------------------------------- grids

@@ -96,7 +96,7 @@ def strict_parse_tex(text):
 
 def test_every_tex_table_parses_strictly(grid):
     files = sorted((grid / "results/tables").glob("*.tex"))
-    assert len(files) == 9
+    assert len(files) == 12
     for f in files:
         strict_parse_tex(f.read_text())
 
@@ -116,12 +116,13 @@ def test_rerun_behaviour(grid):
     with open(grid / "algs/vio_body/handheld_office/run2.txt", "a") as fh:
         fh.write("# edited\n")
     jobs = planned_jobs(grid)
-    assert jobs == {"load": 1, "crop": 1, "sync": 1, "calibrate": 1, "align": 1, "metrics": 1, "drift": 1, "tables": 1}
+    assert jobs == {"load": 1, "crop": 1, "sync": 1, "calibrate": 1, "align": 1, "metrics": 1, "drift": 1,
+                    "consistency": 1, "efficiency": 1, "tables": 1}
     smk(grid)
     # a changed stage setting re-runs that stage onward, for every case
     (grid / "cfg.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\nalign: {method: posyaw}\n")
     jobs = planned_jobs(grid)
-    assert jobs == {"align": 6, "metrics": 6, "drift": 6, "tables": 1}
+    assert jobs == {"align": 6, "metrics": 6, "drift": 6, "consistency": 6, "efficiency": 6, "tables": 1}
 
 
 def test_batched_execution_writes_the_same_artifacts_and_tables(grid):

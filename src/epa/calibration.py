@@ -27,10 +27,21 @@ class Extrinsic:
     info: dict = field(default_factory=dict)
 
     def apply(self, est: Trajectory) -> Trajectory:
-        """Sensor poses (scaled) -> body poses: T_VB = T_VC X^-1."""
+        """Sensor poses (scaled) -> body poses: T_VB = T_VC X^-1, covariance carried along.
+
+        With the local orientation error (R_true = R Exp(d)): d_body = R_x d_sensor, and
+        p_b = s p_c - R_b t_x moves the position error by s dp + R_b [t_x]x d_body. Only the
+        orientation and position blocks are known (no cross-covariance), so the lever arm adds
+        R_b [t_x]x Cov_rot [t_x]x^T R_b^T to the position block."""
         r_b = est.r @ self.R.T
         p_b = self.scale * est.p - np.einsum("nab,b->na", r_b, self.t)
-        return Trajectory.from_rp(est.t, r_b, p_b)
+        cov = {}
+        if est.cov_rot is not None and est.cov_pos is not None:
+            cov_rot = self.R @ est.cov_rot @ self.R.T
+            lever = np.einsum("nab,bc->nac", r_b, geometry.skew(self.t))
+            cov_pos = self.scale ** 2 * est.cov_pos + lever @ cov_rot @ lever.transpose(0, 2, 1)
+            cov = {"cov_rot": cov_rot, "cov_pos": cov_pos}
+        return Trajectory.from_rp(est.t, r_b, p_b, **cov)
 
     def translation_unobservable(self) -> bool:
         return bool(self.info.get("translation_unobservable_directions"))

@@ -18,7 +18,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from epa import io, pipeline, readers
+import numpy as np
+
+from epa import alignment, calibration, consistency, io, pipeline, readers
 from epa.errors import EpaError
 
 log = logging.getLogger("epa")
@@ -188,10 +190,17 @@ def _load(case, values, cfg, write_tables):
     source = st and (os.path.abspath(case.truth), st.st_mtime_ns, st.st_size, repr(ref_opts))
     if source and source not in _LOADED:
         _remember(_LOADED, source, pipeline.load_reference(case.truth, cfg, ref_opts))
-    ref, est, info = pipeline.load(case.truth, case.estimate, cfg, reference=_LOADED.get(source) if source else None,
-                                   ref_opts=ref_opts, est_opts=est_opts)
-    values["load"], values["load/load.json"] = (ref, est), info
+    ref, est, info, timing = pipeline.load(case.truth, case.estimate, cfg,
+                                           reference=_LOADED.get(source) if source else None,
+                                           ref_opts=ref_opts, est_opts=est_opts)
+    values["load"], values["load/load.json"], values["load/timing"] = (ref, est), info, timing
     if write_tables:
+        # the efficiency stage reads the run's timing from here, never from the user's folder
+        timing_path = case.path("load", "timing.csv")
+        if timing is not None:
+            io.write_csv(timing_path, timing)
+        elif timing_path.exists():
+            os.unlink(timing_path)
         _write_reference(case.path("load", "ref.tum"), ref, source)
         io.write_tum(case.path("load", "est.tum"), est)
     io.write_json(case.path("load", "load.json"), info)
@@ -228,6 +237,7 @@ def _calibrate(case, values, cfg, write_tables):
     ref, est, info, pairs = pipeline.calibrate_stage(ref, est, cfg, _record(case, values, "sync", "sync.json"),
                                                      cropped=lambda: _trajectories(case, values, "crop"))
     values["calibrate"], values["calibrate/calibrate.json"] = (ref, est), info
+    values["calibrate/pairs"] = pairs if pairs is not None else _pair_indices(case, values, "sync")
     io.write_json(case.path("calibrate", "calibrate.json"), info)
     if write_tables:
         dst = case.path("calibrate", "pairs.csv")
@@ -288,8 +298,62 @@ def _drift(case, values, cfg, write_tables):
     io.write_json(case.path("drift", "drift.json"), summary)
 
 
+def _calibration_steps(case, values):
+    """What Steps 2 and 3 did to the estimate: the applied extrinsic (or None) and the alignment."""
+    calib = _record(case, values, "calibrate", "calibrate.json")
+    ext = None
+    if calib.get("plan", {}).get("apply_extrinsic"):
+        e = calib["extrinsic"]
+        ext = calibration.Extrinsic(R=np.asarray(e["rotation"]), t=np.asarray(e["translation_m"]), scale=e["scale"])
+    return ext, alignment.Similarity.from_dict(_record(case, values, "align", "transform.json"))
+
+
+def _consistency(case, values, cfg, write_tables):
+    ref_m, _ = _matched(case, values, "calibrate")
+    _, est = _trajectories(case, values, "crop")  # as read: its covariance is in its own frames
+    est_m = est.select(_pair_indices(case, values, "calibrate")[1])
+    extrinsic, align = _calibration_steps(case, values)
+    summary, table = consistency.evaluate(ref_m, est_m, align, extrinsic)
+    if summary.get("available") is False and summary.get("reason"):
+        log.info("consistency: %s", summary["reason"])
+    values["consistency/consistency.json"], values["consistency"] = summary, table
+    nees = case.path("consistency", "nees.csv")
+    if write_tables and table:
+        io.write_csv(nees, table)
+    elif nees.exists():
+        os.unlink(nees)
+    io.write_json(case.path("consistency", "consistency.json"), summary)
+
+
+def _efficiency(case, values, cfg, write_tables):
+    load = _record(case, values, "load", "load.json")
+    if load.get("timing_error"):
+        err = load["timing_error"]
+        raise EpaError(err["message"], path=err["path"], line=err["line"])
+    timing = values.get("load/timing")
+    if timing is None and "load" not in values and case.path("load", "timing.csv").exists():
+        timing = io.read_csv(case.path("load", "timing.csv"))
+    if timing is None:
+        summary, table = {"available": False, "reason": "no timing file for this run"}, {}
+    else:
+        if "metrics" not in values:
+            values["metrics"] = {"ape": io.read_csv(case.path("metrics", "ape.csv"))}
+        _, est_m = _matched(case, values, "calibrate")
+        aligned = values["align"][1] if "align" in values else _read_tum(case.path("align", "aligned.tum"))
+        dataset = Path(load["ref_file"]).stem  # discovery names a dataset by its reference's stem
+        summary, table = pipeline.efficiency_stage(est_m.t, values["metrics"]["ape"], aligned.length(),
+                                                   (timing["t"], timing["frame_ms"]), dataset, cfg)
+    values["efficiency/efficiency.json"], values["efficiency"] = summary, table
+    frames = case.path("efficiency", "frames.csv")
+    if write_tables and table:
+        io.write_csv(frames, table)
+    elif frames.exists():
+        os.unlink(frames)
+    io.write_json(case.path("efficiency", "efficiency.json"), summary)
+
+
 STAGES: tuple[Stage, ...] = (
-    Stage("load", "01_load", ("load.json",), ("ref.tum", "est.tum"), ("load",), _load),
+    Stage("load", "01_load", ("load.json",), ("ref.tum", "est.tum", "timing.csv"), ("load",), _load),
     Stage("crop", "02_crop", ("crop.json",), ("ref.tum", "est.tum"), ("crop",), _crop),
     Stage("sync", "03_sync", ("sync.json",), ("pairs.csv", "xcorr.csv"), ("mode", "sync"), _sync),
     Stage("calibrate", "04_calibrate", ("calibrate.json",), ("pairs.csv", "est.tum"), ("mode", "sync", "calibrate"),
@@ -300,6 +364,9 @@ STAGES: tuple[Stage, ...] = (
     Stage("drift", "07_drift", ("drift.json",),
           ("fail_segments.csv", "pose_valid.csv", "rpe_segments_valid.csv", "rpe_time_valid.csv"),
           ("drift", "metrics"), _drift),
+    # consistency and efficiency report "available": false when there is no covariance / timing
+    Stage("consistency", "08_consistency", ("consistency.json",), ("nees.csv",), (), _consistency),
+    Stage("efficiency", "09_efficiency", ("efficiency.json",), ("frames.csv",), ("efficiency",), _efficiency),
 )
 BY_NAME = {s.name: s for s in STAGES}
 NAMES = tuple(s.name for s in STAGES)
@@ -339,7 +406,8 @@ def run_case(ref_path, est_path, out_dir, cfg: dict, *, write_tables: bool = Fal
             if exc.path is None:  # a stage's finding about the case: name the estimate it is about
                 raise EpaError(f"{st.name}: {exc.message}", path=str(est_path)) from None
             raise
-    return {"metrics": values["metrics/metrics.json"], "drift": values["drift/drift.json"]}
+    return {"metrics": values["metrics/metrics.json"], "drift": values["drift/drift.json"],
+            "consistency": values["consistency/consistency.json"], "efficiency": values["efficiency/efficiency.json"]}
 
 
 def clear_tables(case: CaseFolder) -> None:

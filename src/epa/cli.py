@@ -44,6 +44,8 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--ref-frames", nargs=2, metavar=("PARENT", "CHILD"), help="reference TF frames")
     e.add_argument("--est-frames", nargs=2, metavar=("PARENT", "CHILD"), help="estimate TF frames")
     e.add_argument("--stamp", choices=["header", "record"], help="bag stamps: message header (default) or record time")
+    e.add_argument("--timing", help="per-frame timing file of the estimate (default: <est>_timing.txt|csv beside it)")
+    e.add_argument("--rate", type=float, help="sensor rate (Hz) for EA-Drift (default: from the timing file)")
 
     tr = sub.add_parser("traj", help="what is in a trajectory file or bag; export a topic to TUM or CSV")
     tr.add_argument("source", help="text trajectory file, .bag, .mcap or ROS 2 bag folder")
@@ -85,6 +87,10 @@ def _eval_config(args) -> dict:
             else:
                 node.setdefault("algorithms", {}).setdefault(EVAL_ALGORITHM, {}).update(src)
     overrides[("load", "stamp")] = args.stamp
+    overrides[("efficiency", "sensor_rate_hz")] = args.rate
+    if args.timing:
+        cfg.setdefault("sources", {}).setdefault("algorithms", {}).setdefault(EVAL_ALGORITHM, {})["timing"] = str(
+            Path(args.timing).resolve())
     for keys, value in overrides.items():
         if value is None:
             continue
@@ -124,6 +130,13 @@ def _eval(args) -> None:
     ate = record["ate"]["trans_m"]["rmse"]
     print(f"{record['n_matched']} poses matched, eval_source {record['eval_source']}, "
           f"ATE rmse {ate:.4f} m -> {out.path('metrics', 'metrics.json')}")
+    c, e = result["consistency"], result["efficiency"]
+    if c.get("available"):
+        print(f"NEES orientation {c['nees_rot_mean']:.3f}, position {c['nees_pos_mean']:.3f} (3 = consistent),"
+              f" {c['outside_3sigma_pct']:.2f} % outside 3 sigma")
+    if e.get("available"):
+        print(f"frame time mean {e['frame_time_mean_ms']:.2f} ms (p95 {e['frame_time_p95_ms']:.2f}),"
+              f" EA-Drift {e['ea_drift']:.4f} % (seed formula {e['ea_drift_seed']:.4f} %)")
 
 
 def _traj(args) -> None:

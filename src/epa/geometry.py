@@ -93,6 +93,14 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
     return quat_to_rot(q)
 
 
+def skew(v: np.ndarray) -> np.ndarray:
+    """[v]x, the matrix with [v]x w = v x w, for vectors (..., 3)."""
+    v = np.asarray(v, dtype=float)
+    z = np.zeros(v.shape[:-1])
+    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1), np.stack([v[..., 2], z, -v[..., 0]], -1),
+                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+
+
 def rot_z(yaw: float) -> np.ndarray:
     c, s = np.cos(yaw), np.sin(yaw)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

@@ -67,6 +67,9 @@ def read_json(path) -> dict:
 
 
 TUM_HEADER = "# t x y z qx qy qz qw"
+_UPPER = ([0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2])  # 11 12 13 22 23 33
+EUROC_HEADER = ("#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []")
+COV_HEADER = ["pr11", "pr12", "pr13", "pr22", "pr23", "pr33", "pt11", "pt12", "pt13", "pt22", "pt23", "pt33"]
 
 
 # Stage artifacts are lossless (%.17g round-trips a float64 exactly): the next stage reads exactly
@@ -75,13 +78,17 @@ EXACT = "%.17g"
 
 
 def write_tum(path, traj: Trajectory) -> None:
-    data = np.column_stack([traj.t, traj.p, traj.q])
-    _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=EXACT, header=TUM_HEADER[2:]))
+    """A stage's trajectory artifact: TUM, plus the orientation and position covariance upper
+    triangles (the OpenVINS layout, 20 columns) when the trajectory has covariance."""
+    if traj.cov_rot is not None and traj.cov_pos is not None:
+        cov = np.column_stack([traj.cov_rot[:, _UPPER[0], _UPPER[1]], traj.cov_pos[:, _UPPER[0], _UPPER[1]]])
+        data = np.column_stack([traj.t, traj.p, traj.q, cov])
+        header = TUM_HEADER[2:] + " " + " ".join(COV_HEADER)
+    else:
+        data, header = np.column_stack([traj.t, traj.p, traj.q]), TUM_HEADER[2:]
+    _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=EXACT, header=header))
 
 
-_UPPER = ([0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2])  # 11 12 13 22 23 33
-EUROC_HEADER = ("#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []")
-COV_HEADER = ["pr11", "pr12", "pr13", "pr22", "pr23", "pr33", "pt11", "pt12", "pt13", "pt22", "pt23", "pt33"]
 
 
 def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
@@ -122,6 +129,10 @@ def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
 def read_tum_file(path) -> Trajectory:
     """Read a TUM artifact this project wrote (no detection, no repair)."""
     rows = np.loadtxt(path, ndmin=2, comments="#")
+    if rows.shape[1] == 20:  # with covariance (see write_tum)
+        full = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+        return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8], cov_rot=rows[:, 8:14][:, full],
+                          cov_pos=rows[:, 14:20][:, full])
     return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8])
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import alignment, calibration, metrics, readers, sync
+from epa import alignment, calibration, efficiency, metrics, readers, sync
 from epa.readers import bags, text
 from epa.errors import EpaError
 from epa.trajectory import Trajectory
@@ -42,7 +42,17 @@ def load(ref_path, est_path, cfg: dict, reference: tuple[Trajectory, list[str]] 
             "ref_span_s": [float(ref.t[0]), float(ref.t[-1])], "est_span_s": [float(est.t[0]), float(est.t[-1])],
             "ref_notes": ref_notes, "est_notes": est_notes}
     info["sources"] = {"reference": ref_opts, "estimate": est_opts}  # the settings each side was read with
-    return ref, est, info
+    info["covariance"] = est.cov_rot is not None
+    timing = None
+    try:  # a bad timing file costs the case its efficiency, not its accuracy: the efficiency stage reports it
+        timing_path = readers.timing_file(est_path, est_opts)
+        if timing_path is not None:
+            t, ms, what = efficiency.read_timing(timing_path)
+            timing = {"t": t, "frame_ms": ms}
+            info["timing"] = {"file": timing_path.name, "read_as": what, "frames": int(len(t))}
+    except EpaError as exc:
+        info["timing_error"] = {"path": exc.path, "line": exc.line, "message": exc.message}
+    return ref, est, info, timing
 
 
 def crop(ref: Trajectory, est: Trajectory, cfg: dict):
@@ -217,6 +227,28 @@ def drift_stage(tables: dict, cfg: dict):
                  # row k: whether pair k of 06_metrics/rpe_segments.csv (rpe_time.csv) is drift-valid
                  "rpe_segments_valid": {"valid": seg_valid}, "rpe_time_valid": {"valid": time_valid}}
     return summary, artifacts
+
+
+def efficiency_stage(t_est, ape: dict, est_length_m: float, timing, dataset: str, cfg: dict):
+    """Runtime statistics and EA-Drift of one case (see :mod:`epa.efficiency`)."""
+    c = cfg["efficiency"]
+    rate = c["datasets"].get(dataset, c["sensor_rate_hz"])
+    note = None
+    if rate is None:  # not configured: the timing file's own frame rate
+        dt = np.diff(np.sort(timing[0]))
+        rate = float(1.0 / np.median(dt[dt > 0])) if (dt > 0).any() else None
+        if rate is None:
+            raise EpaError("efficiency: set efficiency.sensor_rate_hz (the timing file's stamps give no rate)")
+        note = f"sensor rate {rate:.3f} Hz from the timing file's stamps (efficiency.sensor_rate_hz not set)"
+        log.warning("%s", note)
+    summary, table = efficiency.evaluate(np.asarray(t_est), np.asarray(ape["t"]), np.asarray(ape["trans_m"]),
+                                         est_length_m, timing, rate, c["max_diff"])
+    if note:
+        summary["notes"] = [note]
+    if summary.get("n_without_timing"):
+        log.warning("%d of %d poses have no timing entry within %s s: left out of EA-Drift",
+                    summary["n_without_timing"], summary["n_poses"], c["max_diff"])
+    return summary, table
 
 
 def case_record(load_info: dict, sync_info: dict, calib_info: dict, align_info: dict, summary: dict) -> dict:

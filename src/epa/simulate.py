@@ -27,12 +27,15 @@ SEQUENCES = {
 T_BC_ROT = geometry.so3_exp(np.array([1.2092, -1.2092, 1.2092]))  # camera z forward, x right (120 deg about (1,-1,1))
 T_BC_TRANS = np.array([0.10, -0.05, 0.02])
 ALGORITHMS = {
-    # name: (frame, offsets per run (s), drift scale, file format)
-    "vio_body": ("body", (0.0, 0.0), 1.0, "tum"),
+    # name: (frame, offsets per run (s), drift scale, file format); openvins = TUM + covariance
+    "vio_body": ("body", (0.0, 0.0), 1.0, "openvins"),
     "vio_camera": ("camera", (0.05, -0.03), 1.0, "euroc"),
     "vo_drifty": ("body", (0.0, 0.0), 4.0, "tum"),
 }
 DIVERGING = ("vo_drifty", "urban_drive", "run2", 60.0)  # algorithm, dataset, run, divergence time (s)
+# per-frame processing time (ms): median and log-normal spread; vio_camera is often over its 50 ms period
+TIMING = {"vio_body": (22.0, 0.25), "vio_camera": (42.0, 0.3)}
+NOISE_ROT_DEG, NOISE_POS_M = 0.1, 0.005
 
 
 def _position(name: str, t: np.ndarray) -> np.ndarray:
@@ -85,9 +88,16 @@ def _estimate(seq: str, alg: str, run_index: int, t0: float, rng: np.random.Gene
         pos_drift += 1.5 * late[:, None] ** 2 * direction
         yaw_drift += 0.02 * late ** 2
     rz = geometry.so3_exp(np.stack([np.zeros_like(yaw_drift), np.zeros_like(yaw_drift), yaw_drift], -1))
-    noise_r = geometry.so3_exp(rng.normal(0, np.radians(0.1), (len(t_est), 3)))
+    noise_r = geometry.so3_exp(rng.normal(0, np.radians(NOISE_ROT_DEG), (len(t_est), 3)))
     r_est = rz @ r @ noise_r
-    p_est = np.einsum("nab,nb->na", rz, p) + pos_drift + rng.normal(0, 0.005, (len(t_est), 3))
+    p_est = np.einsum("nab,nb->na", rz, p) + pos_drift + rng.normal(0, NOISE_POS_M, (len(t_est), 3))
+    # the covariance an honest estimator would report: the random walks' variance so far plus the
+    # white noise (orientation: local error; the yaw walk is about the world z axis)
+    var_yaw = np.cumsum((drift * 2e-4) ** 2 * (step + 1e-3))
+    var_pos = np.cumsum((drift * 4e-3) ** 2 * (step + 1e-3))[:, None] * np.array([1.0, 1.0, 0.09])
+    z_local = r_est[:, 2, :]  # world z in body axes: R^T e_z
+    cov_rot = var_yaw[:, None, None] * np.einsum("na,nb->nab", z_local, z_local) + np.radians(NOISE_ROT_DEG) ** 2 * np.eye(3)
+    cov_pos = np.einsum("na,ab->nab", var_pos, np.eye(3)) + NOISE_POS_M ** 2 * np.eye(3)
     if frame == "camera":
         p_est = p_est + np.einsum("nab,b->na", r_est, T_BC_TRANS)
         r_est = r_est @ T_BC_ROT
@@ -96,10 +106,14 @@ def _estimate(seq: str, alg: str, run_index: int, t0: float, rng: np.random.Gene
     origin = rng.normal(0, 5, 3)
     r_est = world @ r_est
     p_est = p_est @ world.T + origin
-    return Trajectory.from_rp(t0 + t_est, r_est, p_est), offset
+    cov = {} if frame == "camera" else {"cov_rot": cov_rot, "cov_pos": cov_pos}  # x/y equal: yaw-invariant
+    return Trajectory.from_rp(t0 + t_est, r_est, p_est, **cov), offset
 
 
 def _write(path: Path, traj: Trajectory, fmt: str) -> None:
+    if fmt == "openvins":
+        io.write_trajectory(path, traj, "openvins")
+        return
     if fmt == "euroc":
         ns = np.round(traj.t * 1e9).astype(np.int64)
         q = traj.q
@@ -134,6 +148,11 @@ def simulate(out_dir, seed: int = 7) -> dict:
                 est, offset = _estimate(seq, alg, run_index, t0, rng, diverge)
                 ext = ".csv" if fmt == "euroc" else ".txt"
                 _write(out / "algorithms" / alg / seq / f"{run}{ext}", est, fmt)
+                if alg in TIMING:  # <run>_timing.txt: <timestamp> <milliseconds>, the naming rule
+                    median, spread = TIMING[alg]
+                    ms = median * np.exp(rng.normal(0, spread, len(est)))
+                    io.write_text(out / "algorithms" / alg / seq / f"{run}_timing.txt",
+                                  "".join(f"{t:.6f} {m:.3f}\n" for t, m in zip(est.t, ms)))
                 manifest["cases"][f"{alg}/{seq}/{run}"] = {"frame": frame, "time_offset_s": offset,
                                                            "diverges_at_s": diverge, "format": fmt}
     io.write_json(out / "manifest.json", manifest)

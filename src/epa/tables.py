@@ -45,6 +45,8 @@ class CaseResult:
     drift: dict = field(default_factory=dict)
     segments: dict = field(default_factory=dict)
     time: dict = field(default_factory=dict)
+    consistency: dict = field(default_factory=dict)  # 08_consistency/consistency.json
+    efficiency: dict = field(default_factory=dict)  # 09_efficiency/efficiency.json
 
     @property
     def ok(self) -> bool:
@@ -73,6 +75,11 @@ def collect(keys: list[str], results_dir) -> list[CaseResult]:
                         **io.read_csv(case.path("drift", "rpe_time_valid.csv"))}
             if res.drift.get("status"):
                 res.status = res.drift["status"]
+            for stage in ("consistency", "efficiency"):
+                path = case.path(stage, stage + ".json")
+                if path.exists():
+                    record, failed = read_record(path)
+                    setattr(res, stage, record if failed is None else {"available": False, "failed": failed})
         out.append(res)
     return out
 
@@ -162,6 +169,29 @@ def _all_nan_valid(runs, valid):
     return valid and all(c.drift["global_failed"] or not (_num(c.drift["success_rate_distance_pct"]) > 0) for c in runs)
 
 
+def _nees(runs) -> _Cell:
+    have = [c.consistency for c in runs if c.consistency.get("available")]
+    if not have:
+        return _Cell(None)
+    return _Cell((_nanmean(h["nees_rot_mean"] for h in have), _nanmean(h["nees_pos_mean"] for h in have)))
+
+
+def _ea_drift(runs) -> _Cell:
+    have = [c.efficiency for c in runs if c.efficiency.get("available")]
+    return _Cell((_nanmean(h["ea_drift"] for h in have),), pair=False) if have else _Cell(None, pair=False)
+
+
+def _runtime(grid, alg) -> list[_Cell]:
+    """Frame times pooled over every run of an algorithm (each run's statistics, frame-weighted)."""
+    eff = [c.efficiency for c in grid if c.algorithm == alg and c.efficiency.get("available")]
+    frames = np.array([e["frames"] for e in eff], float)
+    w = frames / frames.sum()
+    return [_Cell((float(np.sum(w * [e["frame_time_mean_ms"] for e in eff])),), pair=False),
+            _Cell((float(np.sum(w * [e["frame_time_p95_ms"] for e in eff])),), pair=False),
+            _Cell((float(max(e["frame_time_max_ms"] for e in eff)),), pair=False),
+            _Cell((float(np.sum(w * [e["frames_over_period_pct"] for e in eff])),), pair=False)]
+
+
 def _success(runs) -> _Cell:
     if not runs:
         return _Cell(None, pair=False)
@@ -194,6 +224,25 @@ def build_tables(grid: list[CaseResult], segments, decimals: int = 3) -> list[tu
         rows = [(a, [fn(_ok_runs(grid, a), s) for s in segments]) for a in algs]
         out.append((name, title, _latex_rows(seg_labels, rows, decimals), len(segments) + 1))
 
+    def marked(rows_of, key, missing):
+        """Rows for algorithms with the data; the others named, their cells empty, never faked."""
+        rows = []
+        for a in algs:
+            have = any(c.algorithm == a and getattr(c, key).get("available") for c in grid)
+            cells = [rows_of(_ok_runs(grid, a, d)) if have else _Cell(None, cells_pair[key]) for d in datasets]
+            rows.append((a if have else f"{a} ({missing})", cells + [_average(cells, cells_pair[key])]))
+        return rows
+
+    cells_pair = {"consistency": True, "efficiency": False}
+    extra = [("nees", "NEES LATEX TABLE (ORI / POS, 3 = CONSISTENT)", marked(_nees, "consistency", "no covariance"),
+              datasets + ["Average"]),
+             ("ea_drift", "EA-DRIFT LATEX TABLE (% PER-FRAME NORMALISED, SEE DOCS)",
+              marked(_ea_drift, "efficiency", "no timing"), datasets + ["Average"])]
+    runtime_rows = [(a, _runtime(grid, a)) for a in algs if any(c.algorithm == a and c.efficiency.get("available")
+                                                                 for c in grid)]
+    extra.append(("runtime", "RUNTIME LATEX TABLE (FRAME TIME MS: MEAN, P95, MAX; % FRAMES OVER SENSOR PERIOD)",
+                  runtime_rows, ["mean", "p95", "max", "over period %"]))
+
     for prefix, valid, tag in (("", False, "FULL TRAJECTORY"), ("valid_", True, "DRIFT-VALID ONLY")):
         if valid:
             per_dataset("success_rate", "DRIFT-VALID SUCCESS RATE LATEX TABLE (% PATH LENGTH)", _success, pair=False,
@@ -205,6 +254,8 @@ def build_tables(grid: list[CaseResult], segments, decimals: int = 3) -> list[tu
                     lambda r, s: _drift_rate(r, valid, s))
         per_dataset(prefix + "rpe_time_1s", f"{tag} 1S TIME RPE LATEX TABLE (ROT DEG / TRANS M)",
                     lambda r: _mean_pair(r, "time", valid))
+    for name, title, rows, header in extra:
+        out.append((name, title, _latex_rows(header, rows, decimals), len(header) + 1))
     return out
 
 
@@ -279,7 +330,8 @@ def tex_document(title: str, rows: list[str], ncols: int) -> str:
 SUMMARY_FIXED = ["algorithm", "dataset", "run", "status", "eval_source", "n_matched", "ate_trans_rmse_m",
                  "ate_rot_rmse_deg", "time_rpe_1s_trans_mean_m", "time_rpe_1s_rot_mean_deg", "time_offset_s",
                  "extrinsic_rot_deg", "extrinsic_trans_m", "success_rate_distance_pct", "success_rate_time_pct",
-                 "global_failed", "knee_threshold_m", "fail_segments", "diverged_at_s"]
+                 "global_failed", "knee_threshold_m", "fail_segments", "diverged_at_s", "nees_rot_mean",
+                 "nees_pos_mean", "outside_3sigma_pct", "ea_drift", "frame_time_mean_ms", "notes"]
 
 
 def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict]]:
@@ -302,6 +354,13 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
                        success_rate_time_pct=_num(d.get("success_rate_time_pct")),
                        global_failed=d.get("global_failed"), knee_threshold_m=_stat(d, "knee", "threshold_m"),
                        fail_segments=d.get("n_fail_segments"), diverged_at_s=d.get("diverged_at_s"))
+            if c.consistency.get("available"):  # empty without covariance
+                row.update({k: c.consistency[k] for k in ("nees_rot_mean", "nees_pos_mean", "outside_3sigma_pct")})
+            if c.efficiency.get("available"):  # empty without timing
+                row.update(ea_drift=c.efficiency["ea_drift"], frame_time_mean_ms=c.efficiency["frame_time_mean_ms"])
+            # a stage after drift that failed (a broken timing file) leaves the accuracy standing
+            row["notes"] = "; ".join(getattr(c, s)["failed"] for s in ("consistency", "efficiency")
+                                     if getattr(c, s).get("failed")) or None
             for s in segments:
                 L = segment_key(s)
                 row[f"rpe_{L}m_trans_mean_m"] = _stat(m, "rpe_distance", L, "trans_m", "mean")
@@ -322,7 +381,7 @@ def summary_csv(grid, segments) -> str:
 
 
 TABLE_NAMES = ("ate", "rpe_distance", "drift_rate", "rpe_time_1s", "success_rate",
-               "valid_ate", "valid_rpe_distance", "valid_drift_rate", "valid_rpe_time_1s")
+               "valid_ate", "valid_rpe_distance", "valid_drift_rate", "valid_rpe_time_1s", "nees", "ea_drift", "runtime")
 
 
 def write_all(grid: list[CaseResult], results_dir, cfg: dict) -> None:
@@ -334,6 +393,38 @@ def write_all(grid: list[CaseResult], results_dir, cfg: dict) -> None:
     io.write_text(results_dir / "summary.csv", summary_csv(grid, segments))
     for name, title, rows, n in build_tables(grid, segments, decimals):
         io.write_text(results_dir / "tables" / f"{name}.tex", tex_document(title, rows, n))
+    write_across_runs(grid, results_dir)
+
+
+def write_across_runs(grid: list[CaseResult], results_dir) -> None:
+    """results/consistency/<algorithm>/<dataset>.csv: RMSE(t) and (with covariance) NEES(t) over the
+    reference stamps all runs share; results/consistency/summary.csv: their averages over time."""
+    from epa import consistency
+
+    results_dir = Path(results_dir)
+    rows = []
+    for alg in sorted({c.algorithm for c in grid}):
+        for ds in sorted({c.dataset for c in grid if c.algorithm == alg}):
+            runs = {}
+            for c in _ok_runs(grid, alg, ds):
+                case = CaseFolder(case_dir(results_dir, f"{c.algorithm}/{c.dataset}/{c.run}"))
+                ape = io.read_csv(case.path("metrics", "ape.csv"))
+                nees = case.path("consistency", "nees.csv")
+                table = io.read_csv(nees) if c.consistency.get("available") and nees.exists() else {}
+                runs[c.run] = {"t": ape["t"], "trans_m": ape["trans_m"], "rot_deg": ape["rot_deg"],
+                               "nees_pos": table.get("nees_pos"), "nees_rot": table.get("nees_rot")}
+            if not runs:
+                continue
+            summary, table = consistency.across_runs(runs)
+            io.write_csv(results_dir / "consistency" / alg / f"{ds}.csv", table)
+            rows.append({"algorithm": alg, "dataset": ds, **summary})
+    cols = ["algorithm", "dataset", "runs", "n_common", "rmse_pos_m", "rmse_rot_deg", "nees_pos_mean", "nees_rot_mean"]
+    buf = _io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n", restval="")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r.get(k) is None else (f"{r[k]:.9g}" if isinstance(r[k], float) else r[k])) for k in cols})
+    io.write_text(results_dir / "consistency" / "summary.csv", buf.getvalue())
 
 
 def make(keys: list[str], results_dir, cfg: dict) -> list[tuple[str, str]]:

@@ -22,7 +22,9 @@ from epa.errors import EpaError
 from epa.trajectory import Trajectory
 
 log = logging.getLogger("epa")
-KEYS = ("format", "topic", "frames", "static_topic", "stamp", "time_unit", "unsorted", "kitti_rate")
+KEYS = ("format", "topic", "frames", "static_topic", "stamp", "time_unit", "unsorted", "kitti_rate", "timing",
+        "orientation_covariance")
+TIMING_DEFAULTS = ("{run}_timing.txt", "{run}_timing.csv")
 
 
 def options(cfg: dict, side: str, *, algorithm: str | None = None, dataset: str | None = None) -> dict:
@@ -30,13 +32,31 @@ def options(cfg: dict, side: str, *, algorithm: str | None = None, dataset: str 
     load = cfg["load"]
     opts = {"format": load["truth_format" if side == "reference" else "estimate_format"], "topic": None,
             "frames": None, "static_topic": "/tf_static", "stamp": load["stamp"], "time_unit": load["time_unit"],
-            "unsorted": load["unsorted"], "kitti_rate": load["kitti_rate"]}
+            "unsorted": load["unsorted"], "kitti_rate": load["kitti_rate"], "timing": None,
+            "orientation_covariance": "local"}
     src = cfg.get("sources") or {}
     layers = ([src.get("reference") or {}, (src.get("datasets") or {}).get(dataset) or {}] if side == "reference"
               else [(src.get("algorithms") or {}).get(algorithm) or {}])
     for layer in layers:
         opts.update({k: v for k, v in layer.items() if v is not None})
     return opts
+
+
+def timing_file(run_path, opts: dict) -> Path | None:
+    """A run's per-frame timing file: ``opts["timing"]`` (``{run}`` = the run's name, relative to
+    its folder; an error when missing) or the naming rule ``<run>_timing.txt|csv`` (None when absent)."""
+    run_path = Path(run_path)
+    name = run_path.name if run_path.is_dir() else run_path.stem
+    if opts.get("timing"):
+        path = run_path.parent / opts["timing"].replace("{run}", name)
+        if not path.is_file():
+            raise EpaError(f"timing file not found (sources timing: {opts['timing']})", path=str(path))
+        return path
+    for pattern in TIMING_DEFAULTS:
+        path = run_path.parent / pattern.replace("{run}", name)
+        if path.is_file():
+            return path
+    return None
 
 
 def read(path, opts: dict, *, notes: list | None = None, kitti_times=None) -> Trajectory:
@@ -59,9 +79,16 @@ def read(path, opts: dict, *, notes: list | None = None, kitti_times=None) -> Tr
     if opts.get("topic") or opts.get("frames"):
         raise EpaError("a topic is set for this source but it is not a bag (.bag, .mcap or a ROS 2 bag folder)",
                        path=str(path))
-    return text.read_trajectory(path, opts.get("format", "auto"), time_unit=opts.get("time_unit", "auto"),
-                              on_unsorted=opts.get("unsorted", "error"), kitti_rate=opts.get("kitti_rate", 10.0),
-                              kitti_times=kitti_times, notes=notes)
+    traj = text.read_trajectory(path, opts.get("format", "auto"), time_unit=opts.get("time_unit", "auto"),
+                                on_unsorted=opts.get("unsorted", "error"), kitti_rate=opts.get("kitti_rate", 10.0),
+                                kitti_times=kitti_times, notes=notes)
+    if traj.cov_rot is not None and opts.get("orientation_covariance") == "global":
+        r = traj.r  # to epica's local convention: C_local = R^T C_global R
+        traj = Trajectory(traj.t, traj.p, traj.q, cov_rot=np.einsum("nba,nbc,ncd->nad", r, traj.cov_rot, r),
+                          cov_pos=traj.cov_pos)
+        if notes is not None:
+            notes.append("orientation covariance converted from global to local")
+    return traj
 
 
 def _bag_order(traj: Trajectory, path: Path, opts: dict, notes: list) -> Trajectory:

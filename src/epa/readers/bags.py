@@ -270,9 +270,13 @@ def _finish(t, p, q, cov36) -> Trajectory:
         raise EpaError(f"message {int(np.argmax(norms < 1e-6)) + 1}: zero quaternion")
     q = q / norms[:, None] if len(t) else q
     extra = {}
-    if cov36 is not None:
-        c = cov36.reshape(-1, 6, 6)  # ROS order: x y z, rotation about x y z
-        extra = {"cov_pos": c[:, :3, :3].copy(), "cov_rot": c[:, 3:, 3:].copy(), "cov_ros": c.copy()}
+    if cov36 is not None and np.any(cov36):  # all zeros (a common placeholder) is no covariance
+        c = cov36.reshape(-1, 6, 6)  # ROS order: x y z, rotation about the fixed x y z axes
+        r = geometry.quat_to_rot(q)
+        # epica's convention is the local (body-frame) orientation error, as OpenVINS writes it:
+        # R_true = R Exp(d), while ROS's is about the parent's axes, R_true = Exp(d_world) R.
+        cov_rot = np.einsum("nba,nbc,ncd->nad", r, c[:, 3:, 3:], r)
+        extra = {"cov_pos": c[:, :3, :3].copy(), "cov_rot": cov_rot, "cov_ros": c.copy()}
     return Trajectory(t, p, q, **extra)
 
 

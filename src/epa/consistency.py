@@ -1,0 +1,118 @@
+"""Consistency: is the estimator's own uncertainty honest? NEES per pose, ±3σ bounds, and RMSE(t) /
+NEES(t) across runs.
+
+Convention: orientation covariance is of the *local* (body-frame) error, R_true = R_est Exp(d),
+as OpenVINS writes it (its JPL quaternion error on the global-to-IMU rotation is this error);
+ROS covariances are converted to it when read (see :mod:`epa.readers.bags`).
+
+The errors are taken in the estimate's own frames, where its covariance is valid: the matched
+reference is mapped into the estimate's world by the inverse of Step 3 and into its sensor frame by
+the inverse of Step 2 (never the covariance into the reference's).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from epa import geometry
+from epa.alignment import Similarity
+from epa.trajectory import Trajectory
+
+
+def reference_in_estimate_frame(ref: Trajectory, alignment: Similarity, extrinsic=None) -> tuple[np.ndarray, np.ndarray]:
+    """Rotations and positions of the (matched) reference poses expressed as the estimate's poses
+    would be: Step 3 undone (world), then Step 2 undone (body -> sensor, scale)."""
+    inv = alignment.inverse()
+    r = inv.R @ ref.r
+    p = inv.s * ref.p @ inv.R.T + inv.t
+    if extrinsic is not None:  # Extrinsic.apply maps sensor -> body: r_b = r_c R_x^T, p_b = s p_c - r_b t_x
+        p = (p + np.einsum("nab,b->na", r, extrinsic.t)) / extrinsic.scale
+        r = r @ extrinsic.R
+    return r, p
+
+
+def _quadratic(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """e^T C^-1 e per pose; nan where C is not positive definite."""
+    out = np.full(len(e), np.nan)
+    try:
+        chol = np.linalg.cholesky(cov)
+        good = np.ones(len(e), bool)
+    except np.linalg.LinAlgError:  # some are not: do them one by one
+        good = np.array([_is_pd(c) for c in cov])
+        chol = np.linalg.cholesky(np.where(good[:, None, None], cov, np.eye(3)))
+    y = np.linalg.solve(chol, e[..., None])[..., 0]
+    out[good] = np.sum(y * y, axis=1)[good]
+    return out
+
+
+def _is_pd(c: np.ndarray) -> bool:
+    try:
+        np.linalg.cholesky(c)
+        return True
+    except np.linalg.LinAlgError:
+        return False
+
+
+def evaluate(ref: Trajectory, est: Trajectory, alignment: Similarity, extrinsic=None) -> tuple[dict, dict]:
+    """NEES and ±3σ statistics of matched poses. ``est`` is the estimate as read (with its own
+    covariance); ``ref`` the matched reference; ``alignment``/``extrinsic`` what Steps 3/2 found."""
+    if est.cov_rot is None or est.cov_pos is None:
+        return {"available": False, "reason": "the estimate has no covariance"}, {}
+    r_ref, p_ref = reference_in_estimate_frame(ref, alignment, extrinsic)
+    e_pos = p_ref - est.p
+    e_rot = geometry.so3_log(np.einsum("nba,nbc->nac", est.r, r_ref))  # R_ref = R_est Exp(e_rot)
+    nees_pos = _quadratic(e_pos, est.cov_pos)
+    nees_rot = _quadratic(e_rot, est.cov_rot)
+    sig_pos = np.sqrt(np.clip(np.diagonal(est.cov_pos, axis1=1, axis2=2), 0, None))
+    sig_rot = np.sqrt(np.clip(np.diagonal(est.cov_rot, axis1=1, axis2=2), 0, None))
+    valid = np.isfinite(nees_pos) & np.isfinite(nees_rot)
+    outside = np.concatenate([np.abs(e_pos) > 3 * sig_pos, np.abs(e_rot) > 3 * sig_rot], axis=1)[valid]
+    axes = ["pos_x", "pos_y", "pos_z", "rot_x", "rot_y", "rot_z"]
+    n = int(valid.sum())
+    summary = {
+        "available": n > 0, "n": n, "n_not_positive_definite": int((~valid).sum()),
+        "convention": "local orientation error, R_true = R_est Exp(e); errors in the estimate's frames",
+        "nees_pos_mean": float(np.mean(nees_pos[valid])) if n else None,
+        "nees_rot_mean": float(np.mean(nees_rot[valid])) if n else None,
+        "nees_pos_median": float(np.median(nees_pos[valid])) if n else None,
+        "nees_rot_median": float(np.median(nees_rot[valid])) if n else None,
+        # mean over the six axes of the share of poses outside ±3σ (0.27 % for a consistent Gaussian)
+        "outside_3sigma_pct": float(100 * outside.mean()) if n else None,
+        "outside_3sigma_pct_by_axis": dict(zip(axes, (100 * outside.mean(axis=0)).tolist())) if n else None,
+    }
+    if not n:
+        summary["reason"] = "no pose has a positive-definite covariance"
+    table = {"t": est.t, "nees_pos": nees_pos, "nees_rot": nees_rot,
+             **{f"err_{a}": e_pos[:, k] for k, a in enumerate("xyz")},
+             **{f"sigma_{a}": sig_pos[:, k] for k, a in enumerate("xyz")},
+             **{f"err_rot_{a}": e_rot[:, k] for k, a in enumerate("xyz")},
+             **{f"sigma_rot_{a}": sig_rot[:, k] for k, a in enumerate("xyz")}}
+    return summary, table
+
+
+def across_runs(runs: dict[str, dict]) -> tuple[dict, dict]:
+    """RMSE(t) and NEES(t) over the reference stamps every run matched. ``runs``: run ->
+    {"t": reference stamps, "trans_m", "rot_deg": APE per pose, "nees_pos", "nees_rot": NEES per
+    pose or None}. NEES(t) only when every run has covariance."""
+    if not runs:
+        return {"runs": 0}, {}
+    keys = {k: np.round(np.asarray(r["t"]) * 1e6).astype(np.int64) for k, r in runs.items()}  # µs: stamps as read
+    common = None
+    for stamps in keys.values():
+        common = stamps if common is None else np.intersect1d(common, stamps)
+    sel = {k: np.searchsorted(stamps, common) for k, stamps in keys.items()}
+
+    def stack(name):
+        return np.array([np.asarray(runs[k][name], float)[sel[k]] for k in runs])
+
+    table = {"t": common / 1e6, "rmse_pos_m": np.sqrt(np.mean(stack("trans_m") ** 2, axis=0)),
+             "rmse_rot_deg": np.sqrt(np.mean(stack("rot_deg") ** 2, axis=0))}
+    if all(runs[k].get("nees_pos") is not None for k in runs):
+        table["nees_pos"] = np.nanmean(stack("nees_pos"), axis=0) if len(common) else np.zeros(0)
+        table["nees_rot"] = np.nanmean(stack("nees_rot"), axis=0) if len(common) else np.zeros(0)
+    n = len(common)
+    mean = lambda name: float(np.sqrt(np.mean(table[name] ** 2))) if n else None  # noqa: E731
+    summary = {"runs": len(runs), "n_common": int(n), "rmse_pos_m": mean("rmse_pos_m"), "rmse_rot_deg": mean("rmse_rot_deg"),
+               "nees_pos_mean": float(np.nanmean(table["nees_pos"])) if n and "nees_pos" in table else None,
+               "nees_rot_mean": float(np.nanmean(table["nees_rot"])) if n and "nees_rot" in table else None}
+    return summary, table

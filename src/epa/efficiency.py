@@ -1,0 +1,122 @@
+"""Efficiency: per-frame processing time, and the Efficiency-Aware Drift rate (EA-Drift, seed 003).
+
+EA-Drift = sqrt(sum_i w_i |e_i|^2) / L, w_i = exp((t_i - T) / T), where e_i is the translation error
+of pose i after the rigid alignment, t_i the processing time of frame i and T = 1/f the sensor
+period, both in seconds (the seed writes (t_i - 1/f)/f with t_i in ms; only t_i and T in one unit
+and the difference divided by T make the weight dimensionless and exactly 1 when a frame takes one
+period), and L the estimate's path length. Reported in % like the drift rate.
+
+Three variants:
+- ``ea_drift_seed``: the formula above. It grows with sqrt(n): at 200 Hz it is ~3x the 20 Hz value
+  for the same accuracy, so it cannot compare algorithms that output at different rates.
+- ``ea_drift`` (printed in the tables): per-frame normalised, sqrt(sum w e^2 / n) / L; with every
+  frame on time (w = 1) it is ATE rmse / L.
+- ``ea_drift_m2ud``: the M2UD EA-evo patch as its code does it, for comparison with its numbers:
+  the weight multiplies the error before squaring (so enters squared), timing is matched to each
+  reference stamp by the first entry within ±0.15 s, L is the estimate's path length.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from epa.errors import EpaError
+
+
+def read_timing(path) -> tuple[np.ndarray, np.ndarray, str]:
+    """(stamps in s, frame times in ms, what was read) from ``<timestamp> <milliseconds>`` text or
+    OpenVINS's timing CSV (header ``timestamp (sec),...,total``, in seconds: its ``total``)."""
+    from epa.readers import text
+
+    path = Path(path)
+    tab = text._read_table(path)  # the text readers' parsing and one-line errors
+    header = [h.strip().lower() for h in (tab.header or [])]
+    rows = tab.rows
+    if "total" in header:
+        if len(header) != rows.shape[1]:
+            raise EpaError(f"the header names {len(header)} columns but the rows have {rows.shape[1]}", path=str(path))
+        t, ms, what = rows[:, 0], rows[:, header.index("total")] * 1000.0, "OpenVINS timing CSV (total, s)"
+    elif rows.shape[1] == 2:
+        t, ms, what = rows[:, 0], rows[:, 1], "<timestamp> <ms>"
+    else:
+        raise EpaError(f"a timing file has 2 columns (<timestamp> <milliseconds>) or an OpenVINS header with"
+                       f" 'total'; found {rows.shape[1]} columns", path=str(path))
+    if np.median(np.abs(t)) > text.NS_THRESHOLD:
+        t, what = t / 1e9, what + ", stamps in ns"
+    if (ms < 0).any():
+        k = int(np.argmax(ms < 0))
+        raise EpaError(f"negative frame time {ms[k]:g} ms", path=str(path), line=tab.line_of(k))
+    return t, ms, what
+
+
+def match_nearest(t_pose: np.ndarray, t_timing: np.ndarray, max_diff: float) -> np.ndarray:
+    """Index of the timing entry nearest each pose stamp, -1 where none is within ``max_diff``."""
+    order = np.argsort(t_timing, kind="stable")
+    ts = t_timing[order]
+    k = np.clip(np.searchsorted(ts, t_pose), 1, max(len(ts) - 1, 1))
+    left, right = ts[np.maximum(k - 1, 0)], ts[np.minimum(k, len(ts) - 1)]
+    pick = np.where(np.abs(t_pose - left) <= np.abs(right - t_pose), k - 1, k)
+    pick = np.clip(pick, 0, len(ts) - 1)
+    ok = np.abs(ts[pick] - t_pose) <= max_diff
+    return np.where(ok, order[pick], -1)
+
+
+def match_m2ud(t_ref: np.ndarray, t_timing: np.ndarray, window: float = 0.15) -> np.ndarray:
+    """The M2UD patch's matching: for each reference stamp, the *first* timing entry (in file order)
+    strictly within ±window; -1 where none."""
+    inside = np.abs(t_timing[None, :] - t_ref[:, None]) < window
+    first = np.argmax(inside, axis=1)
+    return np.where(inside.any(axis=1), first, -1)
+
+
+def weights(frame_ms: np.ndarray, rate_hz: float) -> np.ndarray:
+    period_s = 1.0 / rate_hz
+    return np.exp((frame_ms / 1000.0 - period_s) / period_s)
+
+
+def ea_drift(err_m: np.ndarray, frame_ms: np.ndarray, rate_hz: float, path_length_m: float) -> dict:
+    """The seed's EA-Drift and the per-frame normalised variant, in %."""
+    w = weights(frame_ms, rate_hz)
+    s = float(np.sum(w * err_m ** 2))
+    n = len(err_m)
+    return {"ea_drift_seed": 100 * np.sqrt(s) / path_length_m,
+            "ea_drift": 100 * np.sqrt(s / n) / path_length_m if n else None}
+
+
+def ea_drift_m2ud(err_m: np.ndarray, frame_ms: np.ndarray, rate_hz: float, path_length_m: float) -> float:
+    frame_time_ms = 1000.0 / rate_hz
+    w = np.exp((frame_ms - frame_time_ms) / frame_time_ms)
+    return float(100 * np.sqrt(np.sum((w * err_m) ** 2)) / path_length_m)
+
+
+def runtime(frame_ms: np.ndarray, rate_hz: float) -> dict:
+    period_ms = 1000.0 / rate_hz
+    over = frame_ms > period_ms
+    return {"frames": int(len(frame_ms)), "frame_time_mean_ms": float(np.mean(frame_ms)),
+            "frame_time_p95_ms": float(np.percentile(frame_ms, 95)), "frame_time_max_ms": float(np.max(frame_ms)),
+            "frames_over_period": int(over.sum()), "frames_over_period_pct": float(100 * over.mean()),
+            "sensor_period_ms": period_ms}
+
+
+def evaluate(t_est: np.ndarray, t_ref: np.ndarray, err_m: np.ndarray, est_path_length_m: float,
+             timing: tuple[np.ndarray, np.ndarray], rate_hz: float, max_diff: float) -> tuple[dict, dict]:
+    """Efficiency of one case. ``t_est``/``t_ref``: matched stamps; ``err_m``: APE per matched pose."""
+    t_tim, ms = timing
+    idx = match_nearest(t_est, t_tim, max_diff)
+    have = idx >= 0
+    n_missing = int((~have).sum())
+    summary = {"sensor_rate_hz": rate_hz, "timing_max_diff_s": max_diff, "n_poses": int(len(t_est)),
+               "n_without_timing": n_missing, **runtime(ms, rate_hz)}
+    if not have.any():
+        summary.update(available=False, reason=f"no pose has a timing entry within {max_diff} s")
+        return summary, {}
+    summary["available"] = True
+    summary.update(ea_drift(err_m[have], ms[idx[have]], rate_hz, est_path_length_m))
+    m2 = match_m2ud(t_ref, t_tim)
+    summary["ea_drift_m2ud"] = (ea_drift_m2ud(err_m, ms[m2], rate_hz, est_path_length_m) if (m2 >= 0).all()
+                                else None)  # the patch stops when a pose has no timing
+    table = {"t": t_est, "frame_ms": np.where(have, ms[np.maximum(idx, 0)], np.nan),
+             "weight": np.where(have, weights(ms[np.maximum(idx, 0)], rate_hz), np.nan), "err_m": err_m}
+    return summary, table
