@@ -38,7 +38,9 @@ def _trajectory_files(folder: Path, skipped: list[Path]):
             continue  # hidden (.DS_Store, editor swap files): never data
         if p.is_dir():
             (files if (p / "metadata.yaml").is_file() else skipped).append(p)  # a ROS 2 bag is a folder
-        elif (p.is_file() or p.is_symlink()) and not p.name.endswith(SIDE_FILES):
+        elif p.name.endswith(SIDE_FILES):
+            continue  # a side file by the documented rule: expected, so not worth a warning
+        elif p.is_file() or p.is_symlink():
             files.append(p)
         else:
             skipped.append(p)

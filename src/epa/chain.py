@@ -338,10 +338,13 @@ def _efficiency(case, values, cfg, write_tables):
     else:
         if "metrics" not in values:
             values["metrics"] = {"ape": io.read_csv(case.path("metrics", "ape.csv"))}
-        _, est_m = _matched(case, values, "calibrate")
-        aligned = values["align"][1] if "align" in values else _read_tum(case.path("align", "aligned.tum"))
+        if "calibrate/matched" in values or "calibrate" in values:
+            t_est = _matched(case, values, "calibrate")[1].t
+        else:  # the matched estimate stamps, without parsing a trajectory
+            t_est = io.read_csv(case.path("calibrate", "pairs.csv"))["t_est"]
+        length = _record(case, values, "metrics", "metrics.json")["est_length_m"]
         dataset = Path(load["ref_file"]).stem  # discovery names a dataset by its reference's stem
-        summary, table = pipeline.efficiency_stage(est_m.t, values["metrics"]["ape"], aligned.length(),
+        summary, table = pipeline.efficiency_stage(t_est, values["metrics"]["ape"], length,
                                                    (timing["t"], timing["frame_ms"]), dataset, cfg)
     values["efficiency/efficiency.json"], values["efficiency"] = summary, table
     frames = case.path("efficiency", "frames.csv")

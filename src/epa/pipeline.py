@@ -195,6 +195,7 @@ def metrics_stage(ref: Trajectory, est: Trajectory, cfg: dict):
                        " drift rate and success rate are undefined")
     summary, tables = metrics.evaluate(ref, est, segments=c["segments"], segment_tol=c["segment_tol"],
                                        time_delta=c["time_delta"], time_tol=c["time_tol"], rpe=c["rpe"])
+    summary["est_length_m"] = est.length()  # the aligned estimate's matched path (EA-Drift's L)
     # an empty segment length is shown as empty, never as a number; say why once, here
     summary["notes"] = [f"no {key} m segment fits in the {length:.3f} m matched path: its RPE and drift rate are empty"
                         for key, rpe in summary["rpe_distance"].items() if rpe["trans_m"]["n"] == 0]
