@@ -3,7 +3,8 @@ through Steps 1-3, the real OpenVINS runs, and a hand-computed EA-Drift."""
 import numpy as np
 import pytest
 
-from epa import chain, consistency, efficiency, geometry, io, settings, simulate
+from epa import chain, geometry, io, settings, simulate
+from epa.metrics import consistency, efficiency
 from epa.trajectory import Trajectory
 
 X_ROT = geometry.so3_exp(np.array([1.2092, -1.2092, 1.2092]))  # camera: 120° about (1,-1,1)

@@ -1,14 +1,15 @@
 import numpy as np
 import pytest
 
-from epa import chain, drift, io, pipeline, settings
+from epa import chain, io, pipeline, settings
+from epa.metrics import drift
 
 CFG = settings.defaults()
 
 
 def run(t, ape, dist=None, cfg=CFG):
     """Drift stage on a synthetic case: straight line at 2 m/s, APE series given, rotation exact."""
-    from epa.metrics import time_pairs
+    from epa.metrics.accuracy import time_pairs
 
     dist = 2.0 * (t - t[0]) if dist is None else dist
     i, j = time_pairs(t)

@@ -8,7 +8,8 @@ evo_sync = pytest.importorskip("evo.core.sync")
 from evo.core import metrics as em  # noqa: E402
 from evo.tools import file_interface  # noqa: E402
 
-from epa import alignment, io, metrics, sync  # noqa: E402
+from epa import alignment, io, sync  # noqa: E402
+from epa.metrics import accuracy  # noqa: E402
 from epa.readers import text
 
 REL = 1e-6
@@ -27,7 +28,7 @@ def ours(ref, est, specs, scale=False):
     ir, ie = sync.associate(ref, est, policy="evo")
     r, e = ref.select(ir), est.select(ie)
     a = alignment.fit(r, e, method="sim3" if scale else "se3").apply(e)
-    s, _ = metrics.evaluate(r, a, rpe=specs)
+    s, _ = accuracy.evaluate(r, a, rpe=specs)
     return s
 
 

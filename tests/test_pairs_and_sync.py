@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from epa import geometry, io, metrics, sync
+from epa import geometry, io, sync
+from epa.metrics import accuracy
 from epa.readers import text
 
 
@@ -48,7 +49,7 @@ def test_segment_pairs_match_brute_force_on_euroc_grid(data):
         ir, _ = sync.associate(gt, est, max_diff=0.02)
         d = geometry.path_distances(gt.p[ir])
         for length in (8, 16, 48):
-            i, j = metrics.segment_pairs(d, length)
+            i, j = accuracy.segment_pairs(d, length)
             assert list(zip(i.tolist(), j.tolist())) == brute_segment_pairs(d, length), (f, length)
 
 
@@ -57,7 +58,7 @@ def test_segment_pairs_match_brute_force_on_euroc_grid(data):
 def test_segment_pairs_random_with_plateaus(steps, length):
     steps = [0.0 if s < 0.7 else s for s in steps]  # many zero-motion steps: plateaus and ties
     d = np.concatenate([[0.0], np.cumsum(steps)])
-    i, j = metrics.segment_pairs(d, length)
+    i, j = accuracy.segment_pairs(d, length)
     assert list(zip(i.tolist(), j.tolist())) == brute_segment_pairs(d, length)
 
 

@@ -8,7 +8,8 @@ Where things live:
 - ``trajectory``, ``geometry``: the array type and rotation maths.
 - Steps: ``sync`` (Step 1 time offset, association), ``calibration`` (Step 2 hand-eye extrinsic),
   ``alignment`` (Step 3 SE3/Sim3/posyaw).
-- ``metrics`` (APE, RPE, drift rate), ``drift`` (fail segments, success rate, validity).
+- ``metrics/``: ``accuracy`` (APE, RPE, drift rate), ``drift`` (fail segments, success rate,
+  validity), ``consistency`` (NEES, 3σ), ``efficiency`` (frame times, EA-Drift).
 - ``pipeline`` (each stage's computation), ``chain`` (the stage sequence, defined once),
   ``grid`` (batches and worker processes for the workflow), ``cases`` (discovery),
   ``settings`` (schema-validated config), ``tables`` (paper tables), ``cli`` (``epa``).

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from epa import geometry
-from epa.metrics import closest_pairs
+from epa.metrics.accuracy import closest_pairs
 from epa.trajectory import Trajectory
 
 

@@ -20,7 +20,8 @@ from typing import Callable
 
 import numpy as np
 
-from epa import alignment, calibration, consistency, io, pipeline, readers
+from epa import alignment, calibration, io, pipeline, readers
+from epa.metrics import consistency
 from epa.errors import EpaError
 
 log = logging.getLogger("epa")
@@ -316,13 +317,7 @@ def _consistency(case, values, cfg, write_tables):
     summary, table = consistency.evaluate(ref_m, est_m, align, extrinsic)
     if summary.get("available") is False and summary.get("reason"):
         log.info("consistency: %s", summary["reason"])
-    values["consistency/consistency.json"], values["consistency"] = summary, table
-    nees = case.path("consistency", "nees.csv")
-    if write_tables and table:
-        io.write_csv(nees, table)
-    elif nees.exists():
-        os.unlink(nees)
-    io.write_json(case.path("consistency", "consistency.json"), summary)
+    _store(case, values, "consistency", summary, table, write_tables)
 
 
 def _efficiency(case, values, cfg, write_tables):
@@ -346,13 +341,19 @@ def _efficiency(case, values, cfg, write_tables):
         dataset = Path(load["ref_file"]).stem  # discovery names a dataset by its reference's stem
         summary, table = pipeline.efficiency_stage(t_est, values["metrics"]["ape"], length,
                                                    (timing["t"], timing["frame_ms"]), dataset, cfg)
-    values["efficiency/efficiency.json"], values["efficiency"] = summary, table
-    frames = case.path("efficiency", "frames.csv")
+    _store(case, values, "efficiency", summary, table, write_tables)
+
+
+def _store(case, values, stage, summary, table, write_tables):
+    """A stage with one record and one optional table (none without covariance / timing)."""
+    st = BY_NAME[stage]
+    record, table_path = st.records[0], case.path(stage, st.tables[0])
+    values[f"{stage}/{record}"], values[stage] = summary, table
     if write_tables and table:
-        io.write_csv(frames, table)
-    elif frames.exists():
-        os.unlink(frames)
-    io.write_json(case.path("efficiency", "efficiency.json"), summary)
+        io.write_csv(table_path, table)
+    elif table_path.exists():
+        os.unlink(table_path)
+    io.write_json(case.path(stage, record), summary)
 
 
 STAGES: tuple[Stage, ...] = (

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import alignment, calibration, efficiency, metrics, readers, sync
+from epa import alignment, calibration, readers, sync
+from epa.metrics import accuracy, efficiency
 from epa.readers import bags, text
 from epa.errors import EpaError
 from epa.trajectory import Trajectory
@@ -193,7 +194,7 @@ def metrics_stage(ref: Trajectory, est: Trajectory, cfg: dict):
     if length < MIN_PATH_M:
         raise EpaError(f"the reference does not move ({length:.3g} m over the matched poses): distance RPE,"
                        " drift rate and success rate are undefined")
-    summary, tables = metrics.evaluate(ref, est, segments=c["segments"], segment_tol=c["segment_tol"],
+    summary, tables = accuracy.evaluate(ref, est, segments=c["segments"], segment_tol=c["segment_tol"],
                                        time_delta=c["time_delta"], time_tol=c["time_tol"], rpe=c["rpe"])
     summary["est_length_m"] = est.length()  # the aligned estimate's matched path (EA-Drift's L)
     # an empty segment length is shown as empty, never as a number; say why once, here
@@ -205,7 +206,7 @@ def metrics_stage(ref: Trajectory, est: Trajectory, cfg: dict):
 
 
 def drift_stage(tables: dict, cfg: dict):
-    from epa import drift
+    from epa.metrics import drift
 
     ape, seg, tp = tables["ape"], tables["rpe_segments"], tables["rpe_time"]
     det = drift.detect(ape["t"], ape["dist_m"], ape["trans_m"], ape["rot_deg"], tp["i"].astype(int),
@@ -231,7 +232,7 @@ def drift_stage(tables: dict, cfg: dict):
 
 
 def efficiency_stage(t_est, ape: dict, est_length_m: float, timing, dataset: str, cfg: dict):
-    """Runtime statistics and EA-Drift of one case (see :mod:`epa.efficiency`)."""
+    """Runtime statistics and EA-Drift of one case (see :mod:`epa.metrics.efficiency`)."""
     c = cfg["efficiency"]
     rate = c["datasets"].get(dataset, c["sensor_rate_hz"])
     note = None

@@ -17,7 +17,7 @@ import numpy as np
 
 from epa import io
 from epa.chain import CaseFolder, case_dir, read_record
-from epa.metrics import segment_key
+from epa.metrics.accuracy import segment_key
 
 RULE_SHORT = "=" * 38
 RULE_LONG = "=" * 44
@@ -399,7 +399,7 @@ def write_all(grid: list[CaseResult], results_dir, cfg: dict) -> None:
 def write_across_runs(grid: list[CaseResult], results_dir) -> None:
     """results/consistency/<algorithm>/<dataset>.csv: RMSE(t) and (with covariance) NEES(t) over the
     reference stamps all runs share; results/consistency/summary.csv: their averages over time."""
-    from epa import consistency
+    from epa.metrics import consistency
 
     results_dir = Path(results_dir)
     rows = []

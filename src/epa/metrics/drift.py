@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa.metrics import segment_key, stats
+from epa.metrics.accuracy import segment_key, stats
 
 
 def thresholds(settings: dict, ref_t: np.ndarray, ref_dist: np.ndarray, time_pairs) -> dict:
