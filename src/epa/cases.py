@@ -47,6 +47,17 @@ def _trajectory_files(folder: Path, skipped: list[Path]):
     return files
 
 
+def _folders(parent: Path, skipped: list[Path]):
+    """The visible sub-folders of ``parent``; a file at this level is noted in ``skipped``."""
+    for p in sorted(parent.iterdir()):
+        if p.name.startswith("."):
+            continue
+        if p.is_dir():
+            yield p
+        else:
+            skipped.append(p)
+
+
 def discover(truth_dir, algorithms_dir, *, source: str | None = None) -> tuple[dict[str, Path], list[Case]]:
     """The reference per dataset and the cases. Everything not taken as a run or a reference (side
     files, stray files and folders at the wrong level, datasets without a reference) is named in a
@@ -63,18 +74,8 @@ def discover(truth_dir, algorithms_dir, *, source: str | None = None) -> tuple[d
             raise EpaError(f"two reference files for dataset {p.stem!r} ({truth[p.stem].name}, {p.name})", path=str(p))
         truth[p.stem] = p
     cases = []
-    for alg in sorted(algorithms_dir.iterdir()):
-        if alg.name.startswith("."):
-            continue
-        if not alg.is_dir():
-            skipped.append(alg)
-            continue
-        for ds in sorted(alg.iterdir()):
-            if ds.name.startswith("."):
-                continue
-            if not ds.is_dir():
-                skipped.append(ds)
-                continue
+    for alg in _folders(algorithms_dir, skipped):
+        for ds in _folders(alg, skipped):
             if ds.name not in truth:
                 log.warning("%s: no reference %s/%s.* - skipped", ds, truth_dir, ds.name)
                 continue
