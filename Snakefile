@@ -19,11 +19,14 @@ include: "rules/drift.smk"
 include: "rules/consistency.smk"
 include: "rules/efficiency.smk"
 include: "rules/tables.smk"
+include: "rules/report.smk"
 
 
 rule all:
     input:
         rules.tables.output,
+        rules.figures.output,
+        expand(manifest("report"), batch=BATCHES),
     default_target: True
 
 

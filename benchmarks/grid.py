@@ -171,7 +171,7 @@ def short_grid(cwd: Path, n_cases: int, seed: int = 0) -> None:
 
 
 def bench_large(tmp: Path, n_cases: int, check: bool = True) -> dict:
-    from epa import tables
+    from epa.outputs import tables
 
     cwd = tmp / f"grid{n_cases}"
     short_grid(cwd, n_cases)

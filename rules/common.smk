@@ -7,7 +7,8 @@ import epa
 from epa.errors import EpaError
 from snakemake.exceptions import WorkflowError
 from epa import cases as epa_cases, chain as epa_chain, grid as epa_grid, readers as epa_readers
-from epa import settings as epa_settings, tables as epa_tables
+from epa import settings as epa_settings
+from epa.outputs import report as epa_report, tables as epa_tables
 from epa.readers import bags as epa_bags
 
 try:  # a mistake in the config or the folders is one line, not a traceback
@@ -97,6 +98,12 @@ def workers():
 def run_stage(stage, params, output, log, upstream=None):
     epa_grid.run_job(stage, params.cases, RESULTS, params.settings, output.manifest, upstream, log[0],
                      workers=workers())
+
+
+def make_grid_figures(params, log):
+    written = epa_grid.call(workers(), epa_report.write_grid_figures, RESULTS, params.segments)
+    with open(log[0], "w") as fh:
+        fh.write("\n".join(map(str, written)) + "\n")
 
 
 def make_tables(params, log):

@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 import catalogue
-from epa import cases, chain, cli, grid, settings, tables
+from epa import cases, chain, cli, grid, settings
+from epa.outputs import tables
 from epa.errors import EpaError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -5,7 +5,8 @@ from concurrent.futures.process import BrokenProcessPool
 import numpy as np
 import pytest
 
-from epa import chain, grid, io, settings, tables
+from epa import chain, grid, io, settings
+from epa.outputs import tables
 from epa.errors import EpaError
 from test_steps_sim import case as sim_case
 

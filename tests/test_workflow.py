@@ -94,6 +94,17 @@ def strict_parse_tex(text):
         assert "&" not in residue.replace(" & ", "") and "%" not in residue and "_" not in residue and "$" not in residue
 
 
+def test_grid_figures_and_case_reports_are_written(grid):
+    res = grid / "results"
+    for name in ("ate", "success_rate", "drift_rate", "rmse_time"):
+        assert (res / "figures" / f"{name}.png").stat().st_size > 5000
+        assert (res / "figures" / f"{name}.pdf").read_bytes()[:5] == b"%PDF-"
+    report = res / "cases/vio_body/handheld_office/run1/10_report"
+    assert (report / "figures/trajectory.png").exists() and (report / "report_en.md").exists()
+    # a broken case has no report, only the reason
+    assert "failed" in (res / "cases/broken/handheld_office/run1/10_report/report.json").read_text()
+
+
 def test_every_tex_table_parses_strictly(grid):
     files = sorted((grid / "results/tables").glob("*.tex"))
     assert len(files) == 12
@@ -102,7 +113,7 @@ def test_every_tex_table_parses_strictly(grid):
 
 
 def test_latex_escaping_of_names():
-    from epa.tables import latex_escape
+    from epa.outputs.tables import latex_escape
 
     assert latex_escape("a_b&c%d$e#f{g}h~i^j\\") == r"a\_b\&c\%d\$e\#f\{g\}h\textasciitilde{}i\textasciicircum{}j\textbackslash{}"
     strict_parse_tex("% t\n\\begin{tabular}{lc}\n & \\textbf{" + latex_escape("x_1 & {y}") + "} \\\\ \\hline\n"
@@ -117,12 +128,13 @@ def test_rerun_behaviour(grid):
         fh.write("# edited\n")
     jobs = planned_jobs(grid)
     assert jobs == {"load": 1, "crop": 1, "sync": 1, "calibrate": 1, "align": 1, "metrics": 1, "drift": 1,
-                    "consistency": 1, "efficiency": 1, "tables": 1}
+                    "consistency": 1, "efficiency": 1, "report": 1, "tables": 1, "figures": 1}
     smk(grid)
     # a changed stage setting re-runs that stage onward, for every case
     (grid / "cfg.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\nalign: {method: posyaw}\n")
     jobs = planned_jobs(grid)
-    assert jobs == {"align": 6, "metrics": 6, "drift": 6, "consistency": 6, "efficiency": 6, "tables": 1}
+    assert jobs == {"align": 6, "metrics": 6, "drift": 6, "consistency": 6, "efficiency": 6, "report": 6, "tables": 1,
+                    "figures": 1}
 
 
 def test_batched_execution_writes_the_same_artifacts_and_tables(grid):

@@ -356,6 +356,18 @@ def _store(case, values, stage, summary, table, write_tables):
     io.write_json(case.path(stage, record), summary)
 
 
+def _report(case, values, cfg, write_tables):
+    """10_report/: documents, figures and the case zip, from the artifacts (so only where they are written)."""
+    if not cfg["report"]["per_case"] or not write_tables:
+        summary = {"available": False, "reason": "report.per_case is off" if write_tables else "no artifacts written"}
+    else:
+        from epa.outputs import report
+
+        summary = {"available": True, **report.write_case_report(case, "/".join(case.root.parts[-3:]), cfg)}
+    values["report/report.json"] = summary
+    io.write_json(case.path("report", "report.json"), summary)
+
+
 STAGES: tuple[Stage, ...] = (
     Stage("load", "01_load", ("load.json",), ("ref.tum", "est.tum", "timing.csv"), ("load",), _load),
     Stage("crop", "02_crop", ("crop.json",), ("ref.tum", "est.tum"), ("crop",), _crop),
@@ -371,6 +383,7 @@ STAGES: tuple[Stage, ...] = (
     # consistency and efficiency report "available": false when there is no covariance / timing
     Stage("consistency", "08_consistency", ("consistency.json",), ("nees.csv",), (), _consistency),
     Stage("efficiency", "09_efficiency", ("efficiency.json",), ("frames.csv",), ("efficiency",), _efficiency),
+    Stage("report", "10_report", ("report.json",), (), ("report",), _report),
 )
 BY_NAME = {s.name: s for s in STAGES}
 NAMES = tuple(s.name for s in STAGES)

@@ -44,6 +44,8 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--ref-frames", nargs=2, metavar=("PARENT", "CHILD"), help="reference TF frames")
     e.add_argument("--est-frames", nargs=2, metavar=("PARENT", "CHILD"), help="estimate TF frames")
     e.add_argument("--stamp", choices=["header", "record"], help="bag stamps: message header (default) or record time")
+    e.add_argument("--report", action="store_true",
+                   help="also write 10_report/ (reports, figures; implies --artifacts, imports matplotlib)")
     e.add_argument("--timing", help="per-frame timing file of the estimate (default: <est>_timing.txt|csv beside it)")
     e.add_argument("--rate", type=float, help="sensor rate (Hz) for EA-Drift (default: from the timing file)")
 
@@ -54,6 +56,13 @@ def _parser() -> argparse.ArgumentParser:
     tr.add_argument("--stamp", choices=["header", "record"], default="header")
     tr.add_argument("--format", default="auto", help="text format (auto, tum, kitti, euroc, openvins, csv)")
     tr.add_argument("--export", help="write the trajectory to FILE: TUM (.txt, .tum) or CSV (.csv)")
+
+    f = sub.add_parser("fig", help="render a plot bundle again (another style or size), recomputing nothing")
+    f.add_argument("bundle", help="a bundle .json (10_report/bundles/, results/figures/bundles/)")
+    f.add_argument("--out", required=True, help="output path without extension")
+    f.add_argument("--style", default="paper", help="paper (3.5 in column), wide (7 in), slide")
+    f.add_argument("--width", type=float, help="width in inches (the height follows the style's proportions)")
+    f.add_argument("--pdf", action="store_true", help="also write a vector PDF")
 
     s = sub.add_parser("simulate", help="write the deterministic example grid")
     s.add_argument("out", help="folder to write truth/, algorithms/ and manifest.json into")
@@ -87,6 +96,7 @@ def _eval_config(args) -> dict:
             else:
                 node.setdefault("algorithms", {}).setdefault(EVAL_ALGORITHM, {}).update(src)
     overrides[("load", "stamp")] = args.stamp
+    overrides[("report", "per_case")] = bool(args.report)  # epa eval stays free of matplotlib unless asked
     overrides[("efficiency", "sensor_rate_hz")] = args.rate
     if args.timing:
         cfg.setdefault("sources", {}).setdefault("algorithms", {}).setdefault(EVAL_ALGORITHM, {})["timing"] = str(
@@ -122,7 +132,8 @@ def _eval(args) -> None:
 
     from epa import readers
 
-    result = chain.run_case(args.ref, args.est, args.out, cfg, write_tables=args.artifacts, on_stage=on_stage,
+    result = chain.run_case(args.ref, args.est, args.out, cfg, write_tables=args.artifacts or args.report,
+                            on_stage=on_stage,
                             ref_source=readers.options(cfg, "reference"),
                             est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM))
     on_stage(None)
@@ -173,6 +184,12 @@ def main(argv=None) -> int:
     try:
         if args.command == "eval":
             _eval(args)
+        elif args.command == "fig":
+            from epa.outputs import figures
+
+            written = figures.render(figures.read_bundle(args.bundle), args.out, style=args.style, width=args.width,
+                                     formats=("png", "pdf") if args.pdf else ("png",))
+            print("wrote " + ", ".join(map(str, written)))
         elif args.command == "traj":
             _traj(args)
         elif args.command == "simulate":

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -157,7 +158,9 @@ def write_csv(path, columns: dict[str, np.ndarray], fmt: str = EXACT) -> None:
 def read_csv(path) -> dict[str, np.ndarray]:
     with open(path, encoding="utf-8") as fh:
         names = fh.readline().strip().split(",")
-    rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # a header and no rows is an empty table, not a problem
+        rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     if rows.size == 0:
         rows = np.zeros((0, len(names)))
     return {n: rows[:, k] for k, n in enumerate(names)}

@@ -1,0 +1,300 @@
+"""Figures for papers, from plot bundles.
+
+A *bundle* is one figure's data and labels as JSON (``{"kind", "title", "data", "meta"}``; arrays as
+lists). The workflow writes the bundle beside each figure and renders it; ``epa fig BUNDLE`` renders
+it again with another style or size, without recomputing anything. ``render`` is the only function
+that imports matplotlib (≈0.9 s), so no metric stage pays for it.
+
+Style: the Okabe-Ito colour-blind-safe palette, one colour per algorithm across every figure of a
+grid (by the algorithm's place in the sorted list of the grid's algorithms), cividis for error
+colour maps, DejaVu Sans (no LaTeX needed), sizes in inches for a 3.5 in paper column.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from epa import io
+from epa.errors import EpaError
+
+OKABE_ITO = ["#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000"]
+STYLES = {  # name: (width in, height in, base font pt)
+    "paper": (3.5, 2.6, 8.0),
+    "wide": (7.0, 2.8, 8.0),
+    "slide": (6.4, 4.0, 12.0),
+}
+MAX_POINTS = 1000  # a plotted line at column width needs no more; keeps bundles small and drawing fast
+
+
+def thin(n: int, most: int | None = None) -> np.ndarray:
+    """Indices of at most ``most`` (MAX_POINTS) evenly spread samples of ``n`` (first and last kept)."""
+    most = MAX_POINTS if most is None else most
+    if n <= most:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, most).round().astype(int))
+
+
+def _listed(obj):
+    if isinstance(obj, dict):
+        return {k: _listed(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_listed(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _listed(obj.tolist())
+    if isinstance(obj, (float, np.floating)):
+        return None if not np.isfinite(obj) else float(f"{float(obj):.7g}")
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def bundle(kind: str, title: str, data: dict, **meta) -> dict:
+    if kind not in RENDERERS:
+        raise ValueError(f"unknown figure kind {kind!r}")
+    return {"format": "epica-plot-bundle/1", "kind": kind, "title": title, "data": _listed(data), "meta": _listed(meta)}
+
+
+def write_bundle(path, b: dict) -> None:
+    io.write_text(path, json.dumps(b, separators=(",", ":")) + "\n")
+
+
+def read_bundle(path) -> dict:
+    try:
+        with open(path, encoding="utf-8") as fh:
+            b = json.load(fh)
+    except FileNotFoundError:
+        raise EpaError("file not found", path=str(path)) from None
+    except (OSError, ValueError) as exc:
+        raise EpaError(f"not a plot bundle: {exc}", path=str(path)) from None
+    if not isinstance(b, dict) or b.get("format") != "epica-plot-bundle/1" or b.get("kind") not in RENDERERS:
+        raise EpaError("not an epica plot bundle (format epica-plot-bundle/1 with a known kind)", path=str(path))
+    return b
+
+
+# ----------------------------------------------------------------------------- rendering
+def _setup(style: str):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    w, h, pt = STYLES[style]
+    plt.rcParams.update({
+        "font.family": "DejaVu Sans", "font.size": pt, "axes.titlesize": pt, "axes.labelsize": pt,
+        "xtick.labelsize": pt - 1, "ytick.labelsize": pt - 1, "legend.fontsize": pt - 1, "axes.linewidth": 0.6,
+        "lines.linewidth": 1.0, "axes.spines.top": False, "axes.spines.right": False, "legend.frameon": False,
+        "figure.dpi": 100, "savefig.dpi": 150, "pdf.fonttype": 42, "svg.fonttype": "none",
+        "axes.prop_cycle": matplotlib.cycler(color=OKABE_ITO),
+    })
+    return plt, w, h
+
+
+def _single(plt, w, h):
+    fig, ax = plt.subplots(figsize=(w, h))
+    fig.subplots_adjust(left=0.6 / w, right=1 - 0.1 / w, bottom=0.45 / h, top=1 - 0.12 / h)
+    return fig, ax
+
+
+def render(b: dict, out_stem, *, style: str = "paper", width: float | None = None, formats=("png", "pdf")) -> list[Path]:
+    """Draw a bundle to ``out_stem``.png / .pdf; returns the files written."""
+    if style not in STYLES:
+        raise EpaError(f"unknown style {style!r}; choose one of {', '.join(STYLES)}")
+    plt, w, h = _setup(style)
+    scale = (width / w) if width else 1.0
+    fig = RENDERERS[b["kind"]](plt, b, w * scale, h * scale)
+    out = []
+    for fmt in formats:
+        path = Path(f"{out_stem}.{fmt}")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name("." + path.name + ".tmp")
+        # no creation date: the same bundle gives the same bytes (re-runs and batching compare equal)
+        meta = {"CreationDate": None} if fmt == "pdf" else {}
+        fig.savefig(tmp, format=fmt, bbox_inches=None if fig.get_layout_engine() else "tight", pad_inches=0.02,
+                    metadata=meta)
+        tmp.replace(path)
+        out.append(path)
+    plt.close(fig)
+    return out
+
+
+def _arr(x):
+    return np.array([np.nan if v is None else v for v in x], float) if isinstance(x, list) else np.asarray(x, float)
+
+
+def _trajectory(plt, b, w, h):
+    """Top view to scale (its height follows the data) over a side view stretched in z."""
+    d = b["data"]
+    ref, est, err = _arr(d["ref"]), _arr(d["est"]), _arr(d["err"])
+    left, right, bottom, top, gap, side = 0.55, 0.85, 0.4, 0.3, 0.35, 0.9
+    aw = w - left - right
+    span = np.ptp(np.vstack([ref, est])[:, :2], axis=0) if len(ref) else np.ones(2)
+    th = float(np.clip(aw * span[1] / max(span[0], 1e-9), 0.8, 3.2))
+    fh = bottom + side + gap + th + top
+    fig = plt.figure(figsize=(w, fh))
+    ax_top = fig.add_axes([left / w, (bottom + side + gap) / fh, aw / w, th / fh])
+    ax_side = fig.add_axes([left / w, bottom / fh, aw / w, side / fh], sharex=ax_top)
+    vmax = np.nanpercentile(err, 99) if err.size else 1.0
+    for ax, j, label in ((ax_top, 1, "y [m]"), (ax_side, 2, "z [m]")):
+        ax.plot(ref[:, 0], ref[:, j], color="0.65", lw=1.6, label="reference", zorder=1)
+        sc = ax.scatter(est[:, 0], est[:, j], c=err, cmap="cividis", s=1.2, lw=0, zorder=2, vmin=0, vmax=vmax,
+                        rasterized=True, label="aligned estimate")
+        ax.set_ylabel(label)
+    ax_top.set_aspect("equal", adjustable="datalim")
+    ax_top.tick_params(labelbottom=False)
+    ax_side.set_xlabel("x [m]")
+    ax_top.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), ncols=2, markerscale=5, fontsize="small",
+                  borderaxespad=0.1)  # above the plot: a trajectory fills its axes
+    cax = fig.add_axes([(w - right + 0.12) / w, (bottom + side + gap) / fh, 0.08 / w, th / fh])
+    fig.colorbar(sc, cax=cax).set_label("APE [m]")
+    return fig
+
+
+def _ape_time(plt, b, w, h):
+    d = b["data"]
+    t, ape = _arr(d["t"]), _arr(d["ape"])
+    fig, ax = _single(plt, w, h)
+    for k, (s, e) in enumerate(zip(d.get("fail_start", []), d.get("fail_end", []))):
+        ax.axvspan(s, e, color=OKABE_ITO[5], alpha=0.18, lw=0, label="fail segment" if k == 0 else None)
+    ax.plot(t, ape, color=OKABE_ITO[0], label="APE")
+    if d.get("threshold") is not None:
+        ax.axhline(d["threshold"], color="0.4", ls="--", lw=0.7, label="knee threshold")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("APE [m]")
+    ax.set_xlim(t[0] if t.size else 0, t[-1] if t.size else 1)
+    ax.set_ylim(bottom=0)
+    ax.legend(loc="upper left")
+    return fig
+
+
+def _rpe_box(plt, b, w, h):
+    d = b["data"]
+    lengths = d["lengths"]
+    fig, ax = _single(plt, w, h)
+    groups = [_arr(v) for v in d["trans"]]
+    have = [k for k, g in enumerate(groups) if g.size]
+    if have:
+        ax.boxplot([groups[k] for k in have], positions=np.arange(len(have)), widths=0.6, showfliers=False,
+                   patch_artist=True, boxprops={"facecolor": OKABE_ITO[4], "alpha": 0.6, "lw": 0.6},
+                   medianprops={"color": "black", "lw": 1.0}, whiskerprops={"lw": 0.6}, capprops={"lw": 0.6})
+        ax.set_xticks(np.arange(len(have)), [f"{lengths[k]:g}" for k in have])
+    ax.set_xlabel("segment length [m]")
+    ax.set_ylabel("RPE translation [m]")
+    return fig
+
+
+def _xcorr(plt, b, w, h):
+    d = b["data"]
+    lag, corr = _arr(d["lag"]), _arr(d["corr"])
+    peak = d.get("peak")
+    fig, ax = _single(plt, w, h)
+    if peak is not None and lag.size:
+        near = np.abs(lag - peak) <= max(0.1, 20 * (lag[1] - lag[0]) if lag.size > 1 else 0.1)
+        ax.plot(lag[near] * 1000, corr[near], color=OKABE_ITO[0])
+        ax.axvline(peak * 1000, color=OKABE_ITO[5], lw=0.8, ls="--", label=f"offset {peak * 1000:.2f} ms")
+        ax.legend(loc="upper left")
+        inset = ax.inset_axes([0.34, 0.1, 0.34, 0.34])  # below the peak, where the zoomed curve is not
+        inset.plot(lag, corr, color=OKABE_ITO[0], lw=0.6)
+        inset.axvline(peak, color=OKABE_ITO[5], lw=0.6, ls="--")
+        inset.set_xlabel("lag [s]", fontsize=6, labelpad=1)
+        inset.tick_params(labelsize=5.5, length=2, pad=1)
+    else:
+        ax.plot(lag, corr, color=OKABE_ITO[0])
+        ax.text(0.02, 0.95, d.get("reason", "Step 1 not used"), transform=ax.transAxes, va="top")
+    ax.set_xlabel("lag [ms]" if peak is not None else "lag [s]")
+    ax.set_ylabel("normalised correlation")
+    return fig
+
+
+def _steps(plt, b, w, h):
+    d = b["data"]
+    ref, before, after = _arr(d["ref"]), _arr(d["before"]), _arr(d["after"])
+    fig, axes = plt.subplots(1, 2, figsize=(w, h))
+    fig.subplots_adjust(left=0.55 / w, right=1 - 0.1 / w, bottom=0.45 / h, top=1 - 0.25 / h, wspace=0.35)
+    for ax, est, title in ((axes[0], before, "first pose only"), (axes[1], after, "Steps 1-3")):
+        ax.plot(ref[:, 0], ref[:, 1], color="0.6", lw=1.4, label="reference")
+        ax.plot(est[:, 0], est[:, 1], color=OKABE_ITO[0], lw=0.8, label="estimate")
+        ax.set_title(title)
+        ax.set_xlabel("x [m]")
+        ax.set_aspect("equal", adjustable="datalim")
+    axes[0].set_ylabel("y [m]")
+    axes[0].legend(loc="best")
+    return fig
+
+
+def _sigma3(plt, b, w, h):
+    d = b["data"]
+    t = _arr(d["t"])
+    fw, fh = max(w, 7.0), h * 1.3
+    fig, axes = plt.subplots(2, 3, figsize=(fw, fh), sharex=True)
+    fig.subplots_adjust(left=0.6 / fw, right=1 - 0.1 / fw, bottom=0.45 / fh, top=1 - 0.1 / fh, wspace=0.45, hspace=0.15)
+    labels = [("err_x", "sigma_x", "x [m]"), ("err_y", "sigma_y", "y [m]"), ("err_z", "sigma_z", "z [m]"),
+              ("err_rot_x", "sigma_rot_x", "roll [deg]"), ("err_rot_y", "sigma_rot_y", "pitch [deg]"),
+              ("err_rot_z", "sigma_rot_z", "yaw [deg]")]
+    for ax, (e, s, name) in zip(axes.ravel(), labels):
+        k = 57.29577951308232 if "rot" in e else 1.0
+        err, sig = _arr(d[e]) * k, 3 * _arr(d[s]) * k
+        ax.fill_between(t, -sig, sig, color=OKABE_ITO[4], alpha=0.35, lw=0, label="±3σ", rasterized=True)
+        ax.plot(t, err, color=OKABE_ITO[0], lw=0.5, label="error", rasterized=True)
+        ax.set_ylabel(name)
+    for ax in axes[1]:
+        ax.set_xlabel("time [s]")
+    axes[0, 0].legend(loc="upper left", ncols=2)
+    return fig
+
+
+def _grouped(plt, b, w, h):
+    """Per algorithm and dataset: box plots over runs (or bars when one value per cell)."""
+    d = b["data"]
+    datasets, algs = d["datasets"], d["algorithms"]
+    colors = d.get("colors") or OKABE_ITO
+    fig, ax = _single(plt, w, h)
+    width = 0.8 / max(len(algs), 1)
+    for a, alg in enumerate(algs):
+        pos = np.arange(len(datasets)) - 0.4 + width * (a + 0.5)
+        vals = [_arr(v) for v in d["values"][a]]
+        color = colors[a % len(colors)]
+        if d.get("bars"):
+            ax.bar(pos, [v[0] if v.size else np.nan for v in vals], width * 0.9, color=color, label=alg)
+        else:
+            keep = [k for k, v in enumerate(vals) if v.size]
+            if keep:
+                bp = ax.boxplot([vals[k] for k in keep], positions=pos[keep], widths=width * 0.8, showfliers=True,
+                                patch_artist=True, manage_ticks=False, flierprops={"markersize": 2},
+                                medianprops={"color": "black", "lw": 0.8})
+                for box in bp["boxes"]:
+                    box.set(facecolor=color, alpha=0.8, lw=0.5)
+            ax.plot([], [], color=color, lw=4, label=alg)
+    ax.set_xticks(np.arange(len(datasets)), datasets, rotation=20 if len(datasets) > 3 else 0, ha="right"
+                  if len(datasets) > 3 else "center")
+    ax.set_ylabel(d["ylabel"])
+    if d.get("log"):
+        ax.set_yscale("log")
+    ax.legend(loc="best", ncols=min(len(algs), 3))
+    return fig
+
+
+def _lines(plt, b, w, h):
+    """One line per algorithm (drift rate against segment length, RMSE over time)."""
+    d = b["data"]
+    colors = d.get("colors") or OKABE_ITO
+    panels = d["panels"]
+    fig, axes = plt.subplots(1, len(panels), figsize=(w, h), squeeze=False, sharey=d.get("sharey", False),
+                             layout="constrained")
+    for ax, panel in zip(axes[0], panels):
+        for k, line in enumerate(panel["lines"]):
+            ax.plot(_arr(line["x"]), _arr(line["y"]), color=colors[line.get("color", k) % len(colors)],
+                    marker="o" if d.get("markers") else None, ms=3, label=line["label"])
+        ax.set_title(panel.get("title", ""))
+        ax.set_xlabel(d["xlabel"])
+        if d.get("log"):
+            ax.set_yscale("log")
+    axes[0, 0].set_ylabel(d["ylabel"])
+    axes[0, 0].legend(loc="best")
+    return fig
+
+
+RENDERERS = {"trajectory": _trajectory, "ape_time": _ape_time, "rpe_box": _rpe_box, "xcorr": _xcorr,
+             "steps": _steps, "sigma3": _sigma3, "grouped": _grouped, "lines": _lines}

@@ -1,0 +1,281 @@
+"""Per-case report (``10_report/``) and grid figures, built from the stage artifacts only: nothing is
+recomputed here but plot coordinates (the first-pose overlay of the "before" view).
+
+Per case: ``metrics.json`` (every stage's record in one document), ``metrics_summary.csv``
+(section, metric, value), ``report_en.md`` / ``report_zh.md``, ``figures/<name>.png|pdf`` with each
+figure's bundle in ``bundles/<name>.json``, and ``<run>.zip`` (every artifact plus a manifest).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io as _io
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from epa import io
+from epa.outputs import figures
+
+CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")
+GRID_FIGURES = ("ate", "success_rate", "drift_rate", "rmse_time")
+
+
+# ----------------------------------------------------------------------------- case bundles
+def case_bundles(case) -> dict[str, dict]:
+    """Every per-case figure's bundle, from the artifacts of a case folder (``chain.CaseFolder``)."""
+    p = case.path
+    ref_c = io.read_tum_file(p("crop", "ref.tum"))
+    est_c = io.read_tum_file(p("crop", "est.tum"))
+    i_ref, i_est = io.read_pair_indices(p("calibrate", "pairs.csv"))
+    ref = ref_c.select(i_ref)
+    aligned = io.read_tum_file(p("align", "aligned.tum"))
+    ape = io.read_csv(p("metrics", "ape.csv"))
+    drift = io.read_json(p("drift", "drift.json"))
+    sync = io.read_json(p("sync", "sync.json"))
+    t0 = float(ref.t[0])
+    k = figures.thin(len(ref))
+    out = {"trajectory": figures.bundle("trajectory", "Reference and aligned estimate, coloured by APE",
+                                        {"ref": ref.p[k], "est": aligned.p[k], "err": ape["trans_m"][k]})}
+    fail = io.read_csv(p("drift", "fail_segments.csv"))
+    out["ape_time"] = figures.bundle(
+        "ape_time", "APE over time, fail segments shaded",
+        {"t": ape["t"][k] - t0, "ape": ape["trans_m"][k],
+         "fail_start": np.asarray(fail.get("t_start", []), float) - t0,
+         "fail_end": np.asarray(fail.get("t_end", []), float) - t0,
+         "threshold": (drift.get("knee") or {}).get("threshold_m")})
+    seg = io.read_csv(p("metrics", "rpe_segments.csv"))
+    lengths = sorted({float(x) for x in seg["length_m"]}) if len(seg.get("length_m", [])) else []
+    out["rpe_box"] = figures.bundle("rpe_box", "RPE per segment length",
+                                    {"lengths": lengths, "trans": [seg["trans_m"][seg["length_m"] == L] for L in lengths]})
+    xc = io.read_csv(p("sync", "xcorr.csv"))
+    step1 = sync.get("step1", {})
+    out["xcorr"] = figures.bundle("xcorr", "Step 1: angular-speed cross-correlation",
+                                  {"lag": xc.get("lag_s", []), "corr": xc.get("corr", []),
+                                   "peak": step1.get("estimated") if step1.get("used") else None,
+                                   "reason": step1.get("reason", "")})
+    est_m = est_c.select(i_est)
+    # "before": the estimate as read, put on the reference by its first pose only
+    r0 = ref.r[0] @ est_m.r[0].T
+    before = (est_m.p - est_m.p[0]) @ r0.T + ref.p[0]
+    out["steps"] = figures.bundle("steps", "Before and after Steps 1-3 (top view)",
+                                  {"ref": ref.p[k], "before": before[k], "after": aligned.p[k]})
+    nees = p("consistency", "nees.csv")
+    if nees.exists():
+        n = io.read_csv(nees)
+        kk = figures.thin(len(n["t"]))  # noqa: the bound is drawn as a band, 1000 samples suffice
+        out["sigma3"] = figures.bundle("sigma3", "Per-axis error and its ±3σ bound",
+                                       {"t": n["t"][kk] - n["t"][0], **{c: n[c][kk] for c in n if c.startswith(("err_", "sigma_"))}})
+    return out
+
+
+# ----------------------------------------------------------------------------- documents
+def case_document(case) -> dict:
+    """Every stage's record of a case, as one document."""
+    doc = {}
+    for stage, name in (("metrics", "metrics.json"), ("drift", "drift.json"), ("consistency", "consistency.json"),
+                        ("efficiency", "efficiency.json")):
+        path = case.path(stage, name)
+        if path.exists():
+            doc[stage] = io.read_json(path)
+    return doc
+
+
+def _flatten(prefix: str, obj, rows: list) -> None:
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            _flatten(f"{prefix}.{k}" if prefix else str(k), v, rows)
+    elif isinstance(obj, (int, float)) and not isinstance(obj, bool):
+        rows.append(prefix)
+
+
+def summary_rows(doc: dict) -> list[tuple[str, str, float]]:
+    """(section, metric, value) for every number in the document, except matrices and settings."""
+    out = []
+    for section, record in doc.items():
+        names: list[str] = []
+        skip = ("load", "sync", "calibrate", "alignment", "thresholds", "rpe")
+        _flatten("", {k: v for k, v in record.items() if k not in skip}, names)
+        for name in names:
+            value = record
+            for part in name.split("."):
+                value = value[part]
+            out.append((section, name, value))
+    return out
+
+
+def summary_csv(doc: dict) -> str:
+    buf = _io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["section", "metric", "value"])
+    for section, metric, value in summary_rows(doc):
+        w.writerow([section, metric, f"{value:.9g}" if isinstance(value, float) else value])
+    return buf.getvalue()
+
+
+TEXT = {
+    "en": {"title": "Evaluation of", "settings": "Settings", "steps": "Steps 1-3", "metrics": "Metrics",
+           "fail": "Fail segments", "figures": "Figures", "none": "none", "offset": "Step 1 time offset",
+           "extrinsic": "Step 2 extrinsic", "align": "Step 3 alignment", "used": "used", "not_used": "not used",
+           "source": "evaluated as", "metric": "metric", "value": "value", "start": "start [s]", "end": "end [s]",
+           "consistency": "Consistency", "efficiency": "Efficiency", "unavailable": "not available"},
+    "zh": {"title": "评估：", "settings": "设置", "steps": "步骤 1-3", "metrics": "指标", "fail": "失效区段",
+           "figures": "图", "none": "无", "offset": "步骤 1 时间偏移", "extrinsic": "步骤 2 外参",
+           "align": "步骤 3 对齐", "used": "已使用", "not_used": "未使用", "source": "评估方式",
+           "metric": "指标", "value": "数值", "start": "开始 [s]", "end": "结束 [s]", "consistency": "一致性",
+           "efficiency": "效率", "unavailable": "不可用"},
+}
+
+
+def _num(v) -> float:
+    """A record's number as a float ("inf" is how JSON artifacts hold infinity; None is nan)."""
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def report_md(doc: dict, case_name: str, figure_names: list[str], lang: str, fail: dict) -> str:
+    T = TEXT[lang]
+    m = doc.get("metrics", {})
+    sync, calib, align = m.get("sync", {}), m.get("calibrate", {}), m.get("alignment", {})
+    step1 = sync.get("step1", {})
+    ext = calib.get("extrinsic") or {}
+    lines = [f"# {T['title']} {case_name}", "", f"## {T['settings']}", "",
+             f"- mode `{sync.get('mode')}`, association `{sync.get('policy')}` (max {sync.get('max_diff_s')} s),"
+             f" alignment `{align.get('method')}`", f"- {T['source']}: `{m.get('eval_source')}`", "",
+             f"## {T['steps']}", "",
+             f"- {T['offset']}: {_num(m.get('time_offset_s')) * 1000:.3f} ms"
+             f" ({T['used'] if step1.get('used') else T['not_used']}: {step1.get('reason', '')};"
+             f" peak {_num(step1.get('peak_corr')):.3f}, ratio {_num(step1.get('peak_ratio')):.3f})",
+             f"- {T['extrinsic']}: " + (f"{_num(ext.get('rotation_deg')):.3f} deg, {_num(ext.get('translation_norm_m')):.4f} m"
+                                        f" ({T['used'] if calib.get('plan', {}).get('apply_extrinsic') else T['not_used']}:"
+                                        f" {calib.get('plan', {}).get('reason', '')})" if ext else T["none"]),
+             f"- {T['align']}: {align.get('method')}, yaw {_num(align.get('yaw_deg')):.3f} deg,"
+             f" scale {_num(align.get('scale')):.6f}",
+             "", f"## {T['metrics']}", "", f"| {T['metric']} | {T['value']} |", "|---|---|"]
+    for section, metric, value in summary_rows({k: doc[k] for k in ("metrics", "drift") if k in doc}):
+        if metric.endswith(("rmse", "mean", "median", "max", "_pct")) or metric in ("n_matched", "ref_length_m"):
+            lines.append(f"| {section}.{metric} | {value:.6g} |")
+    for key in ("consistency", "efficiency"):
+        rec = doc.get(key, {})
+        lines += ["", f"## {T[key]}", ""]
+        if not rec.get("available"):
+            lines.append(f"{T['unavailable']}: {rec.get('reason', rec.get('failed', ''))}")
+            continue
+        for k, v in rec.items():
+            if isinstance(v, (int, float)) and not isinstance(v, bool):
+                lines.append(f"- {k}: {v:.6g}")
+    lines += ["", f"## {T['fail']}", ""]
+    starts = np.asarray(fail.get("t_start", []), float)
+    if starts.size:  # stamps of the reference clock, as in 07_drift/fail_segments.csv
+        lines += [f"| {T['start']} | {T['end']} |", "|---|---|"]
+        lines += [f"| {s:.3f} | {e:.3f} |" for s, e in zip(starts, np.asarray(fail["t_end"], float))]
+    else:
+        lines.append(T["none"])
+    lines += ["", f"## {T['figures']}", ""] + [f"![{n}](figures/{n}.png)" for n in figure_names]
+    return "\n".join(lines) + "\n"
+
+
+def case_zip(case_root: Path, out: Path) -> None:
+    """Every artifact of the case and a manifest (file, bytes, sha256), for sharing one evaluation."""
+    files = sorted(p for p in case_root.rglob("*") if p.is_file() and p != out and not p.name.startswith(".")
+                   and p.suffix != ".zip")
+    manifest = []
+    tmp = out.with_name("." + out.name + ".tmp")
+    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as z:
+        for f in files:
+            data = f.read_bytes()
+            rel = f.relative_to(case_root).as_posix()
+            z.writestr(rel, data)
+            manifest.append({"file": rel, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()})
+        z.writestr("MANIFEST.json", json.dumps({"format": "epica-case-bundle/1", "files": manifest}, indent=1))
+    tmp.replace(out)
+
+
+def write_case_report(case, name: str, cfg: dict) -> dict:
+    """The report stage: documents, figures (unless ``report.figures`` is off) and the zip."""
+    c = cfg["report"]
+    folder = case.path("report", "report.json").parent
+    doc = case_document(case)
+    io.write_json(folder / "metrics.json", doc)
+    io.write_text(folder / "metrics_summary.csv", summary_csv(doc))
+    drawn = []
+    if c["figures"]:
+        for fig_name, b in case_bundles(case).items():
+            figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b)
+            figures.render(b, folder / "figures" / fig_name, formats=("png", "pdf") if c["pdf"] else ("png",))
+            drawn.append(fig_name)
+    fail = io.read_csv(case.path("drift", "fail_segments.csv"))
+    for lang in ("en", "zh"):
+        io.write_text(folder / f"report_{lang}.md", report_md(doc, name, drawn, lang, fail))
+    if c["zip"]:
+        case_zip(case.root, folder / f"{name.replace('/', '_')}.zip")
+    return {"figures": drawn, "zip": bool(c["zip"])}
+
+
+# ----------------------------------------------------------------------------- grid figures
+def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]:
+    """ATE per algorithm and dataset, drift rate against segment length, success rate, RMSE over
+    time across runs: from summary.csv and results/consistency/, one colour per algorithm."""
+    from epa.metrics.accuracy import segment_key
+
+    with open(summary_csv_path, encoding="utf-8", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    ok = [r for r in rows if r["status"] == "ok" or r["status"].startswith("globally failed")]
+    algs = sorted({r["algorithm"] for r in rows})
+    datasets = sorted({r["dataset"] for r in rows})
+    colors = figures.OKABE_ITO
+
+    def num(r, key):
+        try:
+            return float(r[key])
+        except (KeyError, ValueError):
+            return np.nan
+
+    def cells(key):
+        return [[[num(r, key) for r in ok if r["algorithm"] == a and r["dataset"] == d and np.isfinite(num(r, key))]
+                 for d in datasets] for a in algs]
+
+    out = {"ate": figures.bundle("grouped", "ATE per algorithm and dataset (runs)",
+                                 {"datasets": datasets, "algorithms": algs, "values": cells("ate_trans_rmse_m"),
+                                  "ylabel": "ATE RMSE [m]", "log": True, "colors": colors}),
+           "success_rate": figures.bundle("grouped", "Success rate per algorithm and dataset",
+                                          {"datasets": datasets, "algorithms": algs, "bars": True,
+                                           "values": [[[np.nanmean(v)] if v else [] for v in a]
+                                                      for a in cells("success_rate_distance_pct")],
+                                           "ylabel": "success rate [% of path]", "colors": colors})}
+    lines = []
+    for k, a in enumerate(algs):
+        ys = [np.nanmean([num(r, f"drift_rate_{segment_key(s)}m_pct") for r in ok if r["algorithm"] == a] or [np.nan])
+              for s in segments]
+        lines.append({"label": a, "x": list(segments), "y": ys, "color": k})
+    out["drift_rate"] = figures.bundle("lines", "Distance drift rate against segment length",
+                                       {"panels": [{"lines": lines}], "xlabel": "segment length [m]",
+                                        "ylabel": "drift rate [%]", "markers": True, "colors": colors})
+    panels = []
+    for d in datasets:
+        panel_lines = []
+        for k, a in enumerate(algs):
+            path = Path(consistency_dir) / a / f"{d}.csv"
+            if path.exists():
+                t = io.read_csv(path)
+                if len(t.get("t", [])):
+                    kk = figures.thin(len(t["t"]), 1500)
+                    panel_lines.append({"label": a, "x": t["t"][kk] - t["t"][0], "y": t["rmse_pos_m"][kk], "color": k})
+        panels.append({"title": d, "lines": panel_lines})
+    out["rmse_time"] = figures.bundle("lines", "RMSE over time across runs", {
+        "panels": panels, "xlabel": "time [s]", "ylabel": "RMSE [m]", "colors": colors, "log": True})
+    return out
+
+
+def write_grid_figures(results_dir, segments, style: str = "wide") -> list[Path]:
+    results_dir = Path(results_dir)
+    written = []
+    for name, b in grid_bundles(results_dir / "summary.csv", results_dir / "consistency", segments).items():
+        figures.write_bundle(results_dir / "figures" / "bundles" / f"{name}.json", b)
+        written += figures.render(b, results_dir / "figures" / name, style=style)
+    return written
