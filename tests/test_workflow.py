@@ -13,6 +13,8 @@ import pytest
 from epa import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
+# tests about execution, not figures: per-case reports are tested on the main grid and in test_figures
+NO_REPORTS = "report: {per_case: false}\n"
 CMD = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--cores", "2"]
 
 
@@ -170,8 +172,10 @@ def _buggy(case, *args):
     return _sync(case, *args)
 _chain.BY_NAME["sync"] = _chain.BY_NAME["sync"].__class__(**{**_chain.BY_NAME["sync"].__dict__, "run": _buggy})
 """)
-    (grid / "bug.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: bug\n")
-    out = smk(grid, "--cores", "1", "all", config="bug.yaml", snakefile=wrapper)
+    (grid / "bug.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: bug\n" + NO_REPORTS)
+    # the profile is found next to the Snakefile only: name it, so jobs run in threads as usual
+    out = smk(grid, "--cores", "1", "--profile", str(ROOT / "profiles/default"), "all", config="bug.yaml",
+              snakefile=wrapper)
     rows = {r["algorithm"] + "/" + r["run"]: r for r in csv.DictReader(open(grid / "bug/summary.csv"))}
     assert rows["vio_body/run2"]["status"] == "internal error: ZeroDivisionError: injected bug"
     assert [r["status"] for k, r in rows.items() if k.startswith("vio_")].count("ok") == 3
@@ -188,7 +192,7 @@ def test_cluster_generic_executor_gives_the_local_tables(tmp_path):
     cwd = tmp_path
     simulate.simulate(cwd / "sim")
     (cwd / "local.yaml").write_text("truth_dir: sim/truth\nalgorithms_dir: sim/algorithms\nresults_dir: local\n"
-                                    "grid: {max_batches: 3}\n")
+                                    "grid: {max_batches: 3}\n" + NO_REPORTS)
     (cwd / "cluster.yaml").write_text((cwd / "local.yaml").read_text().replace("results_dir: local",
                                                                                "results_dir: cluster"))
     # a stand-in for sbatch: run the job script in the background, print a job id
@@ -205,7 +209,7 @@ def test_a_killed_run_resumes_to_the_same_tables(grid):
     import os
     import signal
 
-    (grid / "kill.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: killed\n")
+    (grid / "kill.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: killed\n" + NO_REPORTS)
     cmd = CMD + ["--directory", str(grid), "--configfile", str(grid / "kill.yaml"), "--quiet"]
     proc = subprocess.Popen(cmd, cwd=grid, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 120
@@ -263,7 +267,7 @@ def test_bag_grid_with_per_source_settings(tmp_path):
     for ds in ("office_ros1", "office_ros2"):
         (tmp_path / f"algs/text/{ds}").mkdir(parents=True)
         io.write_trajectory(tmp_path / f"algs/text/{ds}/run1.csv", est, "euroc")
-    base = ("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\nsources:\n"
+    base = ("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\n" + NO_REPORTS + "sources:\n"
             "  datasets:\n    office_ros2: {topic: /vicon}\n    office_ros1: {topic: /gt}\n"
             "  algorithms:\n    text: {format: euroc}\n    bagged: {topic: %s}\n")
     (tmp_path / "cfg.yaml").write_text(base % "/odom")
