@@ -24,12 +24,15 @@ class Similarity:
     def apply(self, traj: Trajectory) -> Trajectory:
         """The trajectory in the target world frame. The local orientation error is unchanged by a
         world rotation; the position covariance turns with it and scales by s^2."""
-        r = self.R @ traj.r
-        p = self.s * traj.p @ self.R.T + self.t
+        r, p = self.apply_rp(traj.r, traj.p)
         cov = {}
         if traj.cov_rot is not None and traj.cov_pos is not None:
             cov = {"cov_rot": traj.cov_rot, "cov_pos": self.s ** 2 * self.R @ traj.cov_pos @ self.R.T}
         return Trajectory.from_rp(traj.t, r, p, **cov)
+
+    def apply_rp(self, r: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rotations (N, 3, 3) and positions (N, 3) in the target world frame."""
+        return self.R @ r, self.s * p @ self.R.T + self.t
 
     def inverse(self) -> "Similarity":
         return Similarity(self.R.T, -self.R.T @ self.t / self.s, 1.0 / self.s)

@@ -43,6 +43,16 @@ class Extrinsic:
             cov = {"cov_rot": cov_rot, "cov_pos": cov_pos}
         return Trajectory.from_rp(est.t, r_b, p_b, **cov)
 
+    def to_sensor_rp(self, r_b: np.ndarray, p_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The inverse of :meth:`apply` on rotations and positions: body poses -> sensor poses."""
+        return r_b @ self.R, (p_b + np.einsum("nab,b->na", r_b, self.t)) / self.scale
+
+    @staticmethod
+    def from_dict(d: dict) -> "Extrinsic":
+        """The transform of a ``to_dict`` record (what calibrate.json holds)."""
+        return Extrinsic(R=np.asarray(d["rotation"], float), t=np.asarray(d["translation_m"], float),
+                         scale=float(d["scale"]), trusted=bool(d["trusted"]), reason=d["reason"])
+
     def translation_unobservable(self) -> bool:
         return bool(self.info.get("translation_unobservable_directions"))
 

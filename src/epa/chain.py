@@ -18,8 +18,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
-
 from epa import alignment, calibration, io, pipeline, readers
 from epa.metrics import consistency
 from epa.errors import EpaError
@@ -302,17 +300,12 @@ def _drift(case, values, cfg, write_tables):
 def _calibration_steps(case, values):
     """What Steps 2 and 3 did to the estimate: the applied extrinsic (or None) and the alignment."""
     calib = _record(case, values, "calibrate", "calibrate.json")
-    ext = None
-    if calib.get("plan", {}).get("apply_extrinsic"):
-        e = calib["extrinsic"]
-        ext = calibration.Extrinsic(R=np.asarray(e["rotation"]), t=np.asarray(e["translation_m"]), scale=e["scale"])
+    ext = calibration.Extrinsic.from_dict(calib["extrinsic"]) if calib["plan"]["apply_extrinsic"] else None
     return ext, alignment.Similarity.from_dict(_record(case, values, "align", "transform.json"))
 
 
 def _consistency(case, values, cfg, write_tables):
-    ref_m, _ = _matched(case, values, "calibrate")
-    _, est = _trajectories(case, values, "crop")  # as read: its covariance is in its own frames
-    est_m = est.select(_pair_indices(case, values, "calibrate")[1])
+    ref_m, est_m = _matched(case, values, "calibrate")  # the estimate as read: its covariance is in its own frames
     extrinsic, align = _calibration_steps(case, values)
     summary, table = consistency.evaluate(ref_m, est_m, align, extrinsic)
     if summary.get("available") is False and summary.get("reason"):

@@ -85,22 +85,13 @@ def _eval_config(args) -> dict:
         ("sync", "estimate_offset"): False if args.no_offset_estimate else None,
         ("calibrate", "enabled"): False if args.no_calibrate else None,
         ("calibrate", "scale"): True if args.scale else None,
+        ("load", "stamp"): args.stamp, ("efficiency", "sensor_rate_hz"): args.rate,
+        ("report", "per_case"): bool(args.report),  # epa eval stays free of matplotlib unless asked
+        ("sources", "reference", "topic"): args.ref_topic, ("sources", "reference", "frames"): args.ref_frames,
+        ("sources", "algorithms", EVAL_ALGORITHM, "topic"): args.est_topic,
+        ("sources", "algorithms", EVAL_ALGORITHM, "frames"): args.est_frames,
+        ("sources", "algorithms", EVAL_ALGORITHM, "timing"): args.timing and str(Path(args.timing).resolve()),
     }
-    for side, topic, frames in (("reference", args.ref_topic, args.ref_frames),
-                                ("algorithms", args.est_topic, args.est_frames)):
-        src = {k: v for k, v in (("topic", topic), ("frames", frames)) if v}
-        if src:
-            node = cfg.setdefault("sources", {})
-            if side == "reference":
-                node.setdefault("reference", {}).update(src)
-            else:
-                node.setdefault("algorithms", {}).setdefault(EVAL_ALGORITHM, {}).update(src)
-    overrides[("load", "stamp")] = args.stamp
-    overrides[("report", "per_case")] = bool(args.report)  # epa eval stays free of matplotlib unless asked
-    overrides[("efficiency", "sensor_rate_hz")] = args.rate
-    if args.timing:
-        cfg.setdefault("sources", {}).setdefault("algorithms", {}).setdefault(EVAL_ALGORITHM, {})["timing"] = str(
-            Path(args.timing).resolve())
     for keys, value in overrides.items():
         if value is None:
             continue

@@ -101,6 +101,12 @@ def skew(v: np.ndarray) -> np.ndarray:
                      np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
 
 
+def local_covariance(r: np.ndarray, cov_global: np.ndarray) -> np.ndarray:
+    """Orientation covariance of the global error (R_true = Exp(d) R, ROS's) as the local one
+    (R_true = R Exp(d), epica's and OpenVINS's): d_local = R^T d_global, so C_local = R^T C R."""
+    return np.einsum("nba,nbc,ncd->nad", r, cov_global, r)
+
+
 def rot_z(yaw: float) -> np.ndarray:
     c, s = np.cos(yaw), np.sin(yaw)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from epa.errors import EpaError
-from epa.readers.text import FORMATS
+from epa.readers.text import FORMATS, upper_to_full
 from epa.trajectory import Trajectory
 
 
@@ -78,18 +78,20 @@ COV_HEADER = ["pr11", "pr12", "pr13", "pr22", "pr23", "pr33", "pt11", "pt12", "p
 EXACT = "%.17g"
 
 
+def _cov_columns(traj: Trajectory) -> np.ndarray | None:
+    """The orientation then position covariance upper triangles (N, 12), or None without covariance."""
+    if traj.cov_rot is None or traj.cov_pos is None:
+        return None
+    return np.column_stack([traj.cov_rot[:, _UPPER[0], _UPPER[1]], traj.cov_pos[:, _UPPER[0], _UPPER[1]]])
+
+
 def write_tum(path, traj: Trajectory) -> None:
     """A stage's trajectory artifact: TUM, plus the orientation and position covariance upper
     triangles (the OpenVINS layout, 20 columns) when the trajectory has covariance."""
-    if traj.cov_rot is not None and traj.cov_pos is not None:
-        cov = np.column_stack([traj.cov_rot[:, _UPPER[0], _UPPER[1]], traj.cov_pos[:, _UPPER[0], _UPPER[1]]])
-        data = np.column_stack([traj.t, traj.p, traj.q, cov])
-        header = TUM_HEADER[2:] + " " + " ".join(COV_HEADER)
-    else:
-        data, header = np.column_stack([traj.t, traj.p, traj.q]), TUM_HEADER[2:]
+    cov = _cov_columns(traj)
+    data = np.column_stack([traj.t, traj.p, traj.q] + ([] if cov is None else [cov]))
+    header = TUM_HEADER[2:] + ("" if cov is None else " " + " ".join(COV_HEADER))
     _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=EXACT, header=header))
-
-
 
 
 def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
@@ -99,7 +101,11 @@ def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
     covariance upper triangles; only for a trajectory with covariance); ``csv`` (named columns, with
     covariance columns when it has them)."""
     path = Path(path)
-    if fmt == "tum":
+    cov = _cov_columns(traj)
+    if fmt == "openvins" and cov is None:  # never invent an uncertainty the estimator did not report
+        raise EpaError("the OpenVINS format holds covariance and this trajectory has none; write tum or csv",
+                       path=str(path))
+    if fmt in ("tum", "openvins"):  # write_tum adds the covariance columns (OpenVINS's layout) when there are some
         return write_tum(path, traj)
     if fmt == "kitti":
         m = np.concatenate([traj.r, traj.p[:, :, None]], axis=2).reshape(len(traj), 12)
@@ -110,16 +116,7 @@ def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
         rows = np.column_stack([traj.p, traj.q[:, [3, 0, 1, 2]]])
         return _atomic_write(path, lambda fh: fh.write(EUROC_HEADER + "\n" + "".join(
             f"{a}," + ",".join(EXACT % v for v in row) + "\n" for a, row in zip(ns, rows))))
-    cov = None
-    if traj.cov_rot is not None and traj.cov_pos is not None:
-        cov = np.column_stack([traj.cov_rot[:, _UPPER[0], _UPPER[1]], traj.cov_pos[:, _UPPER[0], _UPPER[1]]])
-    elif fmt == "openvins":  # never invent an uncertainty the estimator did not report
-        raise EpaError("the OpenVINS format holds covariance and this trajectory has none; write tum or csv",
-                       path=str(path))
     data = np.column_stack([traj.t, traj.p, traj.q] + ([] if cov is None else [cov]))
-    if fmt == "openvins":
-        return _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=EXACT, header=TUM_HEADER[2:] + " " +
-                                                         " ".join(COV_HEADER)))
     if fmt == "csv":
         names = ["t", "x", "y", "z", "qx", "qy", "qz", "qw"] + ([] if cov is None else COV_HEADER)
         return _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=EXACT, delimiter=",", header=",".join(names),
@@ -131,9 +128,8 @@ def read_tum_file(path) -> Trajectory:
     """Read a TUM artifact this project wrote (no detection, no repair)."""
     rows = np.loadtxt(path, ndmin=2, comments="#")
     if rows.shape[1] == 20:  # with covariance (see write_tum)
-        full = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
-        return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8], cov_rot=rows[:, 8:14][:, full],
-                          cov_pos=rows[:, 14:20][:, full])
+        return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8], cov_rot=upper_to_full(rows[:, 8:14]),
+                          cov_pos=upper_to_full(rows[:, 14:20]))
     return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8])
 
 

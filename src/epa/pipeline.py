@@ -240,7 +240,7 @@ def efficiency_stage(t_est, ape: dict, est_length_m: float, timing, dataset: str
         dt = np.diff(np.sort(timing[0]))
         rate = float(1.0 / np.median(dt[dt > 0])) if (dt > 0).any() else None
         if rate is None:
-            raise EpaError("efficiency: set efficiency.sensor_rate_hz (the timing file's stamps give no rate)")
+            raise EpaError("set efficiency.sensor_rate_hz (the timing file's stamps give no rate)")
         note = f"sensor rate {rate:.3f} Hz from the timing file's stamps (efficiency.sensor_rate_hz not set)"
         log.warning("%s", note)
     summary, table = efficiency.evaluate(np.asarray(t_est), np.asarray(ape["t"]), np.asarray(ape["trans_m"]),

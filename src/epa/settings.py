@@ -81,6 +81,7 @@ def defaults() -> dict:
 GRID_FOLDERS = ("truth_dir", "algorithms_dir")
 
 
+@lru_cache(maxsize=1)
 def _strict_loader():
     """PyYAML's safe loader, except that a key given twice is an error (PyYAML keeps the last one)."""
     import yaml

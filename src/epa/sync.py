@@ -18,7 +18,7 @@ POLICIES = {"ov_eval": 0.02, "evo": 0.01}  # default max_diff (s) of each associ
 
 
 # ----------------------------------------------------------------------------- association
-def _nearest_from(stamps: np.ndarray, x: np.ndarray, lo: np.ndarray) -> np.ndarray:
+def nearest_from(stamps: np.ndarray, x: np.ndarray, lo: np.ndarray) -> np.ndarray:
     """Index of the stamp nearest to each x among stamps[lo:], ties to the earlier one."""
     n = len(stamps)
     k = np.maximum(np.searchsorted(stamps, x, side="left"), lo)
@@ -40,7 +40,7 @@ def associate_ov_eval(t_ref: np.ndarray, t_est: np.ndarray, max_diff: float, off
     n_est = len(x)
     lo = np.zeros(n_est, dtype=np.int64)
     while True:
-        j = _nearest_from(t_ref, x, lo)
+        j = nearest_from(t_ref, x, lo)
         ok = np.abs(t_ref[j] - x) <= max_diff
         jm = np.where(ok, j, -1)
         prev = np.maximum.accumulate(np.concatenate([[-1], jm[:-1]]))

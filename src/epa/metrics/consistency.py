@@ -22,13 +22,8 @@ from epa.trajectory import Trajectory
 def reference_in_estimate_frame(ref: Trajectory, alignment: Similarity, extrinsic=None) -> tuple[np.ndarray, np.ndarray]:
     """Rotations and positions of the (matched) reference poses expressed as the estimate's poses
     would be: Step 3 undone (world), then Step 2 undone (body -> sensor, scale)."""
-    inv = alignment.inverse()
-    r = inv.R @ ref.r
-    p = inv.s * ref.p @ inv.R.T + inv.t
-    if extrinsic is not None:  # Extrinsic.apply maps sensor -> body: r_b = r_c R_x^T, p_b = s p_c - r_b t_x
-        p = (p + np.einsum("nab,b->na", r, extrinsic.t)) / extrinsic.scale
-        r = r @ extrinsic.R
-    return r, p
+    r, p = alignment.inverse().apply_rp(ref.r, ref.p)
+    return (r, p) if extrinsic is None else extrinsic.to_sensor_rp(r, p)
 
 
 def _quadratic(e: np.ndarray, cov: np.ndarray) -> np.ndarray:

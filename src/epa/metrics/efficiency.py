@@ -53,12 +53,11 @@ def read_timing(path) -> tuple[np.ndarray, np.ndarray, str]:
 
 def match_nearest(t_pose: np.ndarray, t_timing: np.ndarray, max_diff: float) -> np.ndarray:
     """Index of the timing entry nearest each pose stamp, -1 where none is within ``max_diff``."""
+    from epa.sync import nearest_from
+
     order = np.argsort(t_timing, kind="stable")
     ts = t_timing[order]
-    k = np.clip(np.searchsorted(ts, t_pose), 1, max(len(ts) - 1, 1))
-    left, right = ts[np.maximum(k - 1, 0)], ts[np.minimum(k, len(ts) - 1)]
-    pick = np.where(np.abs(t_pose - left) <= np.abs(right - t_pose), k - 1, k)
-    pick = np.clip(pick, 0, len(ts) - 1)
+    pick = nearest_from(ts, t_pose, np.zeros(len(t_pose), dtype=np.int64))
     ok = np.abs(ts[pick] - t_pose) <= max_diff
     return np.where(ok, order[pick], -1)
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from epa import io
-from epa.outputs import figures
+from epa.outputs import figures, tables
 
 CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")
 GRID_FIGURES = ("ate", "success_rate", "drift_rate", "rmse_time")
@@ -84,27 +84,22 @@ def case_document(case) -> dict:
     return doc
 
 
-def _flatten(prefix: str, obj, rows: list) -> None:
+def _numbers(prefix: str, obj):
+    """(dotted name, value) of every number in a nested record."""
     if isinstance(obj, dict):
         for k, v in obj.items():
-            _flatten(f"{prefix}.{k}" if prefix else str(k), v, rows)
+            yield from _numbers(f"{prefix}.{k}" if prefix else str(k), v)
     elif isinstance(obj, (int, float)) and not isinstance(obj, bool):
-        rows.append(prefix)
+        yield prefix, obj
+
+
+SETTINGS_AND_MATRICES = ("load", "sync", "calibrate", "alignment", "thresholds", "rpe")
 
 
 def summary_rows(doc: dict) -> list[tuple[str, str, float]]:
     """(section, metric, value) for every number in the document, except matrices and settings."""
-    out = []
-    for section, record in doc.items():
-        names: list[str] = []
-        skip = ("load", "sync", "calibrate", "alignment", "thresholds", "rpe")
-        _flatten("", {k: v for k, v in record.items() if k not in skip}, names)
-        for name in names:
-            value = record
-            for part in name.split("."):
-                value = value[part]
-            out.append((section, name, value))
-    return out
+    return [(section, name, value) for section, record in doc.items()
+            for name, value in _numbers("", {k: v for k, v in record.items() if k not in SETTINGS_AND_MATRICES})]
 
 
 def summary_csv(doc: dict) -> str:
@@ -225,7 +220,7 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
 
     with open(summary_csv_path, encoding="utf-8", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    ok = [r for r in rows if r["status"] == "ok" or r["status"].startswith("globally failed")]
+    ok = [r for r in rows if tables.has_result(r["status"])]
     algs = sorted({r["algorithm"] for r in rows})
     datasets = sorted({r["dataset"] for r in rows})
     colors = figures.OKABE_ITO

@@ -224,22 +224,22 @@ def build_tables(grid: list[CaseResult], segments, decimals: int = 3) -> list[tu
         rows = [(a, [fn(_ok_runs(grid, a), s) for s in segments]) for a in algs]
         out.append((name, title, _latex_rows(seg_labels, rows, decimals), len(segments) + 1))
 
-    def marked(rows_of, key, missing):
+    def has(alg, stage):
+        return any(c.algorithm == alg and getattr(c, stage).get("available") for c in grid)
+
+    def marked(rows_of, stage, missing, pair):
         """Rows for algorithms with the data; the others named, their cells empty, never faked."""
         rows = []
         for a in algs:
-            have = any(c.algorithm == a and getattr(c, key).get("available") for c in grid)
-            cells = [rows_of(_ok_runs(grid, a, d)) if have else _Cell(None, cells_pair[key]) for d in datasets]
-            rows.append((a if have else f"{a} ({missing})", cells + [_average(cells, cells_pair[key])]))
+            cells = [rows_of(_ok_runs(grid, a, d)) if has(a, stage) else _Cell(None, pair) for d in datasets]
+            rows.append((a if has(a, stage) else f"{a} ({missing})", cells + [_average(cells, pair)]))
         return rows
 
-    cells_pair = {"consistency": True, "efficiency": False}
-    extra = [("nees", "NEES LATEX TABLE (ORI / POS, 3 = CONSISTENT)", marked(_nees, "consistency", "no covariance"),
-              datasets + ["Average"]),
+    extra = [("nees", "NEES LATEX TABLE (ORI / POS, 3 = CONSISTENT)",
+              marked(_nees, "consistency", "no covariance", True), datasets + ["Average"]),
              ("ea_drift", "EA-DRIFT LATEX TABLE (% PER-FRAME NORMALISED, SEE DOCS)",
-              marked(_ea_drift, "efficiency", "no timing"), datasets + ["Average"])]
-    runtime_rows = [(a, _runtime(grid, a)) for a in algs if any(c.algorithm == a and c.efficiency.get("available")
-                                                                 for c in grid)]
+              marked(_ea_drift, "efficiency", "no timing", False), datasets + ["Average"])]
+    runtime_rows = [(a, _runtime(grid, a)) for a in algs if has(a, "efficiency")]
     extra.append(("runtime", "RUNTIME LATEX TABLE (FRAME TIME MS: MEAN, P95, MAX; % FRAMES OVER SENSOR PERIOD)",
                   runtime_rows, ["mean", "p95", "max", "over period %"]))
 

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from epa import geometry
 from epa.readers import bags, text
 from epa.errors import EpaError
 from epa.trajectory import Trajectory
@@ -83,8 +84,7 @@ def read(path, opts: dict, *, notes: list | None = None, kitti_times=None) -> Tr
                                 on_unsorted=opts.get("unsorted", "error"), kitti_rate=opts.get("kitti_rate", 10.0),
                                 kitti_times=kitti_times, notes=notes)
     if traj.cov_rot is not None and opts.get("orientation_covariance") == "global":
-        r = traj.r  # to epica's local convention: C_local = R^T C_global R
-        traj = Trajectory(traj.t, traj.p, traj.q, cov_rot=np.einsum("nba,nbc,ncd->nad", r, traj.cov_rot, r),
+        traj = Trajectory(traj.t, traj.p, traj.q, cov_rot=geometry.local_covariance(traj.r, traj.cov_rot),
                           cov_pos=traj.cov_pos)
         if notes is not None:
             notes.append("orientation covariance converted from global to local")
@@ -95,22 +95,18 @@ def _bag_order(traj: Trajectory, path: Path, opts: dict, notes: list) -> Traject
     """Bag stamps follow the same rules as a file's: repeats and backward steps stop, unless sorting
     was asked for; every repair is a note."""
     where = f"{path} topic {opts.get('topic') or '(auto)'}"
-    if np.abs(traj.p).max(initial=0) > text.MAX_POSITION_M:
-        k = int(np.argmax(np.abs(traj.p).max(axis=1) > text.MAX_POSITION_M))
+    k = text.beyond_reach(traj.p)
+    if k is not None:
         raise EpaError(f"message {k + 1}: position beyond {text.MAX_POSITION_M:.0e} m", path=where)
-    dt = np.diff(traj.t)
-    if (dt <= 0).any():
-        k = int(np.argmax(dt <= 0)) + 1
+    bad = text.disorder(traj.t)
+    if bad is not None:
+        k, what = bad
         if opts.get("unsorted", "error") != "sort":
-            what = "repeats" if dt[k - 1] == 0 else "goes backwards"
             raise EpaError(f"message {k + 1}: stamp {float(traj.t[k])!r} {what} (set unsorted: sort to sort and"
                            " drop duplicates)", path=where)
-        order = np.argsort(traj.t, kind="stable")
-        keep = np.concatenate([[True], np.diff(traj.t[order]) > 0])
-        notes.append(f"{int((dt < 0).sum())} backward and {int((~keep).sum())} repeated stamps: sorted, kept the first"
-                     " of each repeat")
-        traj = traj.select(order[keep])
-        log.warning("%s: %s", path, notes[-1])  # a repair is a warning; what was read is a note
+        traj, note = text.sort_unique(traj)
+        notes.append(note)
+        log.warning("%s: %s", path, note)  # a repair is a warning; what was read is a note
     if len(traj) < 2:
         raise EpaError(f"only {len(traj)} pose(s); at least 2 are needed", path=where)
     return traj

@@ -106,6 +106,12 @@ def topics(path) -> list[TopicInfo]:
 def _span(reader, conns, count) -> tuple[float | None, float | None]:
     if not count:
         return None, None
+    if not reader.is2:  # a ROS 1 bag's index holds every record's time: no message is read
+        try:
+            times = [ix.time for c in conns for ix in reader.readers[0].indexes[c.id]]
+            return min(times) / 1e9, max(times) / 1e9
+        except (AttributeError, KeyError, IndexError):  # another rosbags layout: read the records
+            pass
     first = last = None
     for _, stamp, _ in reader.messages(connections=conns):
         first = stamp if first is None else first
@@ -272,10 +278,8 @@ def _finish(t, p, q, cov36) -> Trajectory:
     extra = {}
     if cov36 is not None and np.any(cov36):  # all zeros (a common placeholder) is no covariance
         c = cov36.reshape(-1, 6, 6)  # ROS order: x y z, rotation about the fixed x y z axes
-        r = geometry.quat_to_rot(q)
-        # epica's convention is the local (body-frame) orientation error, as OpenVINS writes it:
-        # R_true = R Exp(d), while ROS's is about the parent's axes, R_true = Exp(d_world) R.
-        cov_rot = np.einsum("nba,nbc,ncd->nad", r, c[:, 3:, 3:], r)
+        # ROS's orientation error is about the parent's axes; epica's is the local one
+        cov_rot = geometry.local_covariance(geometry.quat_to_rot(q), c[:, 3:, 3:])
         extra = {"cov_pos": c[:, :3, :3].copy(), "cov_rot": cov_rot, "cov_ros": c.copy()}
     return Trajectory(t, p, q, **extra)
 

@@ -214,7 +214,7 @@ def _named_columns(header: list[str] | None, width: int) -> dict | None:
     return cols
 
 
-def _upper_to_full(u: np.ndarray) -> np.ndarray:
+def upper_to_full(u: np.ndarray) -> np.ndarray:
     """(N, 6) upper triangles (11 12 13 22 23 33) -> (N, 3, 3) symmetric matrices."""
     idx = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
     return u[:, idx]
@@ -257,10 +257,15 @@ def _check_one_unit(tab: _Table, t: np.ndarray, *, ns: bool) -> None:
         tab.fail(k, f"timestamp {float(t[k]):.0f} is in nanoseconds but most stamps are seconds: the file mixes units")
 
 
+def beyond_reach(p: np.ndarray) -> int | None:
+    """The first pose farther than MAX_POSITION_M from the origin, or None."""
+    huge = np.abs(p).max(axis=1, initial=0) > MAX_POSITION_M
+    return int(np.argmax(huge)) if huge.any() else None
+
+
 def _check_positions(tab: _Table, p: np.ndarray) -> None:
-    huge = np.abs(p).max(axis=1) > MAX_POSITION_M
-    if huge.any():
-        k = int(np.argmax(huge))
+    k = beyond_reach(p)
+    if k is not None:
         tab.fail(k, f"position {np.abs(p[k]).max():.3g} m is beyond {MAX_POSITION_M:.0e} m (a diverged or corrupt row)")
 
 
@@ -276,22 +281,34 @@ def _sec_nsec(tab: _Table) -> np.ndarray:
     return out
 
 
+def disorder(t: np.ndarray) -> tuple[int, str] | None:
+    """The first stamp that repeats or goes backwards, and which; None when strictly increasing."""
+    dt = np.diff(t)
+    if not (dt <= 0).any():
+        return None
+    k = int(np.argmax(dt <= 0)) + 1
+    return k, "repeats" if dt[k - 1] == 0 else "goes backwards"
+
+
+def sort_unique(traj: Trajectory) -> tuple[Trajectory, str]:
+    """Sorted by stamp, the first of each repeat kept, and the note saying so."""
+    order = np.argsort(traj.t, kind="stable")
+    keep = np.concatenate([[True], np.diff(traj.t[order]) > 0])
+    n_back, n_dup = int((np.diff(traj.t) < 0).sum()), int((~keep).sum())
+    return traj.select(order[keep]), (f"{n_back} backward and {n_dup} repeated timestamps: sorted, kept the first"
+                                      " of each repeat")
+
+
 def _check_order(traj: Trajectory, tab: _Table, on_unsorted: str) -> Trajectory:
-    dt = np.diff(traj.t)
-    bad = dt <= 0
-    if not bad.any():
+    bad = disorder(traj.t)
+    if bad is None:
         return traj
-    k = int(np.argmax(bad)) + 1
-    what = "repeats" if dt[k - 1] == 0 else "goes backwards"
+    k, what = bad
     if on_unsorted != "sort":
         tab.fail(k, f"timestamp {float(traj.t[k])!r} {what} (set load.unsorted: sort to sort and drop duplicates)")
-    order = np.argsort(traj.t, kind="stable")
-    t_sorted = traj.t[order]
-    keep = np.concatenate([[True], np.diff(t_sorted) > 0])
-    n_back = int((dt < 0).sum())
-    n_dup = int((~keep).sum())
-    tab.notes.append(f"{n_back} backward and {n_dup} repeated timestamps: sorted, kept the first of each repeat")
-    return traj.select(order[keep])
+    traj, note = sort_unique(traj)
+    tab.notes.append(note)
+    return traj
 
 
 def read_tum(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
@@ -306,7 +323,7 @@ def read_openvins(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) ->
     if rows.shape[1] != 20:
         tab.fail(0, f"OpenVINS needs 20 columns (TUM + 12 covariance), found {rows.shape[1]}")
     return _finish(tab, rows[:, 0], rows[:, 1:4], rows[:, 4:8], time_unit=time_unit, on_unsorted=on_unsorted,
-                   cov_rot=_upper_to_full(rows[:, 8:14]), cov_pos=_upper_to_full(rows[:, 14:20]))
+                   cov_rot=upper_to_full(rows[:, 8:14]), cov_pos=upper_to_full(rows[:, 14:20]))
 
 
 def read_euroc(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
@@ -323,7 +340,7 @@ def read_named_csv(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -
         raise EpaError("the header does not name time, x, y, z, qx, qy, qz, qw columns"
                        f" (header: {', '.join(tab.header or ['none'])})", path=str(tab.path))
     rows = tab.rows
-    cov = {k: _upper_to_full(rows[:, cols["cov_" + k]]) for k in ("rot", "pos") if "cov_" + k in cols}
+    cov = {k: upper_to_full(rows[:, cols["cov_" + k]]) for k in ("rot", "pos") if "cov_" + k in cols}
     return _finish(tab, rows[:, cols["t"]], rows[:, [cols["px"], cols["py"], cols["pz"]]],
                    rows[:, [cols["qx"], cols["qy"], cols["qz"], cols["qw"]]], time_unit=time_unit,
                    header_ns=cols["ns"], on_unsorted=on_unsorted,
