@@ -272,7 +272,8 @@ def _grouped(plt, b, w, h):
     ax.set_ylabel(d["ylabel"])
     if d.get("log"):
         ax.set_yscale("log")
-    ax.legend(loc="best", ncols=min(len(algs), 3))
+    # above the axes: bars and boxes may reach any height
+    ax.legend(loc="lower left", bbox_to_anchor=(0.0, 1.0), ncols=min(len(algs), 4), borderaxespad=0.2)
     return fig
 
 

@@ -250,7 +250,8 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
         lines.append({"label": a, "x": list(segments), "y": ys, "color": k})
     out["drift_rate"] = figures.bundle("lines", "Distance drift rate against segment length",
                                        {"panels": [{"lines": lines}], "xlabel": "segment length [m]",
-                                        "ylabel": "drift rate [%]", "markers": True, "colors": colors})
+                                        "ylabel": "drift rate [%]", "markers": True, "colors": colors,
+                                        "log": True})  # a diverged run would flatten the others
     panels = []
     for d in datasets:
         panel_lines = []
