@@ -165,3 +165,20 @@ def test_openvins_mh04_diverging_run_with_timing(data, tmp_path):
 # pinned: the run diverges to km-scale errors its covariance does not admit (NEES ~1e9)
 PINNED_MH04 = {"ea_drift": 18.858148432833904, "ea_drift_seed": 821.1419057318004,
                "nees_pos_mean": 1349299313.9413412, "nees_rot_mean": 80449.04007774167}
+
+
+def test_rmse_across_runs_pairs_stamps_within_half_a_pose_spacing():
+    from epa.metrics import consistency
+
+    a = {"t": np.array([0.0, 0.1, 0.2, 0.3]), "trans_m": np.array([1.0, 2, 3, 4]), "rot_deg": np.zeros(4),
+         "nees_pos": None, "nees_rot": None}
+    # B's stamps jitter by up to 10 ms; its 0.5 s is nobody's neighbour and A's 0.3 s has no partner
+    b = {"t": np.array([0.004, 0.1, 0.21, 0.5]), "trans_m": np.array([3.0, 2, 1, 9]), "rot_deg": np.zeros(4),
+         "nees_pos": None, "nees_rot": None}
+    summary, table = consistency.across_runs({"run1": a, "run2": b})
+    np.testing.assert_allclose(table["t"], [0.0, 0.1, 0.2])
+    np.testing.assert_allclose(table["rmse_pos_m"], [np.sqrt(5), 2.0, np.sqrt(5)])
+    assert summary["n_common"] == 3 and summary["runs"] == 2 and summary["nees_pos_mean"] is None
+    # runs that share their stamps exactly (a simulator's) use exactly those
+    summary, table = consistency.across_runs({"run1": a, "run2": {**a, "trans_m": np.array([3.0, 2, 1, 0])}})
+    np.testing.assert_allclose(table["rmse_pos_m"], [np.sqrt(5), 2.0, np.sqrt(5), np.sqrt(8)])

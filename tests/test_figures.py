@@ -62,3 +62,136 @@ def test_a_bad_bundle_is_one_line(tmp_path, capsys, content, message):
     assert cli.main(["fig", str(tmp_path / "b.json"), "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and message in err and str(tmp_path / "b.json") in err
+
+
+# ----------------------------------------------------------------------------- a grid of real EuRoC files
+@pytest.fixture(scope="module")
+def euroc_grid(tmp_path_factory):
+    """MH_01 and MH_04 (OpenVINS ground truth): OpenVINS with covariance, rpg's VI-SLAM (3 runs each)
+    and VIO mono; every stage and the report run in one process, then the tables and grid figures."""
+    from conftest import DATA
+
+    if not DATA.is_dir():
+        pytest.skip(f"real data not found at {DATA} (CI keeps ../shared/data beside the checkout)")
+    from epa import chain, grid, settings
+    from epa.outputs import report, tables
+
+    gt = DATA / "rpng_open_vins/ov_data/euroc_mav"
+    rpg = DATA / "uzh-rpg_rpg_trajectory_evaluation/results"
+    sources = {("openvins", "MH_01", "run0"): DATA / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv",
+               ("openvins", "MH_04", "run0"): DATA / "qmy0519_open_vins-master/traj_estimate.txt",
+               ("vio_mono", "MH_01", "run0"): rpg / "euroc_mono_stereo/laptop/vio_mono/laptop_vio_mono_MH_01/stamped_traj_estimate.txt"}
+    for s in ("MH_01", "MH_04"):
+        for k in range(3):
+            sources["vislam_ba", s, f"run{k}"] = (rpg / f"euroc_vislam_mono/laptop/vislam_ba/laptop_vislam_ba_{s}/"
+                                                  f"stamped_ba_estimate{k}.txt")
+    truth = {"MH_01": gt / "MH_01_easy.txt", "MH_04": gt / "MH_04_difficult.txt"}
+    out = tmp_path_factory.mktemp("euroc") / "results"
+    cfg = settings.resolve({"truth_dir": str(gt), "algorithms_dir": str(rpg), "report": {"pdf": True}})
+    cases = [{"key": "/".join(k), "truth": str(truth[k[1]]), "estimate": str(v)} for k, v in sources.items()]
+    prev = None
+    for stage in chain.NAMES:
+        manifest = out / "batches/all" / f"{stage}.json"
+        grid.run_job(stage, cases, out, cfg, manifest, prev, out / f"logs/{stage}.log")
+        prev = manifest
+    keys = [c["key"] for c in cases]
+    assert tables.make(keys, out, cfg) == []
+    report.write_grid_figures(out, cfg["metrics"]["segments"])
+    return out, keys
+
+
+def test_every_figure_renders_for_a_real_euroc_grid(euroc_grid):
+    out, keys = euroc_grid
+    for key in keys:
+        folder = out / "cases" / key / "10_report"
+        expected = set(report_names := ("trajectory", "ape_time", "rpe_box", "xcorr", "steps"))
+        if key.startswith("openvins/"):  # OpenVINS writes covariance: the 3-sigma plot exists
+            expected.add("sigma3")
+        assert {p.stem for p in (folder / "figures").glob("*.png")} == expected, key
+        assert {p.stem for p in (folder / "figures").glob("*.pdf")} == expected, key
+        for p in (folder / "figures").glob("*.png"):
+            w, h = png_size(p)
+            assert 300 < w < 2200 and 200 < h < 2200, (key, p.name, w, h)
+        for name in report_names:  # each bundle holds data, not an empty frame
+            data = json.loads((folder / "bundles" / f"{name}.json").read_text())["data"]
+            assert any(isinstance(v, list) and len(v) > 0 for v in data.values()), (key, name)
+        size = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
+        assert size < 2_000_000, (key, size)  # PNG and PDF included
+    for name in ("ate", "success_rate", "drift_rate", "rmse_time"):
+        for fmt in ("png", "pdf"):
+            assert (out / "figures" / f"{name}.{fmt}").stat().st_size > 5_000, (name, fmt)
+
+
+def test_one_colour_per_algorithm_across_the_grid_figures(euroc_grid):
+    out, _ = euroc_grid
+    colour_of = {}
+    for name in ("ate", "success_rate", "drift_rate", "rmse_time"):
+        d = json.loads((out / "figures/bundles" / f"{name}.json").read_text())["data"]
+        colours = d["colors"]
+        if "algorithms" in d:
+            pairs = [(alg, colours[k]) for k, alg in enumerate(d["algorithms"])]
+        else:
+            pairs = [(line["label"], colours[line.get("color", k)]) for panel in d["panels"]
+                     for k, line in enumerate(panel["lines"])]
+        for alg, colour in pairs:
+            assert colour_of.setdefault(alg, colour) == colour, (name, alg)
+    assert set(colour_of) >= {"openvins", "vislam_ba", "vio_mono"}
+    assert len(set(colour_of.values())) == len(colour_of)
+
+
+def test_bundle_arrays_are_written_at_seven_digits_with_nan_as_null(tmp_path):
+    import numpy as np
+
+    from epa.outputs import figures
+
+    b = figures.bundle("ape_time", "t", {"t": np.array([0.0, 1.0, 2.0]), "ape": np.array([0.123456789, np.nan, 1e-9]),
+                                         "fail_start": [], "fail_end": [], "threshold": None})
+    figures.write_bundle(tmp_path / "b.json", b)
+    back = figures.read_bundle(tmp_path / "b.json")
+    assert back["data"]["ape"] == [0.1234568, None, 1e-9] and back["data"]["threshold"] is None
+    assert np.isnan(figures._arr(back["data"]["ape"])[1])
+
+
+def test_epa_eval_prints_its_stages_on_a_large_input(case, capsys, monkeypatch, tmp_path):
+    sim = case.parents[1] / "sim"
+    monkeypatch.setattr(cli, "LARGE_INPUT_MB", 0)  # every input counts as large
+    assert cli.main(["eval", str(sim / "truth/drone_figure8.txt"), str(sim / "algorithms/vio_body/drone_figure8/run1.txt"),
+                     "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("epa: ") and "MB of input" in err[0]
+    done = [line.split()[1] for line in err if line.endswith(" s")]
+    assert done == ["load", "crop", "sync", "calibrate", "align", "metrics", "drift", "consistency", "efficiency",
+                    "report"]
+
+
+def test_a_rerun_recording_holds_the_case(case, tmp_path):
+    pytest.importorskip("rerun", reason="the rerun extra is not installed")
+    import numpy as np
+    from rerun.chunk import RrdReader
+
+    from epa import io
+
+    sim = case.parents[1] / "sim"
+    out = tmp_path / "out"
+    assert cli.main(["eval", str(sim / "truth/drone_figure8.txt"), str(sim / "algorithms/vio_body/drone_figure8/run1.txt"),
+                     "--out", str(out), "--rerun", "--rate", "20"]) == 0
+    rrd = next((out / "10_report").glob("*.rrd"))
+    chunks = {str(c.entity_path): c for c in RrdReader(rrd).stream().to_chunks()}
+    assert {"/world/reference", "/world/estimate", "/world/estimate/now", "/errors/ape_m", "/consistency/nees_pos"} <= set(chunks)
+    ape = io.read_csv(out / "06_metrics/ape.csv")["trans_m"]
+    batch = chunks["/errors/ape_m"].to_record_batch()
+    column = next(name for name in batch.schema.names if name.endswith("scalars"))
+    got = np.array([v[0] for v in batch.column(column).to_pylist()])
+    np.testing.assert_allclose(got, ape, rtol=0, atol=0)
+    assert json.loads((out / "10_report/report.json").read_text())["rerun"] is True
+
+
+def test_report_rerun_without_the_extra_is_refused_at_config_time(monkeypatch):
+    from epa.errors import EpaError
+    from epa.outputs import recording
+
+    from epa import settings
+
+    monkeypatch.setattr(recording, "available", lambda: False)
+    with pytest.raises(EpaError, match=r'pip install "epica\[rerun\]"'):
+        settings.resolve({"truth_dir": "t", "algorithms_dir": "a", "report": {"rerun": True}})

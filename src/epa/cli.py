@@ -46,6 +46,8 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--stamp", choices=["header", "record"], help="bag stamps: message header (default) or record time")
     e.add_argument("--report", action="store_true",
                    help="also write 10_report/ (reports, figures; implies --artifacts, imports matplotlib)")
+    e.add_argument("--rerun", action="store_true",
+                   help='also write a Rerun recording 10_report/<name>.rrd (implies --report; pip install "epica[rerun]")')
     e.add_argument("--timing", help="per-frame timing file of the estimate (default: <est>_timing.txt|csv beside it)")
     e.add_argument("--rate", type=float, help="sensor rate (Hz) for EA-Drift (default: from the timing file)")
 
@@ -86,7 +88,8 @@ def _eval_config(args) -> dict:
         ("calibrate", "enabled"): False if args.no_calibrate else None,
         ("calibrate", "scale"): True if args.scale else None,
         ("load", "stamp"): args.stamp, ("efficiency", "sensor_rate_hz"): args.rate,
-        ("report", "per_case"): bool(args.report),  # epa eval stays free of matplotlib unless asked
+        ("report", "per_case"): bool(args.report or args.rerun),  # epa eval stays free of matplotlib unless asked
+        ("report", "rerun"): True if args.rerun else None,
         ("sources", "reference", "topic"): args.ref_topic, ("sources", "reference", "frames"): args.ref_frames,
         ("sources", "algorithms", EVAL_ALGORITHM, "topic"): args.est_topic,
         ("sources", "algorithms", EVAL_ALGORITHM, "frames"): args.est_frames,
@@ -102,6 +105,18 @@ def _eval_config(args) -> dict:
     return settings.resolve(cfg, source=args.config or "command line")
 
 
+LARGE_INPUT_MB = 20  # about 200,000 TUM poses, some seconds of work: worth showing progress
+
+
+def _input_bytes(path) -> int:
+    """Bytes of a file, or of a folder's files (a ROS 2 bag); 0 when it is missing (load reports that)."""
+    p = Path(path)
+    try:
+        return sum(f.stat().st_size for f in p.iterdir() if f.is_file()) if p.is_dir() else p.stat().st_size
+    except OSError:
+        return 0
+
+
 EVAL_ALGORITHM = "estimate"  # the name `epa eval` gives its one estimate in `sources.algorithms`
 
 
@@ -114,16 +129,23 @@ def _eval(args) -> None:
     out = chain.CaseFolder(args.out)
     chain.clear_tables(out)
     clock = {"stage": None, "t": time.perf_counter()}
+    size_mb = sum(_input_bytes(p) for p in (args.ref, args.est)) / 1e6
+    progress = args.verbose or size_mb >= LARGE_INPUT_MB
+    if progress and not args.verbose:
+        print(f"epa: {size_mb:.0f} MB of input: each stage is printed as it starts, with its time when done",
+              file=sys.stderr)
 
     def on_stage(name):
         now = time.perf_counter()
-        if args.verbose and clock["stage"]:
-            print(f"epa: {clock['stage']:<9} {now - clock['t']:7.3f} s", file=sys.stderr)
+        if progress and clock["stage"]:
+            print(f"epa: {clock['stage']:<11} {now - clock['t']:7.3f} s", file=sys.stderr)
+        if progress and name and not args.verbose:
+            print(f"epa: {name} ...", file=sys.stderr, flush=True)
         clock.update(stage=name, t=now)
 
     from epa import readers
 
-    result = chain.run_case(args.ref, args.est, args.out, cfg, write_tables=args.artifacts or args.report,
+    result = chain.run_case(args.ref, args.est, args.out, cfg, write_tables=args.artifacts or args.report or args.rerun,
                             on_stage=on_stage,
                             ref_source=readers.options(cfg, "reference"),
                             est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM))

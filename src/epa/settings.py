@@ -50,6 +50,11 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
     crop = cfg["crop"]
     if crop["start"] is not None and crop["end"] is not None and crop["end"] <= crop["start"]:
         raise EpaError(f"crop.end ({crop['end']}) must be after crop.start ({crop['start']})", path=source)
+    if cfg["report"]["rerun"]:
+        from epa.outputs import recording
+
+        if not recording.available():  # refused before any case runs, not once per case
+            raise EpaError(recording.INSTALL_HINT, path=source)
     return cfg
 
 

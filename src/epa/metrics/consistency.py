@@ -86,21 +86,34 @@ def evaluate(ref: Trajectory, est: Trajectory, alignment: Similarity, extrinsic=
 
 
 def across_runs(runs: dict[str, dict]) -> tuple[dict, dict]:
-    """RMSE(t) and NEES(t) over the reference stamps every run matched. ``runs``: run ->
-    {"t": reference stamps, "trans_m", "rot_deg": APE per pose, "nees_pos", "nees_rot": NEES per
+    """RMSE(t) and NEES(t) over the stamps of the first run (by name) that every run matched within
+    half its median pose spacing. Runs of a simulator share stamps exactly (ov_eval's case); real runs of
+    one sequence evaluate at slightly different reference poses, and would otherwise share none.
+    ``runs``: run -> {"t": stamps, "trans_m", "rot_deg": APE per pose, "nees_pos", "nees_rot": NEES per
     pose or None}. NEES(t) only when every run has covariance."""
     if not runs:
         return {"runs": 0}, {}
-    keys = {k: np.round(np.asarray(r["t"]) * 1e6).astype(np.int64) for k, r in runs.items()}  # µs: stamps as read
-    common = None
-    for stamps in keys.values():
-        common = stamps if common is None else np.intersect1d(common, stamps)
-    sel = {k: np.searchsorted(stamps, common) for k, stamps in keys.items()}
+    from epa.sync import nearest_from
+
+    stamps = {k: np.asarray(r["t"], float) for k, r in runs.items()}
+    grid = stamps[min(stamps)]
+    tol = 0.5 * float(np.median(np.diff(grid))) if len(grid) > 1 else 0.0
+    keep = np.ones(len(grid), bool)
+    sel = {}
+    for k, t in stamps.items():
+        if not len(t):
+            keep[:] = False
+            sel[k] = np.zeros(len(grid), np.intp)
+            continue
+        sel[k] = nearest_from(t, grid, np.zeros(len(grid), np.int64))
+        keep &= np.abs(t[sel[k]] - grid) <= tol * (1 + 1e-9)
+    common = grid[keep]
+    sel = {k: idx[keep] for k, idx in sel.items()}
 
     def stack(name):
         return np.array([np.asarray(runs[k][name], float)[sel[k]] for k in runs])
 
-    table = {"t": common / 1e6, "rmse_pos_m": np.sqrt(np.mean(stack("trans_m") ** 2, axis=0)),
+    table = {"t": common, "rmse_pos_m": np.sqrt(np.mean(stack("trans_m") ** 2, axis=0)),
              "rmse_rot_deg": np.sqrt(np.mean(stack("rot_deg") ** 2, axis=0))}
     if all(runs[k].get("nees_pos") is not None for k in runs):
         table["nees_pos"] = np.nanmean(stack("nees_pos"), axis=0) if len(common) else np.zeros(0)

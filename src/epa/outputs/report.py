@@ -207,9 +207,13 @@ def write_case_report(case, name: str, cfg: dict) -> dict:
     fail = io.read_csv(case.path("drift", "fail_segments.csv"))
     for lang in ("en", "zh"):
         io.write_text(folder / f"report_{lang}.md", report_md(doc, name, drawn, lang, fail))
-    if c["zip"]:
+    if c["rerun"]:
+        from epa.outputs import recording
+
+        recording.write_rrd(case, name, folder / f"{name.replace('/', '_')}.rrd")
+    if c["zip"]:  # last: it holds the other report files
         case_zip(case.root, folder / f"{name.replace('/', '_')}.zip")
-    return {"figures": drawn, "zip": bool(c["zip"])}
+    return {"figures": drawn, "zip": bool(c["zip"]), "rerun": bool(c["rerun"])}
 
 
 # ----------------------------------------------------------------------------- grid figures

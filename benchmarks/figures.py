@@ -1,0 +1,102 @@
+"""Cost of reports and figures against the metric stages (issue: reports and figures). Figures go in
+docs/performance.md and the closing note, never in a timed test.
+
+    python benchmarks/figures.py [--out DIR]
+
+1. The bundled 18-case example (config/config.yaml's settings), `snakemake --cores 2`: job time
+   summed from the `benchmark:` files, for the metric stages (load ... efficiency), the per-case
+   `report` rule and the grid's `figures` rule; wall time with and without per-case reports.
+2. In one process: the time to build each case figure's bundle and to draw each kind (median over
+   the example's cases, after matplotlib is imported), and bytes per case folder.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--profile", str(ROOT / "profiles/default")]
+METRIC_STAGES = ("load", "crop", "sync", "calibrate", "align", "metrics", "drift", "consistency", "efficiency")
+
+
+def job_seconds(results: Path) -> dict[str, float]:
+    """Seconds per rule, summed over its jobs' benchmark files."""
+    out: dict[str, float] = defaultdict(float)
+    for tsv in results.rglob("benchmarks/*.tsv"):
+        with open(tsv) as fh:
+            row = next(csv.DictReader(fh, delimiter="\t"))
+        out[tsv.stem] += float(row["s"])
+    return dict(out)
+
+
+def run_example(cwd: Path, per_case: bool) -> tuple[float, dict[str, float]]:
+    cfg = yaml.safe_load((ROOT / "config/config.yaml").read_text())
+    cfg.update(truth_dir=str(cwd / "sim/truth"), algorithms_dir=str(cwd / "sim/algorithms"), results_dir="results")
+    cfg["report"] = {"per_case": per_case}
+    (cwd / "cfg.yaml").write_text(yaml.safe_dump(cfg))
+    shutil.rmtree(cwd / "results", ignore_errors=True)
+    shutil.rmtree(cwd / ".snakemake", ignore_errors=True)
+    t0 = time.perf_counter()
+    subprocess.run([*SNAKEMAKE, "--directory", str(cwd), "--configfile", str(cwd / "cfg.yaml"), "--cores", "2",
+                    "--quiet"], check=True, capture_output=True)
+    return time.perf_counter() - t0, job_seconds(cwd / "results")
+
+
+def in_process(results: Path) -> dict:
+    from epa import chain
+    from epa.outputs import figures, report
+
+    figures._setup("paper")  # import matplotlib outside the timings
+    build, draw, size = [], defaultdict(list), []
+    with tempfile.TemporaryDirectory() as tmp:
+        for case_root in sorted(results.glob("cases/*/*/*")):
+            case = chain.CaseFolder(case_root)
+            t0 = time.perf_counter()
+            bundles = report.case_bundles(case)
+            build.append(time.perf_counter() - t0)
+            for name, b in bundles.items():
+                t0 = time.perf_counter()
+                figures.render(b, Path(tmp) / name, formats=("png",))
+                draw[name].append(time.perf_counter() - t0)
+            size.append(sum(p.stat().st_size for p in (case_root / "10_report").rglob("*") if p.is_file()))
+    return {"bundles_s": statistics.median(build),
+            "draw_s": {k: round(statistics.median(v), 3) for k, v in draw.items()},
+            "report_folder_mb": {"median": statistics.median(size) / 1e6, "max": max(size) / 1e6}}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, help="working folder (default: a temporary one)")
+    args = ap.parse_args()
+    tmp = args.out or Path(tempfile.mkdtemp(prefix="epa-figbench-"))
+    tmp.mkdir(parents=True, exist_ok=True)
+    from epa import simulate
+
+    cwd = tmp / "example"
+    if not (cwd / "sim").exists():
+        simulate.simulate(cwd / "sim")
+    wall_off, _ = run_example(cwd, per_case=False)
+    wall_on, jobs = run_example(cwd, per_case=True)
+    metric = sum(jobs.get(s, 0.0) for s in METRIC_STAGES)
+    print(f"example --cores 2: {wall_off:.1f} s without per-case reports, {wall_on:.1f} s with them")
+    print(f"job time: metric stages {metric:.1f} s; report {jobs.get('report', 0):.1f} s; "
+          f"figures (grid) {jobs.get('figures', 0):.1f} s; tables {jobs.get('tables', 0):.1f} s")
+    print("in process:", in_process(cwd / "results"))
+    if not args.out:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONHASHSEED", "0")
+    main()
