@@ -142,7 +142,7 @@ def render(b: dict, out_stem, *, style: str = "paper", width: float | None = Non
         # no creation date: the same bundle gives the same bytes (re-runs and batching compare equal)
         meta = {"CreationDate": None} if fmt == "pdf" else {}
         # fixed margins, not bbox_inches="tight": that draws the figure twice (half the cost of a figure);
-        # fast PNG compression: a fifth of the time of the default level, for about a quarter more bytes
+        # fast PNG compression: a few ms less per figure, for 11 % more bytes
         fig.savefig(tmp, format=fmt, metadata=meta, **({"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}))
         tmp.replace(path)
         out.append(path)
