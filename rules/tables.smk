@@ -5,7 +5,7 @@ rule tables:
     output:
         text=report(f"{RESULTS}/error_comparison.txt", caption="../docs/report_caption.rst", category="Tables"),
         summary=report(f"{RESULTS}/summary.csv", caption="../docs/report_caption.rst", category="Tables"),
-        tex=[f"{RESULTS}/tables/{name}.tex" for name in epa_tables.TABLE_NAMES],
+        tex=[f"{RESULTS}/tables/{name}.tex" for name in epa_tables.table_names(EPA)],
         across_runs=f"{RESULTS}/consistency/summary.csv",
     params:
         cases=lambda wc: sorted(CASE_BY_KEY),  # a function: braces in a name are not wildcards

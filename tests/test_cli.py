@@ -71,3 +71,27 @@ def test_a_ros2_bag_folder_is_a_run(tmp_path):
     (tmp_path / "algs/a/seq/run1_timing.txt").write_text("0 12\n")
     _, found = cases.discover(tmp_path / "truth", tmp_path / "algs")
     assert [(c.key, c.estimate.name) for c in found] == [("a/seq/run1", "run1")]
+
+
+def test_config_lists_defaults_and_marks_what_a_config_sets(tmp_path, capsys, caplog):
+    from epa import cli
+
+    assert cli.main(["config"]) == 0
+    defaults = capsys.readouterr().out.splitlines()
+    assert "sync.max_diff: null" in defaults and "metrics.kitti: false" in defaults
+    (tmp_path / "c.yaml").write_text("truth_dir: t\nalgorithms_dir: a\nmetrics: {kitti: true}\nmode: ov_eval\n"
+                                     "sync: {max_diff: 0.05}\n")
+    assert cli.main(["config", str(tmp_path / "c.yaml")]) == 0
+    captured = capsys.readouterr()
+    lines = captured.out.splitlines()
+    assert "metrics.kitti: true  # set (default false)" in lines
+    assert "sync.max_diff: 0.02  # set (default null)" in lines  # ov_eval's value: the mode overrides the file
+    assert "mode ov_eval overrides sync.max_diff: 0.05 -> 0.02" in caplog.text
+    assert cli.main(["config", str(tmp_path / "missing.yaml")]) == 2
+
+
+def test_epica_is_the_same_command():
+    import importlib.metadata
+
+    scripts = {e.name: e.value for e in importlib.metadata.entry_points(group="console_scripts")}
+    assert scripts["epica"] == scripts["epa"] == "epa.cli:main"

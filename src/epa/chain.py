@@ -281,6 +281,11 @@ def _metrics(case, values, cfg, write_tables):
     if write_tables:
         for name in ("ape", "rpe_segments", "rpe_time"):
             io.write_csv(case.path("metrics", name + ".csv"), tables[name])
+    kitti_table = case.path("metrics", "kitti_segments.csv")
+    if write_tables and "kitti_segments" in tables:
+        io.write_csv(kitti_table, tables["kitti_segments"])
+    elif kitti_table.exists():  # from a run with metrics.kitti on
+        os.unlink(kitti_table)
     io.write_json(case.path("metrics", "metrics.json"), record)
 
 
@@ -368,7 +373,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("calibrate", "04_calibrate", ("calibrate.json",), ("pairs.csv", "est.tum"), ("mode", "sync", "calibrate"),
           _calibrate),
     Stage("align", "05_align", ("transform.json",), ("aligned.tum",), ("mode", "align"), _align),
-    Stage("metrics", "06_metrics", ("metrics.json",), ("ape.csv", "rpe_segments.csv", "rpe_time.csv"),
+    Stage("metrics", "06_metrics", ("metrics.json",), ("ape.csv", "rpe_segments.csv", "rpe_time.csv", "kitti_segments.csv"),
           ("metrics",), _metrics),
     Stage("drift", "07_drift", ("drift.json",),
           ("fail_segments.csv", "pose_valid.csv", "rpe_segments_valid.csv", "rpe_time_valid.csv"),

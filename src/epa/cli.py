@@ -66,6 +66,9 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--width", type=float, help="width in inches (the height follows the style's proportions)")
     f.add_argument("--pdf", action="store_true", help="also write a vector PDF")
 
+    c = sub.add_parser("config", help="every setting: the defaults, or the effective settings of a config file")
+    c.add_argument("config", nargs="?", help="a config YAML (without it: the defaults)")
+
     s = sub.add_parser("simulate", help="write the deterministic example grid")
     s.add_argument("out", help="folder to write truth/, algorithms/ and manifest.json into")
     s.add_argument("--seed", type=int, default=7)
@@ -115,6 +118,35 @@ def _input_bytes(path) -> int:
         return sum(f.stat().st_size for f in p.iterdir() if f.is_file()) if p.is_dir() else p.stat().st_size
     except OSError:
         return 0
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict) and v:
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[prefix + k] = v
+    return out
+
+
+def _config_listing(path) -> str:
+    """One ``key: value`` line per setting, in the schema's order; with a config file, the settings it
+    changes are marked with their default."""
+    import json
+
+    from epa import settings
+
+    defaults = _flat(settings._fill({}, settings.schema()))
+    if path is None:
+        return "".join(f"{k}: {json.dumps(v)}\n" for k, v in defaults.items())
+    effective = _flat(settings.resolve(settings.load_yaml(path), source=str(path)))
+    lines = []
+    for k, v in effective.items():
+        note = "" if k in defaults and defaults[k] == v else (
+            f"  # set (default {json.dumps(defaults[k])})" if k in defaults else "  # set")
+        lines.append(f"{k}: {json.dumps(v)}{note}\n")
+    return "".join(lines)
 
 
 EVAL_ALGORITHM = "estimate"  # the name `epa eval` gives its one estimate in `sources.algorithms`
@@ -205,6 +237,8 @@ def main(argv=None) -> int:
             print("wrote " + ", ".join(map(str, written)))
         elif args.command == "traj":
             _traj(args)
+        elif args.command == "config":
+            print(_config_listing(args.config), end="")
         elif args.command == "simulate":
             from epa import simulate
 

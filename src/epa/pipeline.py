@@ -200,6 +200,13 @@ def metrics_stage(ref: Trajectory, est: Trajectory, cfg: dict):
     # an empty segment length is shown as empty, never as a number; say why once, here
     summary["notes"] = [f"no {key} m segment fits in the {length:.3f} m matched path: its RPE and drift rate are empty"
                         for key, rpe in summary["rpe_distance"].items() if rpe["trans_m"]["n"] == 0]
+    if c["kitti"]:
+        from epa.metrics import kitti
+
+        summary["kitti"], tables["kitti_segments"] = kitti.odometry(ref, est)
+        if not summary["kitti"]["n_segments"]:
+            summary["notes"].append(f"no 100 m KITTI segment fits in the {length:.3f} m matched path: the KITTI"
+                                    " metric is empty")
     for note in summary["notes"]:
         log.warning("%s", note)
     return summary, tables

@@ -192,6 +192,14 @@ def _runtime(grid, alg) -> list[_Cell]:
             _Cell((float(np.sum(w * [e["frames_over_period_pct"] for e in eff])),), pair=False)]
 
 
+def _kitti(runs) -> _Cell:
+    """KITTI devkit metric, mean over runs: (rotation deg/100 m, translation %)."""
+    have = [c.metrics["kitti"] for c in runs if (c.metrics.get("kitti") or {}).get("n_segments")]
+    if not have:
+        return _Cell(None)
+    return _Cell((_nanmean(k["rot_deg_per_100m"] for k in have), _nanmean(k["trans_pct"] for k in have)))
+
+
 def _success(runs) -> _Cell:
     if not runs:
         return _Cell(None, pair=False)
@@ -206,7 +214,8 @@ def _latex_rows(header: list[str], rows: list[tuple[str, list[_Cell]]], decimals
     return lines
 
 
-def build_tables(grid: list[CaseResult], segments, decimals: int = 3) -> list[tuple[str, str, list[str], int]]:
+def build_tables(grid: list[CaseResult], segments, decimals: int = 3,
+                 kitti: bool = False) -> list[tuple[str, str, list[str], int]]:
     """(file name, title, latex row lines, number of columns) for every table, in report order."""
     algs = sorted({c.algorithm for c in grid})
     datasets = sorted({c.dataset for c in grid})
@@ -256,6 +265,8 @@ def build_tables(grid: list[CaseResult], segments, decimals: int = 3) -> list[tu
                     lambda r: _mean_pair(r, "time", valid))
     for name, title, rows, header in extra:
         out.append((name, title, _latex_rows(header, rows, decimals), len(header) + 1))
+    if kitti:
+        per_dataset("kitti", "KITTI ODOMETRY LATEX TABLE (ROT DEG/100M / TRANS %, 100-800 M SEGMENTS)", _kitti)
     return out
 
 
@@ -331,7 +342,8 @@ SUMMARY_FIXED = ["algorithm", "dataset", "run", "status", "eval_source", "n_matc
                  "ate_rot_rmse_deg", "time_rpe_1s_trans_mean_m", "time_rpe_1s_rot_mean_deg", "time_offset_s",
                  "extrinsic_rot_deg", "extrinsic_trans_m", "success_rate_distance_pct", "success_rate_time_pct",
                  "global_failed", "knee_threshold_m", "fail_segments", "diverged_at_s", "nees_rot_mean",
-                 "nees_pos_mean", "outside_3sigma_pct", "ea_drift", "frame_time_mean_ms", "notes"]
+                 "nees_pos_mean", "outside_3sigma_pct", "ea_drift", "frame_time_mean_ms", "kitti_trans_pct",
+                 "kitti_rot_deg_per_100m", "notes"]
 
 
 def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict]]:
@@ -358,6 +370,8 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
                 row.update({k: c.consistency[k] for k in ("nees_rot_mean", "nees_pos_mean", "outside_3sigma_pct")})
             if c.efficiency.get("available"):  # empty without timing
                 row.update(ea_drift=c.efficiency["ea_drift"], frame_time_mean_ms=c.efficiency["frame_time_mean_ms"])
+            kitti = m.get("kitti") or {}  # empty unless metrics.kitti is on
+            row.update(kitti_trans_pct=kitti.get("trans_pct"), kitti_rot_deg_per_100m=kitti.get("rot_deg_per_100m"))
             # a stage after drift that failed (a broken timing file) leaves the accuracy standing
             row["notes"] = "; ".join(getattr(c, s)["failed"] for s in ("consistency", "efficiency")
                                      if getattr(c, s).get("failed")) or None
@@ -384,6 +398,11 @@ TABLE_NAMES = ("ate", "rpe_distance", "drift_rate", "rpe_time_1s", "success_rate
                "valid_ate", "valid_rpe_distance", "valid_drift_rate", "valid_rpe_time_1s", "nees", "ea_drift", "runtime")
 
 
+def table_names(cfg: dict) -> tuple[str, ...]:
+    """The .tex files the tables rule writes under these settings."""
+    return TABLE_NAMES + (("kitti",) if cfg["metrics"]["kitti"] else ())
+
+
 def write_all(grid: list[CaseResult], results_dir, cfg: dict) -> None:
     """error_comparison.txt, summary.csv and tables/<name>.tex under ``results_dir``."""
     results_dir = Path(results_dir)
@@ -391,7 +410,7 @@ def write_all(grid: list[CaseResult], results_dir, cfg: dict) -> None:
     decimals = cfg["tables"]["decimals"]
     io.write_text(results_dir / "error_comparison.txt", report_text(grid, segments, decimals))
     io.write_text(results_dir / "summary.csv", summary_csv(grid, segments))
-    for name, title, rows, n in build_tables(grid, segments, decimals):
+    for name, title, rows, n in build_tables(grid, segments, decimals, kitti=cfg["metrics"]["kitti"]):
         io.write_text(results_dir / "tables" / f"{name}.tex", tex_document(title, rows, n))
     write_across_runs(grid, results_dir)
 
