@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import os
 import shutil
 import statistics
 import subprocess
@@ -63,7 +62,7 @@ def in_process(results: Path) -> dict:
         for case_root in sorted(results.glob("cases/*/*/*")):
             case = chain.CaseFolder(case_root)
             t0 = time.perf_counter()
-            bundles = report.case_bundles(case)
+            bundles = report.case_bundles(report.CaseArtifacts(case))
             build.append(time.perf_counter() - t0)
             for name, b in bundles.items():
                 t0 = time.perf_counter()
@@ -98,5 +97,4 @@ def main():
 
 
 if __name__ == "__main__":
-    os.environ.setdefault("PYTHONHASHSEED", "0")
     main()

@@ -8,6 +8,19 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("EPA_SHARED_DATA", ROOT.parent / "shared" / "data"))
 
 
+def run_stages(cases: list[dict], out: Path, cfg: dict, stages=None) -> dict:
+    """Run stages (default: all) over a grid of cases in this process, as the stage jobs do; returns
+    each stage's manifest path."""
+    from epa import chain, grid
+
+    manifests = {}
+    for stage in stages or chain.NAMES:
+        manifests[stage] = out / "batches/all" / f"{stage}.json"
+        grid.run_job(stage, cases, out, cfg, manifests[stage], manifests.get(chain.previous(stage)),
+                     out / f"logs/{stage}.log")
+    return manifests
+
+
 @pytest.fixture(scope="session")
 def data():
     if not DATA.is_dir():

@@ -8,6 +8,7 @@ import pytest
 from epa import chain, grid, io, settings
 from epa.outputs import tables
 from epa.errors import EpaError
+from conftest import run_stages
 from test_steps_sim import case as sim_case
 
 
@@ -79,12 +80,7 @@ def three_cases(tmp_path, offset_case):
 
 def run_grid(tmp_path, cases, cfg):
     out = tmp_path / "results"
-    manifests = {}
-    for stage in chain.NAMES:
-        prev = manifests.get(chain.previous(stage))
-        manifests[stage] = out / "batches/all" / f"{stage}.json"
-        grid.run_job(stage, cases, out, cfg, manifests[stage], prev, out / f"logs/{stage}.log")
-    return out, manifests
+    return out, run_stages(cases, out, cfg)
 
 
 def test_a_bug_in_one_case_is_recorded_and_the_others_finish(tmp_path, three_cases, monkeypatch):

@@ -73,7 +73,8 @@ def euroc_grid(tmp_path_factory):
 
     if not DATA.is_dir():
         pytest.skip(f"real data not found at {DATA} (CI keeps ../shared/data beside the checkout)")
-    from epa import chain, grid, settings
+    from conftest import run_stages
+    from epa import settings
     from epa.outputs import report, tables
 
     gt = DATA / "rpng_open_vins/ov_data/euroc_mav"
@@ -89,11 +90,7 @@ def euroc_grid(tmp_path_factory):
     out = tmp_path_factory.mktemp("euroc") / "results"
     cfg = settings.resolve({"truth_dir": str(gt), "algorithms_dir": str(rpg), "report": {"pdf": True}})
     cases = [{"key": "/".join(k), "truth": str(truth[k[1]]), "estimate": str(v)} for k, v in sources.items()]
-    prev = None
-    for stage in chain.NAMES:
-        manifest = out / "batches/all" / f"{stage}.json"
-        grid.run_job(stage, cases, out, cfg, manifest, prev, out / f"logs/{stage}.log")
-        prev = manifest
+    run_stages(cases, out, cfg)
     keys = [c["key"] for c in cases]
     assert tables.make(keys, out, cfg) == []
     report.write_grid_figures(out, cfg["metrics"]["segments"])

@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from epa import chain, cli, grid, settings
+from conftest import run_stages
+from epa import chain, cli, settings
 from epa.outputs import tables
 
 
@@ -77,11 +78,8 @@ def test_kitti_metric_reaches_summary_and_its_table(kitti00, tmp_path):
     cfg = settings.resolve({"truth_dir": str(gt.parent), "algorithms_dir": str(gt.parent), "metrics": {"kitti": True},
                             "sync": {"estimate_offset": False}, "calibrate": {"enabled": False}})
     cases = [{"key": f"{name}/KITTI_00/run1", "truth": str(gt), "estimate": str(est)} for name, est in estimates.items()]
-    out, prev = tmp_path / "results", None
-    for stage in chain.NAMES[:-1]:  # every stage but the report
-        manifest = out / "batches/all" / f"{stage}.json"
-        grid.run_job(stage, cases, out, cfg, manifest, prev, out / f"logs/{stage}.log")
-        prev = manifest
+    out = tmp_path / "results"
+    run_stages(cases, out, cfg, chain.NAMES[:-1])  # every stage but the report
     assert tables.make([c["key"] for c in cases], out, cfg) == []
     summary = (out / "summary.csv").read_text().splitlines()
     header = summary[0].split(",")

@@ -137,7 +137,7 @@ def _config_listing(path) -> str:
 
     from epa import settings
 
-    defaults = _flat(settings._fill({}, settings.schema()))
+    defaults = _flat(settings.defaults())
     if path is None:
         return "".join(f"{k}: {json.dumps(v)}\n" for k, v in defaults.items())
     effective = _flat(settings.resolve(settings.load_yaml(path), source=str(path)))
@@ -196,7 +196,7 @@ def _eval(args) -> None:
 
 
 def _traj(args) -> None:
-    from epa import io, readers
+    from epa import io, readers, settings
     from epa.readers import bags
 
     if bags.is_bag(args.source) and not args.topic and not args.frames:
@@ -209,8 +209,9 @@ def _traj(args) -> None:
             print(f" {mark} {i.topic:<{width}}  {i.msgtype:<45} {i.count:8d} msgs  {span}".rstrip())
         print("   (* a pose type: read it with --topic, TF with --topic /tf --frames PARENT CHILD)")
         return
-    opts = {"format": args.format, "topic": args.topic, "frames": args.frames, "stamp": args.stamp,
-            "time_unit": "auto", "unsorted": "error", "kitti_rate": 10.0, "static_topic": "/tf_static"}
+    # a source at the configured defaults, with what the command line names
+    opts = {**readers.options(settings.defaults(), "reference"), "format": args.format, "topic": args.topic,
+            "frames": args.frames, "stamp": args.stamp}
     notes: list[str] = []
     traj = readers.read(args.source, opts, notes=notes)
     print(readers.describe(args.source, traj, notes))

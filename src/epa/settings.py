@@ -32,6 +32,11 @@ def _fill(value, sch: dict):
     return value
 
 
+def defaults() -> dict:
+    """Every setting at its default (the schema's), the folders aside."""
+    return _fill({}, schema())
+
+
 def resolve(config: dict | None, *, source: str = "config") -> dict:
     """Validate a config and fill in every default; a mistake is one line naming the key."""
     import jsonschema

@@ -16,15 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from epa import geometry
 from epa.trajectory import Trajectory
 
 LENGTHS_M = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
 STEP = 10
-
-
-def path_distances(p: np.ndarray) -> np.ndarray:
-    """Distance along the path at each pose (trajectoryDistances: a running sum, in pose order)."""
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
 
 
 def segments(dist: np.ndarray, lengths=LENGTHS_M, step: int = STEP) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -44,21 +40,13 @@ def segments(dist: np.ndarray, lengths=LENGTHS_M, step: int = STEP) -> tuple[np.
 
 
 def odometry(ref: Trajectory, est: Trajectory) -> tuple[dict, dict]:
-    """Summary (means, and per length) and the per-segment table."""
-    f, l, lengths = segments(path_distances(ref.p))
-    # relative motion of each: delta = inv(P_f) P_l
-    r_ref = np.einsum("nji,njk->nik", ref.r[f], ref.r[l])
-    t_ref = np.einsum("nji,nj->ni", ref.r[f], ref.p[l] - ref.p[f])
-    r_est = np.einsum("nji,njk->nik", est.r[f], est.r[l])
-    t_est = np.einsum("nji,nj->ni", est.r[f], est.p[l] - est.p[f])
-    # error = inv(delta_est) delta_ref
-    r_err = np.einsum("nji,njk->nik", r_est, r_ref)
-    t_err = np.einsum("nji,nj->ni", r_est, t_ref - t_est)
-    cos = np.clip(0.5 * (np.trace(r_err, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
-    rot = np.arccos(cos) / lengths  # rad per m
-    trans = np.linalg.norm(t_err, axis=1) / lengths  # m per m
-    table = {"first": f, "last": l, "length_m": lengths, "trans_pct": 100.0 * trans,
-             "rot_deg_per_100m": np.degrees(rot) * 100.0}
+    """Summary (means, and per length) and the per-segment table. The per-segment error is the RPE's
+    (``geometry.relative_errors``): the devkit's inv(delta_est) delta_ref has the same angle and
+    translation norm as the RPE's inv(delta_ref) delta_est."""
+    f, l, lengths = segments(geometry.path_distances(ref.p))
+    rot_deg, trans_m = geometry.relative_errors(geometry.pose_discrepancy(ref.q, est.q), ref.p, est.p, f, l)
+    table = {"first": f, "last": l, "length_m": lengths, "trans_pct": 100.0 * trans_m / lengths,
+             "rot_deg_per_100m": 100.0 * rot_deg / lengths}
     n = len(f)
     summary = {"n_segments": int(n),
                "trans_pct": float(np.mean(table["trans_pct"])) if n else None,

@@ -263,7 +263,9 @@ def _steps(plt, b, w, h):
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0 + 0.12 / (h - 0.87)), ncols=3, borderaxespad=0.1)
+    # above the plot, clear of a "x10^4" offset label
+    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0 + 0.12 / (ax.get_position().height * h)), ncols=3,
+              borderaxespad=0.1)
     return fig
 
 

@@ -13,7 +13,6 @@ import uuid
 
 import numpy as np
 
-from epa import io
 from epa.errors import EpaError
 from epa.outputs.figures import OKABE_ITO
 
@@ -28,24 +27,19 @@ def _rgb(hex_colour: str) -> list[int]:
     return [int(hex_colour[k:k + 2], 16) for k in (1, 3, 5)]
 
 
-def write_rrd(case, name: str, out) -> None:
-    """Write ``out`` (.rrd) for a case folder (``chain.CaseFolder``); atomic like every artifact."""
+def write_rrd(arts, name: str, out) -> None:
+    """Write ``out`` (.rrd) from a case's artifacts (``report.CaseArtifacts``); atomic like every artifact."""
     if not available():
         raise EpaError(INSTALL_HINT)
     import rerun as rr
 
-    p = case.path
-    ref_c = io.read_tum_file(p("crop", "ref.tum"))
-    i_ref, _ = io.read_pair_indices(p("calibrate", "pairs.csv"))
-    ref = ref_c.select(i_ref)
-    aligned = io.read_tum_file(p("align", "aligned.tum"))
-    ape = io.read_csv(p("metrics", "ape.csv"))
+    ref, aligned, ape = arts.ref, arts.aligned, arts.ape
     # a recording id derived from the case name: the same case gives the same id on a re-run
     rec = rr.RecordingStream("epica", recording_id=uuid.uuid5(uuid.NAMESPACE_URL, f"epica:{name}"),
                              send_properties=False)
     tmp = out.with_name("." + out.name + ".tmp")
     rec.save(str(tmp))
-    rec.log("world/reference", rr.LineStrips3D([ref_c.p], colors=[[150, 150, 150]], radii=[0.02]), static=True)
+    rec.log("world/reference", rr.LineStrips3D([arts.ref_cropped.p], colors=[[150, 150, 150]], radii=[0.02]), static=True)
     rec.log("world/estimate", rr.LineStrips3D([aligned.p], colors=[_rgb(OKABE_ITO[0])], radii=[0.02]), static=True)
     times = rr.TimeColumn("time", duration=ref.t - ref.t[0])
     rec.send_columns("world/estimate/now", indexes=[times],
@@ -53,9 +47,8 @@ def write_rrd(case, name: str, out) -> None:
     rec.send_columns("world/reference/now", indexes=[times],
                      columns=rr.Points3D.columns(positions=ref.p).partition(np.ones(len(ref), int)))
     series = {"errors/ape_m": ape["trans_m"], "errors/ape_rot_deg": ape["rot_deg"]}
-    nees = p("consistency", "nees.csv")
-    if nees.exists():
-        n = io.read_csv(nees)
+    n = arts.nees
+    if n is not None:
         t_nees = rr.TimeColumn("time", duration=n["t"] - ref.t[0])
         for key in ("nees_pos", "nees_rot"):
             rec.send_columns(f"consistency/{key}", indexes=[t_nees], columns=rr.Scalars.columns(scalars=n[key]))

@@ -13,6 +13,7 @@ import hashlib
 import io as _io
 import json
 import zipfile
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -24,23 +25,62 @@ CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")
 GRID_FIGURES = ("ate", "success_rate", "drift_rate", "rmse_time")
 
 
+# ----------------------------------------------------------------------------- case artifacts
+class CaseArtifacts:
+    """The artifacts a report reads, each read once and only when asked for: the figures, the Rerun
+    recording and the documents share them."""
+
+    def __init__(self, case):
+        self.case = case  # a chain.CaseFolder
+
+    @cached_property
+    def ref_cropped(self):
+        return io.read_tum_file(self.case.path("crop", "ref.tum"))
+
+    @cached_property
+    def pairs(self):
+        return io.read_pair_indices(self.case.path("calibrate", "pairs.csv"))
+
+    @cached_property
+    def ref(self):
+        """The reference at the matched poses (row k: match k, like ``aligned``)."""
+        return self.ref_cropped.select(self.pairs[0])
+
+    @cached_property
+    def est(self):
+        """The estimate as read, at the matched poses."""
+        return io.read_tum_file(self.case.path("crop", "est.tum")).select(self.pairs[1])
+
+    @cached_property
+    def aligned(self):
+        return io.read_tum_file(self.case.path("align", "aligned.tum"))
+
+    @cached_property
+    def ape(self):
+        return io.read_csv(self.case.path("metrics", "ape.csv"))
+
+    @cached_property
+    def fail(self):
+        return io.read_csv(self.case.path("drift", "fail_segments.csv"))
+
+    @cached_property
+    def nees(self):
+        """08_consistency/nees.csv, or None without covariance."""
+        path = self.case.path("consistency", "nees.csv")
+        return io.read_csv(path) if path.exists() else None
+
+
 # ----------------------------------------------------------------------------- case bundles
-def case_bundles(case) -> dict[str, dict]:
-    """Every per-case figure's bundle, from the artifacts of a case folder (``chain.CaseFolder``)."""
-    p = case.path
-    ref_c = io.read_tum_file(p("crop", "ref.tum"))
-    est_c = io.read_tum_file(p("crop", "est.tum"))
-    i_ref, i_est = io.read_pair_indices(p("calibrate", "pairs.csv"))
-    ref = ref_c.select(i_ref)
-    aligned = io.read_tum_file(p("align", "aligned.tum"))
-    ape = io.read_csv(p("metrics", "ape.csv"))
+def case_bundles(arts: CaseArtifacts) -> dict[str, dict]:
+    """Every per-case figure's bundle, from a case's artifacts."""
+    p = arts.case.path
+    ref, aligned, ape, fail = arts.ref, arts.aligned, arts.ape, arts.fail
     drift = io.read_json(p("drift", "drift.json"))
     sync = io.read_json(p("sync", "sync.json"))
     t0 = float(ref.t[0])
     k = figures.thin(len(ref))
     out = {"trajectory": figures.bundle("trajectory", "Reference and aligned estimate, coloured by APE",
                                         {"ref": ref.p[k], "est": aligned.p[k], "err": ape["trans_m"][k]})}
-    fail = io.read_csv(p("drift", "fail_segments.csv"))
     out["ape_time"] = figures.bundle(
         "ape_time", "APE over time, fail segments shaded",
         {"t": ape["t"][k] - t0, "ape": ape["trans_m"][k],
@@ -57,15 +97,14 @@ def case_bundles(case) -> dict[str, dict]:
                                   {"lag": xc.get("lag_s", []), "corr": xc.get("corr", []),
                                    "peak": step1.get("estimated") if step1.get("used") else None,
                                    "reason": step1.get("reason", "")})
-    est_m = est_c.select(i_est)
+    est_m = arts.est
     # "before": the estimate as read, put on the reference by its first pose only
     r0 = ref.r[0] @ est_m.r[0].T
     before = (est_m.p - est_m.p[0]) @ r0.T + ref.p[0]
     out["steps"] = figures.bundle("steps", "Before and after Steps 1-3 (top view)",
                                   {"ref": ref.p[k], "before": before[k], "after": aligned.p[k]})
-    nees = p("consistency", "nees.csv")
-    if nees.exists():
-        n = io.read_csv(nees)
+    n = arts.nees
+    if n is not None:
         kk = figures.thin(len(n["t"]))  # noqa: the bound is drawn as a band, 1000 samples suffice
         out["sigma3"] = figures.bundle("sigma3", "Per-axis error and its ±3σ bound",
                                        {"t": n["t"][kk] - n["t"][0], **{c: n[c][kk] for c in n if c.startswith(("err_", "sigma_"))}})
@@ -198,19 +237,19 @@ def write_case_report(case, name: str, cfg: dict) -> dict:
     doc = case_document(case)
     io.write_json(folder / "metrics.json", doc)
     io.write_text(folder / "metrics_summary.csv", summary_csv(doc))
+    arts = CaseArtifacts(case)
     drawn = []
     if c["figures"]:
-        for fig_name, b in case_bundles(case).items():
+        for fig_name, b in case_bundles(arts).items():
             figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b)
             figures.render(b, folder / "figures" / fig_name, formats=("png", "pdf") if c["pdf"] else ("png",))
             drawn.append(fig_name)
-    fail = io.read_csv(case.path("drift", "fail_segments.csv"))
     for lang in ("en", "zh"):
-        io.write_text(folder / f"report_{lang}.md", report_md(doc, name, drawn, lang, fail))
+        io.write_text(folder / f"report_{lang}.md", report_md(doc, name, drawn, lang, arts.fail))
     if c["rerun"]:
         from epa.outputs import recording
 
-        recording.write_rrd(case, name, folder / f"{name.replace('/', '_')}.rrd")
+        recording.write_rrd(arts, name, folder / f"{name.replace('/', '_')}.rrd")
     if c["zip"]:  # last: it holds the other report files
         case_zip(case.root, folder / f"{name.replace('/', '_')}.zip")
     return {"figures": drawn, "zip": bool(c["zip"]), "rerun": bool(c["rerun"])}
