@@ -53,6 +53,44 @@ def test_a_bundle_re_renders_to_the_same_image_without_recomputing(case, tmp_pat
     assert (tmp_path / "slide.pdf").read_bytes()[:5] == b"%PDF-"
 
 
+def _scaled(obj, k):
+    """Another case's bundle data: every number times ``k``."""
+    if isinstance(obj, dict):
+        return {key: _scaled(v, k) for key, v in obj.items()}
+    if isinstance(obj, list):
+        return [_scaled(v, k) for v in obj]
+    return obj * k if isinstance(obj, (int, float)) and not isinstance(obj, bool) else obj
+
+
+def test_a_reused_figure_gives_the_same_bytes_as_a_new_one(case, tmp_path):
+    """A worker reuses each layout's figure for the next case (figures._KEPT); what it writes must
+    not depend on what it drew before."""
+    import matplotlib.pyplot as plt
+    from epa.outputs import figures
+
+    def fresh():
+        for fig in figures._KEPT.values():
+            plt.close(fig)
+        figures._KEPT.clear()
+
+    bundles = {p.stem: figures.read_bundle(p) for p in sorted((case / "bundles").glob("*.json"))}
+    fresh()
+    for name, b in bundles.items():  # another case first, every layout kept after it
+        other = dict(b, data=_scaled(b["data"], 1.7))
+        if name == "rpe_box":
+            other["data"]["lengths"] = other["data"]["lengths"][:2]
+            other["data"]["trans"] = other["data"]["trans"][:2]
+        figures.render(other, tmp_path / "other" / name)
+    no_peak = dict(bundles["xcorr"], data=dict(bundles["xcorr"]["data"], peak=None, reason="Step 1 not used"))
+    figures.render(no_peak, tmp_path / "other" / "no_peak")  # its title on the single-axes layout
+    assert len(figures._KEPT) >= 3  # single-axes, trajectory, ±3σ layouts
+    reused = {name: figures.render(b, tmp_path / "reused" / name) for name, b in bundles.items()}
+    for name, b in bundles.items():
+        fresh()
+        for new, old in zip(figures.render(b, tmp_path / "new" / name), reused[name]):
+            assert new.read_bytes() == old.read_bytes(), old.name
+
+
 @pytest.mark.parametrize("content,message", [
     ("{", "not a plot bundle"),
     ('{"format": "epica-plot-bundle/1", "kind": "pie"}', "not an epica plot bundle"),

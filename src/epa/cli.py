@@ -1,4 +1,5 @@
-"""The ``epa`` command: ``epa eval`` (one case, every stage in one process) and ``epa simulate``."""
+"""The ``epa`` command: ``epa eval`` (one case, every stage in one process), ``epa ape|rpe|res`` (evo's
+command lines, in cli_evo), ``epa traj``, ``epa fig``, ``epa config`` and ``epa simulate``."""
 
 from __future__ import annotations
 
@@ -68,6 +69,11 @@ def _parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("config", help="every setting: the defaults, or the effective settings of a config file")
     c.add_argument("config", nargs="?", help="a config YAML (without it: the defaults)")
+
+    from epa import cli_evo
+
+    cli_evo.add_parsers(sub)
+    cli_evo.add_res_parser(sub)
 
     s = sub.add_parser("simulate", help="write the deterministic example grid")
     s.add_argument("out", help="folder to write truth/, algorithms/ and manifest.json into")
@@ -238,6 +244,14 @@ def main(argv=None) -> int:
             print("wrote " + ", ".join(map(str, written)))
         elif args.command == "traj":
             _traj(args)
+        elif args.command in ("ape", "rpe"):
+            from epa import cli_evo
+
+            cli_evo.run(args)
+        elif args.command == "res":
+            from epa import cli_evo
+
+            cli_evo.res(args)
         elif args.command == "config":
             print(_config_listing(args.config), end="")
         elif args.command == "simulate":

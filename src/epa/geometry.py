@@ -136,6 +136,29 @@ def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return v + 2 * (w * uv + np.cross(u, uv))
 
 
+def slerp(q0: np.ndarray, q1: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Spherical interpolation from q0 to q1 at fractions f (shortest path), row by row."""
+    q0, q1 = normalize_quat(q0), normalize_quat(q1)
+    f = np.asarray(f, float)[..., None]
+    dot = np.sum(q0 * q1, axis=-1, keepdims=True)
+    q1 = np.where(dot < 0, -q1, q1)
+    angle = np.arccos(np.clip(np.abs(dot), 0.0, 1.0))
+    small = angle < 1e-12  # the same rotation: either end
+    s = np.sin(np.where(small, 1.0, angle))
+    w0 = np.where(small, 1.0 - f, np.sin((1.0 - f) * angle) / s)
+    w1 = np.where(small, f, np.sin(f * angle) / s)
+    return w0 * q0 + w1 * q1
+
+
+def interpolate(t: np.ndarray, p: np.ndarray, q: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Poses at stamps ``at``: positions linear, orientations slerp between the neighbouring poses;
+    clamped to the first and last pose outside the stamps (as evo's interpolate)."""
+    k = np.clip(np.searchsorted(t, at, side="left"), 1, len(t) - 1)
+    dt = t[k] - t[k - 1]
+    f = np.clip(np.where(dt > 0, (at - t[k - 1]) / np.where(dt > 0, dt, 1.0), 0.0), 0.0, 1.0)
+    return p[k - 1] + f[:, None] * (p[k] - p[k - 1]), slerp(q[k - 1], q[k], f)
+
+
 def relative_motions(q: np.ndarray, p: np.ndarray, i, j):
     """Relative motions T_i^-1 T_j for index arrays i, j, as (quaternions (M, 4), translations (M, 3))."""
     qi_inv = quat_conj(q[i])

@@ -60,7 +60,8 @@ def associate_evo(t_ref: np.ndarray, t_est: np.ndarray, max_diff: float, offset:
     """evo's association (sync.associate_trajectories, nearest_time): iterate over the shorter
     trajectory, take the nearest stamp of the longer within max_diff; poses of the longer may be reused."""
     est_longer = len(t_est) > len(t_ref)
-    short, long_ = (t_ref, t_est + offset) if est_longer else (t_est + offset, t_ref)
+    # the offset moves the longer side, in the same floating-point operations as evo
+    short, long_ = (t_ref, t_est + offset) if est_longer else (t_est, t_ref - offset)
     k = np.searchsorted(long_, short, side="right")
     k = np.minimum(k, len(long_) - 1)
     d_ub = long_[k] - short

@@ -12,7 +12,7 @@ from epa import geometry
 from epa.errors import EpaError
 from epa.trajectory import Trajectory
 
-RPE_UNITS = ("frames", "m", "s")
+RPE_UNITS = ("frames", "m", "s", "deg", "rad")
 
 
 def stats(x: np.ndarray) -> dict:
@@ -79,7 +79,11 @@ def consecutive_pairs(d: np.ndarray, delta: float):
 
 
 def evo_pairs(traj: Trajectory, delta: float, unit: str, *, all_pairs: bool = False, rel_tol: float = 0.1):
-    """Pairs as evo's id_pairs_from_delta chooses them (frames, metres) plus seconds in the same manner."""
+    """Pairs as evo's id_pairs_from_delta chooses them (frames, metres, degrees, radians) plus seconds
+    in the same manner. Consecutive: a pair ends where the amount accumulated since its start
+    (frames, path, summed rotation angle) reaches delta. All pairs: per start, the partner closest to
+    delta within ±rel_tol·delta (frames: exactly delta; angles: every partner whose direct rotation
+    angle is within the tolerance, as evo's filter_pairs_by_angle)."""
     n = len(traj)
     if unit == "frames":
         delta = int(delta)
@@ -90,6 +94,15 @@ def evo_pairs(traj: Trajectory, delta: float, unit: str, *, all_pairs: bool = Fa
             return i, i + delta
         ids = np.arange(0, n, delta)
         return ids[:-1], ids[1:]
+    if unit in ("deg", "rad"):
+        bound = 180.0 if unit == "deg" else np.pi
+        if not 0 <= delta <= bound:
+            raise EpaError(f"rpe delta angle must be within [0, {bound:g}] {unit}")
+        rad = np.radians(delta) if unit == "deg" else delta
+        if all_pairs:
+            return _pairs_at_angle(traj.q, rad, rad * rel_tol)
+        steps = geometry.quat_angle(geometry.quat_mul(geometry.quat_conj(traj.q[:-1]), traj.q[1:]))
+        return consecutive_pairs(np.concatenate([[0.0], np.cumsum(steps)]), rad)
     if unit == "m":
         d = geometry.path_distances(traj.p)
     elif unit == "s":
@@ -99,6 +112,22 @@ def evo_pairs(traj: Trajectory, delta: float, unit: str, *, all_pairs: bool = Fa
     if all_pairs:
         return closest_pairs(d, delta, delta * rel_tol, strict=False, skip=1)
     return consecutive_pairs(d, delta)
+
+
+def _pairs_at_angle(q: np.ndarray, angle: float, tol: float, block: int = 256):
+    """Every pair i < j whose relative rotation angle is within angle ± tol (O(N²), in blocks of starts)."""
+    n = len(q)
+    found_i, found_j = [], []
+    for start in range(0, max(n - 1, 0), block):
+        i = np.arange(start, min(start + block, n - 1))
+        rel = geometry.quat_angle(geometry.quat_mul(geometry.quat_conj(q[i])[:, None, :], q[None, :, :]))
+        hit = (np.abs(rel - angle) <= tol) & (np.arange(n)[None, :] > i[:, None])
+        a, b = np.nonzero(hit)
+        found_i.append(i[a])
+        found_j.append(b)
+    if not found_i:
+        return np.zeros(0, int), np.zeros(0, int)
+    return np.concatenate(found_i), np.concatenate(found_j)
 
 
 # ----------------------------------------------------------------------------- errors

@@ -13,6 +13,7 @@ colour maps (its middle is not the grey of the reference), DejaVu Sans (no LaTeX
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -52,17 +53,23 @@ def _plain(obj):
     return obj
 
 
+_NOT_FINITE = re.compile(r"-?\b(?:nan|inf)\b")
+
+
 def _json(obj) -> str:
     """JSON with arrays at 7 significant digits (a figure needs no more) and NaN as null, formatted
-    in one call per array row: element-by-element conversion cost more than drawing a figure."""
+    in one call per array: element-by-element conversion cost more than drawing a figure."""
     if isinstance(obj, np.ndarray):
-        if obj.ndim > 1:
+        if obj.ndim > 2:
             return "[" + ",".join(_json(row) for row in obj) + "]"
         if not obj.size:
-            return "[]"
-        text = ("%.7g," * obj.size % tuple(obj.tolist()))[:-1]
+            return "[" + ",".join("[]" for _ in range(len(obj))) + "]" if obj.ndim == 2 else "[]"
+        item = "%.7g," * obj.shape[-1]
+        if obj.ndim == 2:
+            item = "[" + item[:-1] + "],"
+        text = (item * (obj.size // obj.shape[-1]) % tuple(obj.ravel().tolist()))[:-1]
         if not np.isfinite(obj).all():
-            text = ",".join("null" if v in ("nan", "inf", "-inf") else v for v in text.split(","))
+            text = _NOT_FINITE.sub("null", text)
         return "[" + text + "]"
     if isinstance(obj, dict):
         return "{" + ",".join(f"{json.dumps(str(k))}:{_json(v)}" for k, v in obj.items()) + "}"
@@ -114,11 +121,59 @@ def _setup(style: str):
     return plt, w, h
 
 
-def _single(plt, w, h, top: float = 0.12):
+# A worker draws the same few layouts case after case. Creating axes and their tick objects is about
+# half of a figure's cost, so after saving, a case figure is kept (one per kind and size, in this
+# process) and the next figure of that layout reuses it, emptied of data: the same bytes as a new
+# one (a test compares them), at about half the cost.
+_KEPT: dict[tuple, object] = {}
+
+
+def _layout(plt, kind: str, size: tuple, make):
+    """A figure of this layout: the kept one, emptied, or ``make()``'s. Axes are in ``fig.axes``."""
+    key = (kind, tuple(round(v, 6) for v in size), plt.rcParams["font.size"])
+    fig = _KEPT.pop(key, None)
+    if fig is None:
+        fig = make()
+        fig._epa_layout, fig._epa_axes = key, len(fig.axes)  # axes added later (a colour bar) go on reuse
+    else:
+        _empty(fig)
+    return fig
+
+
+def _empty(fig) -> None:
+    """Back to the state of a new figure of the same layout: no data, labels or legends; default
+    ticks, limits, aspect and colour cycle. Tick objects stay (that is the saving)."""
+    for ax in fig.axes[fig._epa_axes:]:
+        ax.remove()
+    for ax in [*fig.axes, *(child for ax in fig.axes for child in ax.child_axes)]:  # insets are part of a layout
+        for artist in [*ax.lines, *ax.collections, *ax.patches, *ax.texts, *ax.images]:
+            artist.remove()
+        if ax.legend_ is not None:
+            ax.legend_.remove()
+        ax.containers.clear()
+        for loc in ("left", "center", "right"):
+            ax.set_title("", loc=loc)
+        ax.set_xlabel("")
+        ax.set_ylabel("")
+        ax.set_xscale("linear")  # default locators and formatters (a box plot leaves fixed ones)
+        ax.set_yscale("linear")
+        ax.set_aspect("auto", adjustable="box")
+        ax.set_prop_cycle(None)
+        ax.relim()
+        ax.set_autoscale_on(True)
+        ax.autoscale_view()
+    for legend in list(fig.legends):
+        legend.remove()
+
+
+def _single(plt, w, h, top: float = 0.12, kind: str = "single"):
     """One axes with fixed margins in inches (``top``: room above it, for a legend)."""
-    fig, ax = plt.subplots(figsize=(w, h))
-    fig.subplots_adjust(left=0.6 / w, right=1 - 0.1 / w, bottom=0.45 / h, top=1 - top / h)
-    return fig, ax
+    def make():
+        fig, ax = plt.subplots(figsize=(w, h))
+        fig.subplots_adjust(left=0.6 / w, right=1 - 0.1 / w, bottom=0.45 / h, top=1 - top / h)
+        return fig
+    fig = _layout(plt, kind, (w, h, top), make)
+    return fig, fig.axes[0]
 
 
 def render(b: dict, out_stem, *, style: str = "paper", width: float | None = None, formats=("png", "pdf")) -> list[Path]:
@@ -146,7 +201,11 @@ def render(b: dict, out_stem, *, style: str = "paper", width: float | None = Non
         fig.savefig(tmp, format=fmt, metadata=meta, **({"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}))
         tmp.replace(path)
         out.append(path)
-    plt.close(fig)
+    key = getattr(fig, "_epa_layout", None)
+    if key is None or key in _KEPT:
+        plt.close(fig)
+    else:
+        _KEPT[key] = fig
     return out
 
 
@@ -161,11 +220,18 @@ def _trajectory(plt, b, w, h):
     left, right, bottom, top, gap, side = 0.62, 0.85, 0.4, 0.42, 0.35, 0.9
     aw = w - left - right
     span = np.ptp(np.vstack([ref, est])[:, :2], axis=0) if len(ref) else np.ones(2)
-    th = float(np.clip(aw * span[1] / max(span[0], 1e-9), 0.8, 3.2))
+    # the height in steps of 0.05 in: cases of a dataset then share a layout (the aspect sets the limits)
+    th = round(float(np.clip(aw * span[1] / max(span[0], 1e-9), 0.8, 3.2)) / 0.05) * 0.05
     fh = bottom + side + gap + th + top
-    fig = plt.figure(figsize=(w, fh))
-    ax_top = fig.add_axes([left / w, (bottom + side + gap) / fh, aw / w, th / fh])
-    ax_side = fig.add_axes([left / w, bottom / fh, aw / w, side / fh], sharex=ax_top)
+
+    def make():
+        fig = plt.figure(figsize=(w, fh))
+        ax_top = fig.add_axes([left / w, (bottom + side + gap) / fh, aw / w, th / fh])
+        fig.add_axes([left / w, bottom / fh, aw / w, side / fh], sharex=ax_top)
+        ax_top.tick_params(labelbottom=False)
+        return fig
+    fig = _layout(plt, "trajectory", (w, fh), make)
+    ax_top, ax_side = fig.axes
     from matplotlib.collections import LineCollection
 
     vmax = np.nanpercentile(err, 99) if err.size else 1.0
@@ -184,7 +250,6 @@ def _trajectory(plt, b, w, h):
         ax.autoscale_view()
         ax.set_ylabel(label)
     ax_top.set_aspect("equal", adjustable="datalim")
-    ax_top.tick_params(labelbottom=False)
     ax_side.set_xlabel("x [m]")
     # above the plot (a trajectory fills its axes), clear of a "x10^4" offset label
     ax_top.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0 + 0.12 / th), ncols=2, fontsize="small", borderaxespad=0.1)
@@ -233,20 +298,25 @@ def _xcorr(plt, b, w, h):
     d = b["data"]
     lag, corr = _arr(d["lag"]), _arr(d["corr"])
     peak = d.get("peak")
-    fig, ax = _single(plt, w, h)
     if peak is not None and lag.size:
+        def make():
+            fig, _ = _single(plt, w, h)
+            inset = fig.axes[0].inset_axes([0.34, 0.1, 0.34, 0.34])  # below the peak, where the zoomed curve is not
+            inset.tick_params(labelsize=5.5, length=2, pad=1)
+            return fig
+        fig = _layout(plt, "xcorr", (w, h), make)
+        ax, inset = fig.axes[0], fig.axes[0].child_axes[0]
         near = np.abs(lag - peak) <= max(0.1, 20 * (lag[1] - lag[0]) if lag.size > 1 else 0.1)
         ax.plot(lag[near] * 1000, corr[near], color=OKABE_ITO[0])
         ax.axvline(peak * 1000, color=OKABE_ITO[5], lw=0.8, ls="--", label=f"offset {peak * 1000:.2f} ms")
         ax.legend(loc="upper left")
-        inset = ax.inset_axes([0.34, 0.1, 0.34, 0.34])  # below the peak, where the zoomed curve is not
         inset.plot(lag, corr, color=OKABE_ITO[0], lw=0.6)
         inset.axvline(peak, color=OKABE_ITO[5], lw=0.6, ls="--")
         inset.set_title("full curve, lag [s]", fontsize=5.5, pad=2)
-        inset.tick_params(labelsize=5.5, length=2, pad=1)
-    else:
+    else:  # why Step 1 was not used, above the plot (inside, it would cross the curve)
+        fig, ax = _single(plt, w, h, top=0.3)
         ax.plot(lag, corr, color=OKABE_ITO[0])
-        ax.text(0.02, 0.95, d.get("reason", "Step 1 not used"), transform=ax.transAxes, va="top")
+        ax.set_title(d.get("reason", "Step 1 not used"), loc="left")
     ax.set_xlabel("lag [ms]" if peak is not None else "lag [s]")
     ax.set_ylabel("normalised correlation")
     return fig
@@ -273,8 +343,13 @@ def _sigma3(plt, b, w, h):
     d = b["data"]
     t = _arr(d["t"])
     fw, fh = max(w, 7.0), h * 1.3
-    fig, axes = plt.subplots(2, 3, figsize=(fw, fh), sharex=True)
-    fig.subplots_adjust(left=0.6 / fw, right=1 - 0.1 / fw, bottom=0.45 / fh, top=1 - 0.1 / fh, wspace=0.45, hspace=0.15)
+    def make():
+        fig, _ = plt.subplots(2, 3, figsize=(fw, fh), sharex=True)
+        fig.subplots_adjust(left=0.6 / fw, right=1 - 0.1 / fw, bottom=0.45 / fh, top=1 - 0.1 / fh, wspace=0.45,
+                            hspace=0.15)
+        return fig
+    fig = _layout(plt, "sigma3", (fw, fh), make)
+    axes = np.array(fig.axes).reshape(2, 3)
     labels = [("err_x", "sigma_x", "x [m]"), ("err_y", "sigma_y", "y [m]"), ("err_z", "sigma_z", "z [m]"),
               ("err_rot_x", "sigma_rot_x", "roll [deg]"), ("err_rot_y", "sigma_rot_y", "pitch [deg]"),
               ("err_rot_z", "sigma_rot_z", "yaw [deg]")]

@@ -101,12 +101,16 @@ def _bag_order(traj: Trajectory, path: Path, opts: dict, notes: list) -> Traject
     bad = text.disorder(traj.t)
     if bad is not None:
         k, what = bad
-        if opts.get("unsorted", "error") != "sort":
+        kept = text.repeats_kept(traj.t, opts.get("unsorted", "error"))
+        if kept is not None:
+            notes.append(kept)
+        elif opts.get("unsorted", "error") != "sort":
             raise EpaError(f"message {k + 1}: stamp {float(traj.t[k])!r} {what} (set unsorted: sort to sort and"
                            " drop duplicates)", path=where)
-        traj, note = text.sort_unique(traj)
-        notes.append(note)
-        log.warning("%s: %s", path, note)  # a repair is a warning; what was read is a note
+        else:
+            traj, note = text.sort_unique(traj)
+            notes.append(note)
+            log.warning("%s: %s", path, note)  # a repair is a warning; what was read is a note
     if len(traj) < 2:
         raise EpaError(f"only {len(traj)} pose(s); at least 2 are needed", path=where)
     return traj

@@ -326,13 +326,9 @@ def _chain(edges: set[tuple[str, str]], parent: str, child: str) -> list[tuple[s
 
 def _interp(rows: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Positions (linear) and rotations (slerp) of a transform's time series at ``t``."""
-    from scipy.spatial.transform import Rotation, Slerp
-
     if len(rows) == 1:
         return np.repeat(rows[:, 1:4], len(t), axis=0), np.repeat(rows[:, 4:8], len(t), axis=0)
-    p = np.column_stack([np.interp(t, rows[:, 0], rows[:, k]) for k in (1, 2, 3)])
-    q = Slerp(rows[:, 0], Rotation.from_quat(rows[:, 4:8]))(t).as_quat()
-    return p, q
+    return geometry.interpolate(rows[:, 0], rows[:, 1:4], rows[:, 4:8], t)
 
 
 def _read_tf(reader, path: Path, topic: str, static_topic: str, frames: tuple[str, str], stamp: str, notes):

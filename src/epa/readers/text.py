@@ -299,11 +299,23 @@ def sort_unique(traj: Trajectory) -> tuple[Trajectory, str]:
                                       " of each repeat")
 
 
+def repeats_kept(t: np.ndarray, on_unsorted: str) -> str | None:
+    """With ``keep`` (as evo reads files): repeated stamps stay, in file order; the note saying so.
+    None when that does not apply (stamps that go backwards are never kept)."""
+    if on_unsorted != "keep" or (np.diff(t) < 0).any():
+        return None
+    return f"{int((np.diff(t) == 0).sum())} repeated timestamps kept (unsorted: keep)"
+
+
 def _check_order(traj: Trajectory, tab: _Table, on_unsorted: str) -> Trajectory:
     bad = disorder(traj.t)
     if bad is None:
         return traj
     k, what = bad
+    kept = repeats_kept(traj.t, on_unsorted)
+    if kept is not None:
+        tab.notes.append(kept)
+        return traj
     if on_unsorted != "sort":
         tab.fail(k, f"timestamp {float(traj.t[k])!r} {what} (set load.unsorted: sort to sort and drop duplicates)")
     traj, note = sort_unique(traj)

@@ -1,0 +1,205 @@
+"""`epa ape`, `epa rpe` (evo's command lines) and `epa res` (a table of saved results, as evo_res).
+
+    epa ape tum|euroc|kitti REF EST [options]      epa ape bag|bag2|mcap BAG REF_TOPIC EST_TOPIC [options]
+    epa rpe ... (the same forms, plus -d/-u/--all_pairs ...)
+    epa res RESULT... [--save_table FILE.csv]
+
+Option names and defaults are evo 1.38.1's; docs/evo.md maps every evo option to epica's.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+from epa.errors import EpaError
+
+FORMS = {"tum": ("ref_file", "est_file"), "euroc": ("state_gt_csv", "est_file"), "kitti": ("ref_file", "est_file"),
+         "bag": ("bag", "ref_topic", "est_topic"), "bag2": ("bag", "ref_topic", "est_topic"),
+         "mcap": ("bag", "ref_topic", "est_topic")}
+RESULT_FORMAT = "epica-result/1"
+
+
+def add_parsers(sub) -> None:
+    for kind in ("ape", "rpe"):
+        title = "absolute pose error" if kind == "ape" else "relative pose error"
+        p = sub.add_parser(kind, help=f"{title} with evo's command line (evo_{kind}'s forms, options and printout)")
+        forms = p.add_subparsers(dest="form", required=True, metavar="{tum,euroc,kitti,bag,bag2,mcap}")
+        for form, positionals in FORMS.items():
+            f = forms.add_parser(form, help=f"{' '.join(x.upper() for x in positionals)}")
+            for name in positionals:
+                f.add_argument(name)
+            _add_options(f, kind, timed=form != "kitti")
+
+
+def _add_options(f, kind: str, timed: bool) -> None:
+    from epa.metrics import relations
+
+    choices = list(relations.RELATIONS) if kind == "rpe" else list(relations.RELATIONS[:-1])
+    f.add_argument("-r", "--pose_relation", default="trans_part", choices=choices,
+                   help="pose relation the error is based on (default: trans_part)")
+    group = f.add_mutually_exclusive_group()
+    group.add_argument("-a", "--align", action="store_true", help="Umeyama SE(3) alignment")
+    group.add_argument("--align_origin", action="store_true", help="align the first poses")
+    f.add_argument("-s", "--correct_scale", action="store_true", help="with -a: Sim(3); alone: the scale only")
+    f.add_argument("--n_to_align", type=int, default=-1, help="align on the first N poses (default: all)")
+    f.add_argument("--project_to_plane", choices=["xy", "xz", "yz"], help="project both to a plane after aligning")
+    if kind == "rpe":
+        f.add_argument("-d", "--delta", type=float, default=1, help="delta between the poses of a pair")
+        f.add_argument("-u", "--delta_unit", default="f", choices=["f", "d", "r", "m"],
+                       help="unit of delta: f frames, d degrees, r radians, m metres")
+        f.add_argument("-t", "--delta_tol", type=float, default=0.1, help="relative delta tolerance (all pairs)")
+        f.add_argument("--all_pairs", action="store_true", help="all pairs instead of consecutive pairs")
+        f.add_argument("--pairs_from_reference", action="store_true", help="choose the pairs on the reference")
+    if timed:
+        f.add_argument("--t_max_diff", type=float, default=0.01, help="association tolerance (s)")
+        f.add_argument("--t_offset", type=float, default=0.0, help="added to the estimate's stamps (s)")
+        f.add_argument("--t_start", type=float, help="use reference poses from this stamp (s)")
+        f.add_argument("--t_end", type=float, help="use reference poses up to this stamp (s)")
+        f.add_argument("--sync_method", default="nearest_time", choices=["nearest_time", "interpolation"])
+        f.add_argument("--step1", action="store_true",
+                       help="epica: estimate the time offset (Step 1) and add it to --t_offset")
+    f.add_argument("--unsorted", default="error", choices=["error", "sort", "keep"],
+                   help="repeated or backward stamps: stop (default), sort and drop repeats, or keep repeats (evo)")
+    f.add_argument("--save_results", help="write the result: FILE.zip (as evo) or FILE.json")
+    f.add_argument("--silent", action="store_true", help="do not print the statistics block")
+
+
+def _read(args, which: str):
+    from epa import readers, settings
+
+    opts = readers.options(settings.defaults(), "reference")
+    opts["unsorted"] = args.unsorted
+    if args.form in ("bag", "bag2", "mcap"):
+        path, topic = args.bag, getattr(args, f"{which}_topic")
+        if ":" in topic:  # evo's TF id: /tf:parent.child
+            topic, _, frames = topic.partition(":")
+            parent, _, child = frames.split(":")[0].partition(".")
+            if not parent or not child:
+                raise EpaError(f"TF id {getattr(args, f'{which}_topic')!r} should look like /tf:parent.child",
+                               path=path)
+            opts["frames"] = (parent, child)
+        opts["topic"] = topic
+    else:
+        path = getattr(args, "state_gt_csv" if (args.form == "euroc" and which == "ref") else f"{which}_file")
+        opts["format"] = "euroc" if (args.form == "euroc" and which == "ref") else (
+            "kitti" if args.form == "kitti" else "tum")
+    try:
+        return readers.read(path, opts)
+    except EpaError as exc:
+        if "repeats" in str(exc):
+            raise EpaError(f"{exc.one_line()}; --unsorted keep keeps repeated stamps as evo does") from None
+        raise
+
+
+def run(args) -> None:
+    from epa import evo_protocol
+
+    names = {"pose_relation": "relation"}
+    fields = set(evo_protocol.EvoOptions.__dataclass_fields__)
+    values = {names.get(k, k): v for k, v in vars(args).items() if names.get(k, k) in fields and v is not None}
+    if getattr(args, "delta", None) is not None and args.delta_unit == "f" and float(args.delta).is_integer():
+        values["delta"] = int(args.delta)
+    o = evo_protocol.EvoOptions(**values)
+    ref, est = _read(args, "ref"), _read(args, "est")
+    fn = evo_protocol.ape if args.command == "ape" else evo_protocol.rpe
+    result = fn(ref, est, o, timed=args.form != "kitti")
+    if not args.silent:
+        print(result.statistics_block(), end="")
+    if args.save_results:
+        save(result, args.save_results, ref=_source(args, "ref"), est=_source(args, "est"))
+        print(f"wrote {args.save_results}")
+
+
+def _source(args, which: str) -> str:
+    if args.form in ("bag", "bag2", "mcap"):
+        return f"{args.bag}:{getattr(args, f'{which}_topic')}"
+    return str(getattr(args, "state_gt_csv" if (args.form == "euroc" and which == "ref") else f"{which}_file"))
+
+
+# ----------------------------------------------------------------------------- saved results
+def save(result, path, *, ref: str, est: str) -> None:
+    """The result as JSON (``epica-result/1``: kind, title, stats, options, info, reference and
+    estimate names, the error array), or a .zip holding ``result.json`` and ``errors.csv``."""
+    from epa import io
+    from epa.outputs import figures
+
+    info = {k: v for k, v in result.info.items() if k != "t"}
+    doc = {"format": RESULT_FORMAT, "kind": result.kind, "title": result.title, "ref": ref, "est": est,
+           "stats": result.stats, "options": result.options, "info": info}
+    path = Path(path)
+    if path.suffix.lower() != ".zip":
+        io.write_text(path, figures._json({**doc, "errors": result.errors}) + "\n")
+        return
+    tmp = path.with_name("." + path.name + ".tmp")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("result.json", json.dumps(doc, indent=1) + "\n")
+        z.writestr("errors.csv", "error\n" + "".join(f"{e!r}\n" for e in result.errors.tolist()))
+    tmp.replace(path)
+
+
+STAT_COLUMNS = ("rmse", "mean", "median", "std", "min", "max", "sse")
+
+
+def load_results(path) -> list[dict]:
+    """Rows {name, what, stats} of one saved file: an ``epa ape/rpe --save_results`` JSON or zip, a
+    case's metrics.json (06_metrics/ or 10_report/), or a case's result bundle .zip."""
+    path = Path(path)
+    try:
+        if path.suffix.lower() == ".zip":
+            with zipfile.ZipFile(path) as z:
+                names = z.namelist()
+                inner = next((n for n in names if n.endswith("result.json")), None) or next(
+                    (n for n in names if n.endswith("metrics.json")), None)
+                if inner is None:
+                    raise EpaError("the zip holds neither result.json nor metrics.json", path=str(path))
+                doc = json.loads(z.read(inner))
+        else:
+            doc = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise EpaError("file not found", path=str(path)) from None
+    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+        raise EpaError(f"not a result file: {exc}", path=str(path)) from None
+    if isinstance(doc, dict) and doc.get("format") == RESULT_FORMAT:
+        return [{"name": str(path), "what": doc["title"].split("\n")[0], "stats": doc["stats"]}]
+    metrics = doc.get("metrics", doc) if isinstance(doc, dict) else None
+    if not isinstance(metrics, dict) or "ate" not in metrics:
+        raise EpaError("neither an epa result (epica-result/1) nor a case's metrics.json", path=str(path))
+    rows = [{"name": str(path), "what": f"ATE {key}", "stats": metrics["ate"][key]}
+            for key in ("trans_m", "rot_deg") if key in metrics["ate"]]
+    for spec in metrics.get("rpe", []):
+        label = f"RPE {spec.get('delta')} {spec.get('unit')}{' all pairs' if spec.get('all_pairs') else ''}"
+        rows += [{"name": str(path), "what": f"{label} {key}", "stats": spec[key]}
+                 for key in ("trans_m", "rot_deg") if key in spec]
+    return rows
+
+
+def res(args) -> None:
+    rows = [row for path in args.results for row in load_results(path)]
+    header = ["result", "metric", *STAT_COLUMNS]
+    table = [[r["name"], r["what"], *(_cell(r["stats"].get(c)) for c in STAT_COLUMNS)] for r in rows]
+    widths = [max(len(str(x)) for x in col) for col in zip(header, *table)]
+    for line in [header, *table]:
+        print("  ".join(str(x).ljust(w) for x, w in zip(line, widths)).rstrip())
+    if args.save_table:
+        from epa import io
+
+        io.write_text(args.save_table, "\n".join(",".join(_csv(x) for x in line) for line in [header, *table]) + "\n")
+        print(f"wrote {args.save_table}")
+
+
+def _cell(v) -> str:
+    return "" if v is None else f"{v:.6f}"
+
+
+def _csv(x: str) -> str:
+    return f'"{x}"' if ("," in x or '"' in x) else x
+
+
+def add_res_parser(sub) -> None:
+    r = sub.add_parser("res", help="a table of saved results (epa ape/rpe --save_results, metrics.json, case zips)")
+    r.add_argument("results", nargs="+", help="result .json/.zip files or case metrics.json files")
+    r.add_argument("--save_table", help="also write the table as CSV")
+
