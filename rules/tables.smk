@@ -9,7 +9,7 @@ rule tables:
         across_runs=f"{RESULTS}/consistency/summary.csv",
     params:
         cases=lambda wc: sorted(CASE_BY_KEY),  # a function: braces in a name are not wildcards
-        settings={"tables": EPA["tables"], "metrics": EPA["metrics"], "efficiency": EPA["efficiency"]},
+        settings={"tables": EPA["tables"], "metrics": EPA["metrics"], "efficiency": EPA["efficiency"], "mode": EPA["mode"]},
         version=EPA_VERSION,
     log:
         f"{RESULTS}/logs/tables.log",

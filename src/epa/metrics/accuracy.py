@@ -142,6 +142,15 @@ def ape(ref: Trajectory, est: Trajectory, d: np.ndarray | None = None) -> tuple[
     return np.linalg.norm(est.p - ref.p, axis=1), np.degrees(geometry.quat_angle(d))
 
 
+def ate_2d(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """ov_eval's ATE 2D (ResultTrajectory::calculate_ate_2d) per pose: the yaw error in degrees,
+    signed, as the z component of the rotation vector of R_est R_ref^T (the error in the world frame:
+    ov_eval's JPL quat_2_Rot(q_est)^T quat_2_Rot(q_gt) is this world-from-body product), and the
+    planar position error |xy_ref - xy_est| in metres."""
+    yaw = np.degrees(geometry.quat_log(geometry.quat_mul(est.q, geometry.quat_conj(ref.q)))[:, 2])
+    return yaw, np.linalg.norm(ref.p[:, :2] - est.p[:, :2], axis=1)
+
+
 def evaluate(ref: Trajectory, est: Trajectory, *, segments=(8, 16, 24, 32, 40, 48), segment_tol: float = 0.5,
              time_delta: float = 1.0, time_tol: float = 0.1, rpe=()) -> tuple[dict, dict]:
     """All metrics of one case. Returns (summary dict for metrics.json, per-pose/per-pair tables)."""
@@ -153,7 +162,10 @@ def evaluate(ref: Trajectory, est: Trajectory, *, segments=(8, 16, 24, 32, 40, 4
     summary = {"n_matched": len(ref), "ref_length_m": float(dist[-1]) if len(dist) else 0.0,
                "duration_s": float(ref.t[-1] - ref.t[0]),
                "ate": {"trans_m": stats(trans), "rot_deg": stats(rot)}}
-    tables = {"ape": {"t": ref.t, "dist_m": dist, "trans_m": trans, "rot_deg": rot}}
+    yaw, trans_xy = ate_2d(ref, est)
+    summary["ate_2d"] = {"yaw_deg": stats(yaw), "trans_xy_m": stats(trans_xy)}  # yaw signed: its rmse is ov_eval's
+    tables = {"ape": {"t": ref.t, "dist_m": dist, "trans_m": trans, "rot_deg": rot, "yaw_deg": yaw,
+                      "trans_xy_m": trans_xy}}
 
     seg_rows = {k: [] for k in ("length_m", "i", "j", "rot_deg", "trans_m")}
     summary["rpe_distance"], summary["drift_rate_pct"] = {}, {}

@@ -133,6 +133,14 @@ def _ate(runs, valid: bool) -> _Cell:
     return _Cell((_nanmean(s["rot_deg"]["rmse"] for s in src), _nanmean(s["trans_m"]["rmse"] for s in src)))
 
 
+def _ate_2d(runs) -> _Cell:
+    """ov_eval's ATE 2D cell: the mean over runs of each run's yaw-error RMSE (deg) and planar RMSE (m)."""
+    if not runs:
+        return _Cell(None)
+    src = [c.metrics.get("ate_2d", {}) for c in runs]
+    return _Cell((_nanmean(_stat(s, "yaw_deg", "rmse") for s in src), _nanmean(_stat(s, "trans_xy_m", "rmse") for s in src)))
+
+
 def _pooled(runs, table: str, valid: bool, length=None):
     rot, trans = [], []
     for c in runs:
@@ -257,6 +265,8 @@ def build_tables(grid: list[CaseResult], segments, decimals: int = 3,
             per_dataset("success_rate", "DRIFT-VALID SUCCESS RATE LATEX TABLE (% PATH LENGTH)", _success, pair=False,
                         dec=2)
         per_dataset(prefix + "ate", f"{tag} ATE LATEX TABLE (ROT DEG / TRANS M)", lambda r: _ate(r, valid))
+        if not valid:
+            per_dataset("ate_2d", "FULL TRAJECTORY ATE 2D LATEX TABLE (YAW DEG / XY M)", _ate_2d)
         per_segment(prefix + "rpe_distance", f"{tag} DISTANCE RPE LATEX TABLE (ROT DEG / TRANS M)",
                     lambda r, s: _mean_pair(r, "segments", valid, s))
         per_segment(prefix + "drift_rate", f"{tag} DISTANCE DRIFT RATE LATEX TABLE (% TRANS / DIST)",
@@ -332,6 +342,76 @@ def report_text(grid: list[CaseResult], segments, decimals: int = 3) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _ov_stats(values) -> tuple[float, float]:
+    """Mean and standard deviation as ov_eval's Statistics: the sample deviation (n - 1), nan for one value."""
+    v = np.asarray(list(values), float)
+    return float(v.mean()), (float(v.std(ddof=1)) if v.size > 1 else np.nan)
+
+
+def _c(x: float, fmt: str) -> str:
+    """A number as C's printf prints it (glibc prints the NaN of 0/0 as -nan)."""
+    return "-nan" if np.isnan(x) else fmt % x
+
+
+def ov_eval_text(grid: list[CaseResult], segments) -> str:
+    """error_comparison.txt in mode ov_eval: what ov_eval's error_comparison (v2.7 and later) prints,
+    line for line ([COMP] lines, ATE, ATE 2D and RPE tables), so a diff shows only the numbers.
+    Deviations: a cell without a successful run reads `- / -`, where ov_eval would stop or print 0."""
+    datasets = sorted({c.dataset for c in grid})
+    algs = sorted({c.algorithm for c in grid})
+    lines = []
+    for ds in datasets:
+        info = next((c.load for c in grid if c.dataset == ds and c.load), None)
+        if info:
+            lines.append(f"[COMP]: {info['n_ref']} poses in {info['ref_file']} => length of {info['ref_length_m']:.2f} meters")
+    cells: dict[str, dict] = {"ate": {}, "ate_2d": {}}
+    for alg in algs:
+        lines += [RULE_SHORT, f"[COMP]: processing {alg} algorithm"]
+        for ds in datasets:
+            runs = _ok_runs(grid, alg, ds)
+            if not runs:
+                lines.append(f"[COMP]: {alg} dataset does not have any runs for {ds}!!!!!")
+                continue
+            lines.append(f"[COMP]: processing {alg} algorithm => {ds} dataset")
+            for name, label, fmt_std, get in (
+                    ("ate", "ATE", "%.3f", lambda c: (c.metrics["ate"]["rot_deg"]["rmse"], c.metrics["ate"]["trans_m"]["rmse"])),
+                    ("ate_2d", "ATE 2D", "%.5f", lambda c: (_stat(c.metrics, "ate_2d", "yaw_deg", "rmse"),
+                                                             _stat(c.metrics, "ate_2d", "trans_xy_m", "rmse")))):
+                ori, pos = zip(*(get(c) for c in runs))
+                (m_ori, s_ori), (m_pos, s_pos) = _ov_stats(ori), _ov_stats(pos)
+                cells[name][(alg, ds)] = (m_ori, m_pos)
+                lines.append(f"\t{label}: mean_ori = {m_ori:.3f} | mean_pos = {m_pos:.3f} ({len(runs)} runs)")
+                lines.append(f"\t{label}: std_ori  = {_c(s_ori, fmt_std)} | std_pos  = {_c(s_pos, fmt_std)}")
+            for seg in segments:
+                rot, trans = _pooled(runs, "segments", False, seg)
+                med = (np.median(rot), np.median(trans)) if rot.size else (0.0, 0.0)
+                lines.append(f"\tRPE: seg {int(seg)} - median_ori = {med[0]:.4f} | median_pos = {med[1]:.4f} "
+                             f"({rot.size} samples)")
+    lines += ["", ""]
+    header = "".join(f" & \\textbf{{{latex_escape(ds)}}}" for ds in datasets) + " & \\textbf{Average} \\\\\\hline"
+    for name, title in (("ate", "ATE LATEX TABLE"), ("ate_2d", "ATE 2D LATEX TABLE")):
+        lines += [RULE_LONG, title, RULE_LONG, header]
+        for alg in algs:
+            row, have = latex_escape(alg), [cells[name][(alg, ds)] for ds in datasets if (alg, ds) in cells[name]]
+            for ds in datasets:
+                v = cells[name].get((alg, ds))
+                row += " & - / -" if v is None else f" & {v[0]:.3f} / {v[1]:.3f}"
+            row += (f" & {np.mean([v[0] for v in have]):.3f} / {np.mean([v[1] for v in have]):.3f} \\\\" if have
+                    else " & - / - \\\\")
+            lines.append(row)
+        lines.append(RULE_LONG)
+    lines += [RULE_LONG, "RPE LATEX TABLE", RULE_LONG,
+              "".join(f" & \\textbf{{{int(seg)}m}}" for seg in segments) + " \\\\\\hline"]
+    for alg in algs:
+        row = latex_escape(alg)
+        for seg in segments:
+            rot, trans = _pooled(_ok_runs(grid, alg), "segments", False, seg)
+            row += f" & {rot.mean():.3f} / {trans.mean():.3f}" if rot.size else " & - / -"
+        lines.append(row + " \\\\")
+    lines.append(RULE_LONG)
+    return "\n".join(lines) + "\n"
+
+
 def tex_document(title: str, rows: list[str], ncols: int) -> str:
     """A table that \\input's into a paper: a tabular with the report's rows, titled in a comment."""
     spec = "l" + "c" * (ncols - 1)
@@ -394,7 +474,7 @@ def summary_csv(grid, segments) -> str:
     return buf.getvalue()
 
 
-TABLE_NAMES = ("ate", "rpe_distance", "drift_rate", "rpe_time_1s", "success_rate",
+TABLE_NAMES = ("ate", "ate_2d", "rpe_distance", "drift_rate", "rpe_time_1s", "success_rate",
                "valid_ate", "valid_rpe_distance", "valid_drift_rate", "valid_rpe_time_1s", "nees", "ea_drift", "runtime")
 
 
@@ -408,7 +488,8 @@ def write_all(grid: list[CaseResult], results_dir, cfg: dict) -> None:
     results_dir = Path(results_dir)
     segments = cfg["metrics"]["segments"]
     decimals = cfg["tables"]["decimals"]
-    io.write_text(results_dir / "error_comparison.txt", report_text(grid, segments, decimals))
+    text = ov_eval_text(grid, segments) if cfg.get("mode") == "ov_eval" else report_text(grid, segments, decimals)
+    io.write_text(results_dir / "error_comparison.txt", text)
     io.write_text(results_dir / "summary.csv", summary_csv(grid, segments))
     for name, title, rows, n in build_tables(grid, segments, decimals, kitti=cfg["metrics"]["kitti"]):
         io.write_text(results_dir / "tables" / f"{name}.tex", tex_document(title, rows, n))
