@@ -82,7 +82,7 @@ def _read(args, which: str):
             opts["frames"] = (parent, child)
         opts["topic"] = topic
     else:
-        path = getattr(args, "state_gt_csv" if (args.form == "euroc" and which == "ref") else f"{which}_file")
+        path = _path(args, which)
         opts["format"] = "euroc" if (args.form == "euroc" and which == "ref") else (
             "kitti" if args.form == "kitti" else "tum")
     try:
@@ -99,8 +99,6 @@ def run(args) -> None:
     names = {"pose_relation": "relation"}
     fields = set(evo_protocol.EvoOptions.__dataclass_fields__)
     values = {names.get(k, k): v for k, v in vars(args).items() if names.get(k, k) in fields and v is not None}
-    if getattr(args, "delta", None) is not None and args.delta_unit == "f" and float(args.delta).is_integer():
-        values["delta"] = int(args.delta)
     o = evo_protocol.EvoOptions(**values)
     ref, est = _read(args, "ref"), _read(args, "est")
     fn = evo_protocol.ape if args.command == "ape" else evo_protocol.rpe
@@ -112,10 +110,15 @@ def run(args) -> None:
         print(f"wrote {args.save_results}")
 
 
+def _path(args, which: str) -> str:
+    """The file of one side of a text form (evo names the EuRoC reference state_gt_csv)."""
+    return getattr(args, "state_gt_csv" if (args.form == "euroc" and which == "ref") else f"{which}_file")
+
+
 def _source(args, which: str) -> str:
     if args.form in ("bag", "bag2", "mcap"):
         return f"{args.bag}:{getattr(args, f'{which}_topic')}"
-    return str(getattr(args, "state_gt_csv" if (args.form == "euroc" and which == "ref") else f"{which}_file"))
+    return str(_path(args, which))
 
 
 # ----------------------------------------------------------------------------- saved results
@@ -125,9 +128,8 @@ def save(result, path, *, ref: str, est: str) -> None:
     from epa import io
     from epa.outputs import figures
 
-    info = {k: v for k, v in result.info.items() if k != "t"}
     doc = {"format": RESULT_FORMAT, "kind": result.kind, "title": result.title, "ref": ref, "est": est,
-           "stats": result.stats, "options": result.options, "info": info}
+           "stats": result.stats, "options": result.options, "info": result.info}
     path = Path(path)
     if path.suffix.lower() != ".zip":
         io.write_text(path, figures._json({**doc, "errors": result.errors}) + "\n")

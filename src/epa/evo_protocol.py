@@ -186,7 +186,7 @@ def ape(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True) 
     ref, est, o, info = prepare(ref, est, o, timed=timed)
     errors = relations.ape(ref, est, o.relation)
     return EvoResult("ape", _title(_relation_head("ape", o.relation), o), errors, relations.evo_statistics(errors),
-                     asdict(o), {**info, "t": ref.t})
+                     asdict(o), info)
 
 
 def rpe(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True) -> EvoResult:
@@ -202,8 +202,7 @@ def rpe(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True) 
                        f"or a larger --delta_tol")
     errors = relations.rpe(ref, est, i, j, o.relation)
     delta = int(o.delta) if o.delta_unit == "f" else o.delta
-    unit_name = {"f": "frames", "d": "deg", "r": "rad", "m": "m"}[o.delta_unit]
-    head = (_relation_head("rpe", o.relation) + f"\nfor delta = {delta} ({unit_name})"
+    head = (_relation_head("rpe", o.relation) + f"\nfor delta = {delta} ({DELTA_UNITS[o.delta_unit]})"
             + (" using all pairs" if o.all_pairs else " using consecutive pairs"))
     return EvoResult("rpe", _title(head, o), errors, relations.evo_statistics(errors), asdict(o),
                      {**info, "n_pairs": int(len(i))})

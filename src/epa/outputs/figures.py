@@ -166,13 +166,13 @@ def _empty(fig) -> None:
         legend.remove()
 
 
-def _single(plt, w, h, top: float = 0.12, kind: str = "single"):
+def _single(plt, w, h, top: float = 0.12):
     """One axes with fixed margins in inches (``top``: room above it, for a legend)."""
     def make():
         fig, ax = plt.subplots(figsize=(w, h))
         fig.subplots_adjust(left=0.6 / w, right=1 - 0.1 / w, bottom=0.45 / h, top=1 - top / h)
         return fig
-    fig = _layout(plt, kind, (w, h, top), make)
+    fig = _layout(plt, "single", (w, h, top), make)
     return fig, fig.axes[0]
 
 

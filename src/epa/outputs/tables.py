@@ -126,19 +126,30 @@ def _ok_runs(grid, alg, ds=None):
     return [c for c in grid if c.algorithm == alg and (ds is None or c.dataset == ds) and c.ok]
 
 
-def _ate(runs, valid: bool) -> _Cell:
+def _run_ate(c, valid: bool = False) -> tuple[float, float]:
+    """One run's ATE RMSE: rotation (deg), translation (m)."""
+    src = c.drift["drift_valid"]["ate"] if valid else c.metrics["ate"]
+    return src["rot_deg"]["rmse"], src["trans_m"]["rmse"]
+
+
+def _run_ate_2d(c) -> tuple[float, float]:
+    """One run's ATE 2D RMSE (ov_eval's): yaw (deg), planar position (m)."""
+    return _stat(c.metrics, "ate_2d", "yaw_deg", "rmse"), _stat(c.metrics, "ate_2d", "trans_xy_m", "rmse")
+
+
+def _mean_over_runs(runs, of) -> _Cell:
+    """The cell of a per-run pair: its mean over the runs (ov_eval's ATE cells)."""
     if not runs:
         return _Cell(None)
-    src = [(c.drift["drift_valid"]["ate"] if valid else c.metrics["ate"]) for c in runs]
-    return _Cell((_nanmean(s["rot_deg"]["rmse"] for s in src), _nanmean(s["trans_m"]["rmse"] for s in src)))
+    return _Cell(tuple(_nanmean(v) for v in zip(*(of(c) for c in runs))))
+
+
+def _ate(runs, valid: bool) -> _Cell:
+    return _mean_over_runs(runs, lambda c: _run_ate(c, valid))
 
 
 def _ate_2d(runs) -> _Cell:
-    """ov_eval's ATE 2D cell: the mean over runs of each run's yaw-error RMSE (deg) and planar RMSE (m)."""
-    if not runs:
-        return _Cell(None)
-    src = [c.metrics.get("ate_2d", {}) for c in runs]
-    return _Cell((_nanmean(_stat(s, "yaw_deg", "rmse") for s in src), _nanmean(_stat(s, "trans_xy_m", "rmse") for s in src)))
+    return _mean_over_runs(runs, _run_ate_2d)
 
 
 def _pooled(runs, table: str, valid: bool, length=None):
@@ -373,11 +384,8 @@ def ov_eval_text(grid: list[CaseResult], segments) -> str:
                 lines.append(f"[COMP]: {alg} dataset does not have any runs for {ds}!!!!!")
                 continue
             lines.append(f"[COMP]: processing {alg} algorithm => {ds} dataset")
-            for name, label, fmt_std, get in (
-                    ("ate", "ATE", "%.3f", lambda c: (c.metrics["ate"]["rot_deg"]["rmse"], c.metrics["ate"]["trans_m"]["rmse"])),
-                    ("ate_2d", "ATE 2D", "%.5f", lambda c: (_stat(c.metrics, "ate_2d", "yaw_deg", "rmse"),
-                                                             _stat(c.metrics, "ate_2d", "trans_xy_m", "rmse")))):
-                ori, pos = zip(*(get(c) for c in runs))
+            for name, label, fmt_std, of in (("ate", "ATE", "%.3f", _run_ate), ("ate_2d", "ATE 2D", "%.5f", _run_ate_2d)):
+                ori, pos = zip(*(of(c) for c in runs))
                 (m_ori, s_ori), (m_pos, s_pos) = _ov_stats(ori), _ov_stats(pos)
                 cells[name][(alg, ds)] = (m_ori, m_pos)
                 lines.append(f"\t{label}: mean_ori = {m_ori:.3f} | mean_pos = {m_pos:.3f} ({len(runs)} runs)")

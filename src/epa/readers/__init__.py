@@ -98,19 +98,14 @@ def _bag_order(traj: Trajectory, path: Path, opts: dict, notes: list) -> Traject
     k = text.beyond_reach(traj.p)
     if k is not None:
         raise EpaError(f"message {k + 1}: position beyond {text.MAX_POSITION_M:.0e} m", path=where)
-    bad = text.disorder(traj.t)
-    if bad is not None:
-        k, what = bad
-        kept = text.repeats_kept(traj.t, opts.get("unsorted", "error"))
-        if kept is not None:
-            notes.append(kept)
-        elif opts.get("unsorted", "error") != "sort":
-            raise EpaError(f"message {k + 1}: stamp {float(traj.t[k])!r} {what} (set unsorted: sort to sort and"
-                           " drop duplicates)", path=where)
-        else:
-            traj, note = text.sort_unique(traj)
-            notes.append(note)
-            log.warning("%s: %s", path, note)  # a repair is a warning; what was read is a note
+    try:
+        traj, note = text.in_order(traj, opts.get("unsorted", "error"))
+    except text.Unordered as bad:
+        raise EpaError(f"message {bad.k + 1}: stamp {float(traj.t[bad.k])!r} {bad.what} (set unsorted: sort to sort"
+                       " and drop duplicates)", path=where) from None
+    if note is not None:
+        notes.append(note)
+        log.warning("%s: %s", path, note)  # a repair is a warning; what was read is a note
     if len(traj) < 2:
         raise EpaError(f"only {len(traj)} pose(s); at least 2 are needed", path=where)
     return traj

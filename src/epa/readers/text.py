@@ -299,27 +299,36 @@ def sort_unique(traj: Trajectory) -> tuple[Trajectory, str]:
                                       " of each repeat")
 
 
-def repeats_kept(t: np.ndarray, on_unsorted: str) -> str | None:
-    """With ``keep`` (as evo reads files): repeated stamps stay, in file order; the note saying so.
-    None when that does not apply (stamps that go backwards are never kept)."""
-    if on_unsorted != "keep" or (np.diff(t) < 0).any():
-        return None
-    return f"{int((np.diff(t) == 0).sum())} repeated timestamps kept (unsorted: keep)"
+class Unordered(Exception):
+    """Stamps that repeat or go backwards where the rule is to stop: the first one (k) and which."""
+
+    def __init__(self, k: int, what: str):
+        super().__init__(what)
+        self.k, self.what = k, what
+
+
+def in_order(traj: Trajectory, on_unsorted: str) -> tuple[Trajectory, str | None]:
+    """The trajectory under the ``unsorted`` rule, and the note of what was done (None: in order).
+    ``sort``: sorted, the first of each repeat kept. ``keep`` (as evo reads files): repeated stamps
+    stay in file order (stamps that go backwards still stop). Otherwise raises :class:`Unordered`."""
+    bad = disorder(traj.t)
+    if bad is None:
+        return traj, None
+    if on_unsorted == "keep" and not (np.diff(traj.t) < 0).any():
+        return traj, f"{int((np.diff(traj.t) == 0).sum())} repeated timestamps kept (unsorted: keep)"
+    if on_unsorted != "sort":
+        raise Unordered(*bad)
+    return sort_unique(traj)
 
 
 def _check_order(traj: Trajectory, tab: _Table, on_unsorted: str) -> Trajectory:
-    bad = disorder(traj.t)
-    if bad is None:
-        return traj
-    k, what = bad
-    kept = repeats_kept(traj.t, on_unsorted)
-    if kept is not None:
-        tab.notes.append(kept)
-        return traj
-    if on_unsorted != "sort":
-        tab.fail(k, f"timestamp {float(traj.t[k])!r} {what} (set load.unsorted: sort to sort and drop duplicates)")
-    traj, note = sort_unique(traj)
-    tab.notes.append(note)
+    try:
+        traj, note = in_order(traj, on_unsorted)
+    except Unordered as bad:
+        tab.fail(bad.k, f"timestamp {float(traj.t[bad.k])!r} {bad.what} (set load.unsorted: sort to sort and drop"
+                        " duplicates)")
+    if note is not None:
+        tab.notes.append(note)
     return traj
 
 
