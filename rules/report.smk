@@ -23,6 +23,7 @@ rule figures:
     input:
         summary=rules.tables.output.summary,
         across_runs=rules.tables.output.across_runs,
+        success_curves=rules.tables.output.success_curves,
     output:
         **{
             f"{name}_{fmt}": report(

@@ -7,6 +7,9 @@ rule tables:
         summary=report(f"{RESULTS}/summary.csv", caption="../docs/report_caption.rst", category="Tables"),
         tex=[f"{RESULTS}/tables/{name}.tex" for name in epa_tables.table_names(EPA)],
         across_runs=f"{RESULTS}/consistency/summary.csv",
+        comparison=report(f"{RESULTS}/comparison.txt", caption="../docs/report_caption.rst", category="Tables"),
+        comparison_tex=f"{RESULTS}/comparison.tex",
+        success_curves=f"{RESULTS}/success_curves.csv",
     params:
         cases=lambda wc: sorted(CASE_BY_KEY),  # a function: braces in a name are not wildcards
         settings={"tables": EPA["tables"], "metrics": EPA["metrics"], "efficiency": EPA["efficiency"], "mode": EPA["mode"]},

@@ -84,15 +84,21 @@ def test_step1_recovers_injected_shifts_on_real_euroc_estimates(data):
               ("MH_04", data / "qmy0519_open_vins-master/traj_estimate.txt", {})]
     assert len(files) == 54
     rng = np.random.default_rng(3)
-    errors = []
+    errors, z, uncertain = [], [], []
     for seq, f, kw in files:
         est = text.read_trajectory(f, **kw)
         base = sync.estimate_offset(gts[seq], est)
         shift = rng.uniform(-1, 1)
         moved = sync.estimate_offset(gts[seq], est.shifted(-shift))
-        assert base.used and moved.used, (f, base.reason, moved.reason)
+        if not (base.used and moved.used):
+            # rpg's bundle-adjusted keyframes (a few Hz) pin the offset only to 5-70 ms: said, not used
+            assert "vislam_ba" in str(f) and "uncertain" in (base.status, moved.status), (f, base.reason, moved.reason)
+            uncertain.append(f)
+            continue
         errors.append(abs(moved.offset - base.offset - shift))
-    assert np.median(errors) <= 0.002 and np.max(errors) <= 0.005
+        z.append(errors[-1] / np.hypot(base.std, moved.std))
+    assert len(errors) >= 20 and len(uncertain) <= 40
+    assert np.median(errors) <= 0.002 and np.max(errors) <= 0.005 and np.max(z) <= 3
 
 
 def test_step1_falls_back_without_motion():

@@ -171,5 +171,7 @@ def test_step1_recovers_a_random_offset_on_random_smooth_motion(seed, offset):
     re, pe = smooth_motion(np.random.default_rng(seed), te + offset)  # same motion, read offset later
     est = Trajectory.from_rp(te, re, pe)
     out = sync.estimate_offset(ref, est, window=2.0)
-    assert out.used, out.reason
+    if not out.used:  # a few sinusoids can repeat within the window (seed 576: two peaks 3 % apart)
+        assert out.status == "ambiguous" and out.peak_ratio < 1.05, out.reason
+        return
     assert abs(out.offset - offset) < 2e-3

@@ -58,7 +58,10 @@ def test_step2_planar_motion_reports_unobservable_z():
     dirs = np.array(ext.info["translation_unobservable_directions"])
     assert len(dirs) == 1 and abs(abs(dirs[0][2]) - 1) < 1e-6
     assert ext.t[2] == pytest.approx(0, abs=1e-9)  # reported and left at zero, not fitted to noise
-    assert "rotation ill-conditioned" in ext.reason and not ext.trusted  # one rotation axis only
+    # one rotation axis only: the rotation about it and the translation along it are unobservable
+    assert ext.status == "unobservable" and not ext.trusted
+    assert np.allclose(np.abs(ext.info["rotation_unobservable_axes"]), [[0, 0, 1]], atol=1e-6)
+    assert ext.info["rotation_std_deg"][2] is None and ext.info["translation_std_m"][2] is None
 
 
 def test_step2_pure_translation_is_untrusted():

@@ -16,6 +16,9 @@ from epa import geometry
 from epa.metrics.accuracy import closest_pairs
 from epa.trajectory import Trajectory
 
+# What Step 2 concluded; anything but "trusted" means the extrinsic was not applied.
+STEP2_STATUS = ("trusted", "disabled", "not run", "too little motion", "unobservable", "large residual", "uncertain")
+
 
 @dataclass
 class Extrinsic:
@@ -24,6 +27,7 @@ class Extrinsic:
     scale: float = 1.0
     trusted: bool = False
     reason: str = ""
+    status: str = "trusted"  # one of STEP2_STATUS
     info: dict = field(default_factory=dict)
 
     def apply(self, est: Trajectory) -> Trajectory:
@@ -51,13 +55,11 @@ class Extrinsic:
     def from_dict(d: dict) -> "Extrinsic":
         """The transform of a ``to_dict`` record (what calibrate.json holds)."""
         return Extrinsic(R=np.asarray(d["rotation"], float), t=np.asarray(d["translation_m"], float),
-                         scale=float(d["scale"]), trusted=bool(d["trusted"]), reason=d["reason"])
-
-    def translation_unobservable(self) -> bool:
-        return bool(self.info.get("translation_unobservable_directions"))
+                         scale=float(d["scale"]), trusted=bool(d["trusted"]), reason=d["reason"],
+                         status=d.get("status", "trusted" if d["trusted"] else "untrusted"))
 
     def to_dict(self) -> dict:
-        return {"trusted": self.trusted, "reason": self.reason,
+        return {"trusted": self.trusted, "status": self.status, "reason": self.reason,
                 "rotation": self.R.tolist(), "quaternion_xyzw": geometry.rot_to_quat(self.R).tolist(),
                 "rotation_deg": float(np.degrees(geometry.rotation_angle(self.R))),
                 "translation_m": self.t.tolist(), "translation_norm_m": float(np.linalg.norm(self.t)),
@@ -74,12 +76,45 @@ def _kabsch(beta: np.ndarray, alpha: np.ndarray):
 
 def solve(ref: Trajectory, est: Trajectory, *, pair_step: float = 1.0, min_rotation_deg: float = 2.0,
           scale: bool = False, max_rot_residual_deg: float = 2.0, max_trans_residual_m: float = 0.2,
-          max_condition: float = 100.0, min_pairs: int = 20, outlier_iterations: int = 3) -> Extrinsic:
-    """Hand-eye calibration over all pose pairs ``pair_step`` seconds apart (on matched poses)."""
+          max_condition: float = 100.0, min_pairs: int = 20, outlier_iterations: int = 3,
+          max_rot_std_deg: float = 1.0, max_trans_std_m: float = 0.05, max_scale_std: float = 0.02,
+          offset_std: float = 0.0) -> Extrinsic:
+    """Hand-eye calibration over all pose pairs ``pair_step`` seconds apart (on matched poses),
+    with the standard deviation of every parameter (:func:`_sandwich`) and the directions the
+    motion leaves unobservable. Trusted only when everything is observed, the residuals are small
+    and the deviations within ``max_*_std``.
+
+    ``offset_std`` (s), Step 1's uncertainty, is carried into those deviations: a wrong offset
+    pairs each estimate pose with a slightly different reference pose and bends the solution. The
+    solve is repeated on the reference moved by +-offset_std and half the difference is added."""
+    fit = dict(pair_step=pair_step, min_rotation_deg=min_rotation_deg, scale=scale, max_condition=max_condition,
+               min_pairs=min_pairs, outlier_iterations=outlier_iterations)
+    ext, cov_rot, null_rot, cov_x, null_x = _fit(ref, est, **fit)
+    if cov_rot is None:
+        return ext
+    if offset_std > 0:
+        ends = []
+        for sign in (1.0, -1.0):
+            p, q = geometry.interpolate(ref.t, ref.p, ref.q, ref.t + sign * offset_std)
+            ends.append(_fit(Trajectory(ref.t, p, q), est, **fit)[0])
+        d_rot = geometry.so3_log(ends[0].R @ ends[1].R.T) / 2
+        d_x = (np.r_[ends[0].t, ends[0].scale] - np.r_[ends[1].t, ends[1].scale])[:len(cov_x)] / 2
+        cov_rot, cov_x = cov_rot + np.outer(d_rot, d_rot), cov_x + np.outer(d_x, d_x)
+        ext.info["offset_std_s"] = float(offset_std)
+    ext.info.update(_uncertainty(cov_rot, null_rot, cov_x, null_x, scale))
+    return _verdict(ext, scale, max_rot_residual_deg, max_trans_residual_m, max_rot_std_deg, max_trans_std_m,
+                    max_scale_std)
+
+
+def _fit(ref: Trajectory, est: Trajectory, *, pair_step, min_rotation_deg, scale, max_condition, min_pairs,
+         outlier_iterations):
+    """The solve, and the covariances and unobservable directions of rotation and translation (all
+    None when too little motion left nothing to solve)."""
     i, j = closest_pairs(ref.t - ref.t[0], pair_step, 0.25 * pair_step, strict=False, skip=1)
     info: dict = {"pairs": int(len(i)), "pair_step_s": pair_step}
     if len(i) < min_pairs:
-        return Extrinsic(trusted=False, reason=f"only {len(i)} motion pairs ({min_pairs} needed)", info=info)
+        return Extrinsic(trusted=False, reason=f"only {len(i)} motion pairs ({min_pairs} needed)",
+                         status="too little motion", info=info), None, None, None, None
     qa, ta = geometry.relative_motions(ref.q, ref.p, i, j)
     qb, tb = geometry.relative_motions(est.q, est.p, i, j)
     alpha, beta = geometry.quat_log(qa), geometry.quat_log(qb)
@@ -90,7 +125,8 @@ def solve(ref: Trajectory, est: Trajectory, *, pair_step: float = 1.0, min_rotat
     info["excitation_rms_deg"] = float(np.sqrt(np.mean(angle[use] ** 2))) if use.any() else 0.0
     if use.sum() < min_pairs:
         return Extrinsic(trusted=False, reason=f"too little rotation: {int(use.sum())} pairs rotate more than"
-                         f" {min_rotation_deg} deg ({min_pairs} needed)", info=info)
+                         f" {min_rotation_deg} deg ({min_pairs} needed)", status="too little motion",
+                         info=info), None, None, None, None
     keep = use.copy()
     for _ in range(outlier_iterations + 1):
         r_x, sv = _kabsch(beta[keep], alpha[keep])
@@ -104,6 +140,11 @@ def solve(ref: Trajectory, est: Trajectory, *, pair_step: float = 1.0, min_rotat
     info.update(rotation_inliers=int(keep.sum()), rotation_residual_rms_deg=rot_rms,
                 rotation_singular_values=sv.tolist(),
                 rotation_condition=float(sv[0] / sv[1]) if sv[1] > 0 else float("inf"))
+    # Rotation covariance: residual alpha - Exp(d) R beta ~ r + [R beta]x d, perturbing R on the left
+    # (body axes). Pairs overlap in time, so the residuals are grouped in blocks (see _sandwich).
+    block = np.floor((ref.t[i] - ref.t[0]) / (2.0 * pair_step)).astype(int)
+    jac_r = geometry.skew(beta[keep] @ r_x.T)
+    cov_rot, null_rot = _sandwich(jac_r, alpha[keep] - beta[keep] @ r_x.T, block[keep], max_condition)
 
     # Translation (and scale): every pair, rotation now known.
     eye = np.eye(3)
@@ -114,56 +155,125 @@ def solve(ref: Trajectory, est: Trajectory, *, pair_step: float = 1.0, min_rotat
         b = -ta
     else:
         b = rtb - ta
-    x, tinfo = _robust_lstsq(m, b, max_condition)
+    x, keep_t, tinfo = _robust_lstsq(m, b, max_condition)
     info.update(tinfo)
     t_x = x[:3]
     s = float(x[3]) if scale else 1.0
-    ext = Extrinsic(R=r_x, t=t_x, scale=s, info=info)
-    problems = []
-    if info["rotation_condition"] > max_condition:
-        problems.append(f"rotation ill-conditioned (axes barely excited, condition {info['rotation_condition']:.3g})")
-    if rot_rms > max_rot_residual_deg:
-        problems.append(f"rotation residual {rot_rms:.3g} deg > {max_rot_residual_deg}")
-    if info["translation_residual_rms_m"] > max_trans_residual_m:
-        problems.append(f"translation residual {info['translation_residual_rms_m']:.3g} m > {max_trans_residual_m}")
+    cov_x, null_x = _sandwich(m[keep_t], np.einsum("kab,b->ka", m[keep_t], x) - b[keep_t], block[keep_t], max_condition)
+    # the rotation's own uncertainty moves R_X t_B: d(residual)/d(rotation) = s [R_X t_B]x
+    lever = geometry.skew(s * rtb[keep_t])
+    h_pinv = _pinv(np.einsum("kai,kaj->ij", m[keep_t], m[keep_t]), max_condition)[0]
+    gain = h_pinv @ np.einsum("kai,kaj->ij", m[keep_t], lever)
+    cov_x = cov_x + gain @ cov_rot @ gain.T
+    return Extrinsic(R=r_x, t=t_x, scale=s, info=info), cov_rot, null_rot, cov_x, null_x
+
+
+def _verdict(ext: Extrinsic, scale: bool, max_rot_residual_deg, max_trans_residual_m, max_rot_std_deg,
+             max_trans_std_m, max_scale_std) -> Extrinsic:
+    """Status, trust and reason of a solved extrinsic: unobservable, large residual, uncertain or trusted."""
+    info, s, rot_rms = ext.info, ext.scale, ext.info["rotation_residual_rms_deg"]
+    unobservable, residual, uncertain = [], [], []
+    if info["rotation_unobservable_axes"]:
+        unobservable.append("rotation about " + _axes(info["rotation_unobservable_axes"]))
+    if info["translation_unobservable_directions"]:
+        unobservable.append("translation along " + _axes(info["translation_unobservable_directions"]))
     if scale and (not np.isfinite(s) or s <= 0 or info["scale_unobservable"]):
-        problems.append("scale not observable")
+        unobservable.append("scale")
+    if rot_rms > max_rot_residual_deg:
+        residual.append(f"rotation residual {rot_rms:.3g} deg > {max_rot_residual_deg}")
+    if info["translation_residual_rms_m"] > max_trans_residual_m:
+        residual.append(f"translation residual {info['translation_residual_rms_m']:.3g} m > {max_trans_residual_m}")
+    for name, std, limit, unit in (("rotation", info["rotation_std_deg"], max_rot_std_deg, " deg"),
+                                   ("translation", info["translation_std_m"], max_trans_std_m, " m"),
+                                   ("relative scale", [info["scale_std"] / abs(s)] if scale and s and info["scale_std"] is not None else [], max_scale_std, "")):
+        worst = max((v for v in std if v is not None), default=0.0)
+        if worst > limit:
+            uncertain.append(f"{name} std {worst:.3g}{unit} > {limit}")
+    problems = (["unobservable: " + ", ".join(unobservable)] if unobservable else []) + residual + uncertain
+    ext.status = ("unobservable" if unobservable else "large residual" if residual else "uncertain" if uncertain
+                  else "trusted")
     ext.trusted = not problems
     ext.reason = "; ".join(problems) if problems else "solved"
     return ext
 
 
+def _axes(dirs) -> str:
+    return " and ".join("[" + ", ".join(f"{v:.2f}" for v in d) + "]" for d in dirs)
+
+
+def _pinv(h: np.ndarray, max_condition: float):
+    """Pseudo-inverse of a normal matrix H = A^T A over the directions observed (singular value of A
+    at least 1/max_condition of the largest), the unit directions left out, and A's singular values
+    (largest first). Columns are scaled by unit group, not one by one: the three of a rotation or a
+    translation share one scale (else a column the motion barely excites would be blown up to look
+    observed), a fourth (scale) its own. H is n x n (n = 3 or 4): no tall SVD over all rows."""
+    d = np.diag(h)
+    col = np.full(len(d), np.sqrt(np.mean(d[:3])))
+    if len(d) > 3:
+        col[3:] = np.sqrt(d[3:])
+    col[col == 0] = 1.0
+    eig, v = np.linalg.eigh(h / np.outer(col, col))
+    eig, v = eig[::-1], v[:, ::-1]
+    sv = np.sqrt(np.clip(eig, 0, None))
+    observed = sv >= sv[0] / max_condition
+    pinv = (v[:, observed] / eig[observed]) @ v[:, observed].T / np.outer(col, col)
+    null = (v[:, ~observed] / col[:, None]).T
+    return pinv, (null / np.linalg.norm(null, axis=1, keepdims=True) if len(null) else null), sv
+
+
+def _sandwich(jac: np.ndarray, resid: np.ndarray, block: np.ndarray, max_condition: float):
+    """Covariance of a least-squares solution, H^+ S H^+ with H = sum J^T J, from residuals that are
+    correlated in time: S sums the outer products of the gradient J^T r over time blocks and of
+    each block with the next (overlapping motion pairs correlate only across neighbouring blocks),
+    scaled by G/(G-1) for G blocks. No noise level is assumed: it comes from the residuals."""
+    h_pinv, null, _ = _pinv(np.einsum("kai,kaj->ij", jac, jac), max_condition)
+    grad = np.einsum("kai,ka->ki", jac, resid)
+    ids, inverse = np.unique(block, return_inverse=True)
+    per_block = np.zeros((len(ids), jac.shape[2]))
+    np.add.at(per_block, inverse, grad)
+    s = per_block.T @ per_block
+    adjacent = np.flatnonzero(np.diff(ids) == 1)
+    cross = per_block[adjacent].T @ per_block[adjacent + 1]
+    s = s + cross + cross.T
+    eig, v = np.linalg.eigh(s)
+    s = (v * np.clip(eig, 0, None)) @ v.T  # the cross terms can leave it slightly indefinite
+    g = len(ids)
+    cov = h_pinv @ s @ h_pinv * (g / (g - 1) if g > 1 else np.inf)
+    return cov, null
+
+
+def _uncertainty(cov_rot, null_rot, cov_x, null_x, scale: bool) -> dict:
+    """Per-axis standard deviations (None along an axis an unobservable direction touches)."""
+    def per_axis(cov, null, factor=1.0):
+        touched = (np.abs(null) > 0.1).any(axis=0) if len(null) else np.zeros(len(cov), bool)
+        return [None if touched[k] else float(factor * np.sqrt(cov[k, k])) for k in range(len(cov))]
+
+    rot = per_axis(cov_rot, null_rot, np.degrees(1.0))
+    trans = per_axis(cov_x, null_x)
+    return {"rotation_std_deg": rot, "translation_std_m": trans[:3],
+            "scale_std": trans[3] if scale else None,
+            "rotation_unobservable_axes": [d.tolist() for d in null_rot],
+            "rotation_covariance_rad2": cov_rot.tolist(), "translation_covariance": cov_x.tolist()}
+
+
 def _robust_lstsq(m: np.ndarray, b: np.ndarray, max_condition: float):
-    """Least squares on stacked 3-row blocks, with one round of outlier rejection and truncation of
-    directions the motion does not observe (reported, and left at zero rather than fitted to noise)."""
+    """Least squares on stacked 3-row blocks, with up to two rounds of outlier rejection and
+    truncation of directions the motion does not observe (reported, and left at zero rather than
+    fitted to noise). Returns the solution, the rows kept and the record."""
     k, _, n = m.shape
     keep = np.ones(k, bool)
-    for _ in range(2):
-        # The normal matrix (n x n, n = 3 or 4) has the stacked system's singular values squared and
-        # the same right singular vectors: no tall SVD over all 3K rows is needed.
-        ata = np.einsum("kai,kaj->ij", m[keep], m[keep])
-        aty = np.einsum("kai,ka->i", m[keep], b[keep])
-        col = np.sqrt(np.diag(ata))
-        col[col == 0] = 1.0
-        eig, v = np.linalg.eigh(ata / np.outer(col, col))
-        order = np.argsort(eig)[::-1]
-        sv = np.sqrt(np.clip(eig[order], 0, None))
-        vt = v[:, order].T
-        observable = sv >= sv[0] / max_condition
-        coef = (vt[observable] @ (aty / col)) / sv[observable] ** 2
-        x = (vt[observable].T @ coef) / col
+    for rejection in range(3):
+        pinv, null, sv = _pinv(np.einsum("kai,kaj->ij", m[keep], m[keep]), max_condition)
+        x = pinv @ np.einsum("kai,ka->i", m[keep], b[keep])
         resid = np.linalg.norm(np.einsum("kab,b->ka", m, x) - b, axis=1)
-        limit = max(3.0 * np.median(resid[keep]), 1e-3)
-        new_keep = resid <= limit
-        if new_keep.sum() < max(n, k // 2) or np.array_equal(new_keep, keep):
+        new_keep = resid <= max(3.0 * np.median(resid[keep]), 1e-3)
+        if rejection == 2 or new_keep.sum() < max(n, k // 2) or np.array_equal(new_keep, keep):
             break
         keep = new_keep
-    null_dirs = (vt[~observable] / col)
-    null_dirs = null_dirs / np.linalg.norm(null_dirs, axis=1, keepdims=True) if len(null_dirs) else null_dirs
-    unobs_t = [d[:3].tolist() for d in null_dirs if np.linalg.norm(d[:3]) > 0.5]
-    scale_unobs = bool(n == 4 and any(abs(d[3]) > 0.5 for d in null_dirs))
-    return x, {"translation_singular_values": sv.tolist(),
-               "translation_condition": float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"),
-               "translation_unobservable_directions": unobs_t, "scale_unobservable": scale_unobs,
-               "translation_inliers": int(keep.sum()),
-               "translation_residual_rms_m": float(np.sqrt(np.mean(resid[keep] ** 2)))}
+    unobs_t = [d[:3].tolist() for d in null if np.linalg.norm(d[:3]) > 0.5]
+    scale_unobs = bool(n == 4 and any(abs(d[3]) > 0.5 for d in null))
+    return x, keep, {"translation_singular_values": sv.tolist(),
+                     "translation_condition": float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"),
+                     "translation_unobservable_directions": unobs_t, "scale_unobservable": scale_unobs,
+                     "translation_inliers": int(keep.sum()),
+                     "translation_residual_rms_m": float(np.sqrt(np.mean(resid[keep] ** 2)))}

@@ -1,5 +1,5 @@
 """The ``epa`` command: ``epa eval`` (one case, every stage in one process), ``epa ape|rpe|res`` (evo's
-command lines, in cli_evo), ``epa traj``, ``epa fig``, ``epa config`` and ``epa simulate``."""
+command lines, in cli_evo), ``epa traj``, ``epa fig``, ``epa config``, ``epa selftest`` and ``epa simulate``."""
 
 from __future__ import annotations
 
@@ -74,6 +74,15 @@ def _parser() -> argparse.ArgumentParser:
 
     cli_evo.add_parsers(sub)
     cli_evo.add_res_parser(sub)
+
+    st = sub.add_parser("selftest", help="how well Steps 1-2 recover known offsets and extrinsics on a reference's own"
+                                         " motion")
+    st.add_argument("reference", help="the reference trajectory (a text file, or a bag with --config's sources)")
+    st.add_argument("--config", help="a config YAML: its load, sources, sync and calibrate settings are used")
+    st.add_argument("--rate", type=float, default=20.0, help="pose rate of the simulated estimates (Hz)")
+    st.add_argument("--trials", type=int, default=5, help="trials per noise level")
+    st.add_argument("--scale", action="store_true", help="simulate and solve a scale (monocular)")
+    st.add_argument("--seed", type=int, default=0)
 
     s = sub.add_parser("simulate", help="write the deterministic example grid")
     s.add_argument("out", help="folder to write truth/, algorithms/ and manifest.json into")
@@ -230,6 +239,22 @@ def _traj(args) -> None:
         print(f"wrote {len(traj)} poses to {out} ({fmt})")
 
 
+def _selftest(args) -> None:
+    from epa import pipeline, selftest, settings
+
+    cfg = {"truth_dir": ".", "algorithms_dir": "."}
+    if args.config:
+        cfg.update(settings.load_yaml(args.config))
+    if args.scale:
+        cfg.setdefault("calibrate", {})["scale"] = True
+    cfg = settings.resolve(cfg, source=args.config or "command line")
+    ref, _ = pipeline.load_reference(args.reference, cfg)
+    if args.trials < 1 or args.rate <= 0:
+        raise EpaError("--trials must be at least 1 and --rate positive")
+    print(selftest.report(selftest.run(ref, cfg, trials=args.trials, rate=args.rate, seed=args.seed),
+                          Path(args.reference).name, args.rate), end="")
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="epa: %(levelname)s: %(message)s")
@@ -254,6 +279,8 @@ def main(argv=None) -> int:
             cli_evo.res(args)
         elif args.command == "config":
             print(_config_listing(args.config), end="")
+        elif args.command == "selftest":
+            _selftest(args)
         elif args.command == "simulate":
             from epa import simulate
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import alignment, calibration, readers, sync
+from epa import alignment, calibration, geometry, readers, sync
 from epa.metrics import accuracy, efficiency
 from epa.readers import bags, text
 from epa.errors import EpaError
@@ -86,20 +86,44 @@ def sync_stage(ref: Trajectory, est: Trajectory, cfg: dict):
     info: dict = {"mode": cfg["mode"], "policy": c["policy"]}
     curve = None
     if c["estimate_offset"]:
-        est_off = sync.estimate_offset(ref, est, window=c["window"], resample_dt=c["resample_dt"],
-                                       min_motion=c["min_motion"], min_corr=c["min_corr"],
-                                       min_peak_ratio=c["min_peak_ratio"], fallback=c["offset"])
+        est_off = offset_step(ref, est, cfg)
         if not est_off.used:
             log.warning("Step 1 not used: %s; using the configured offset %.6f s", est_off.reason, c["offset"])
         info["step1"] = est_off.to_dict()
         offset = est_off.offset
         curve = {"lag_s": est_off.curve_lag, "corr": est_off.curve_corr}
     else:
-        info["step1"] = {"used": False, "reason": "disabled", "offset": c["offset"], "estimated": None}
+        info["step1"] = {"used": False, "status": "disabled", "reason": "disabled", "offset": c["offset"],
+                         "estimated": None, "std": None}
         offset = c["offset"]
     i_ref, i_est, assoc = associate(ref, est, c, offset)
     info.update(assoc)
     return (i_ref, i_est), info, curve
+
+
+def offset_step(ref: Trajectory, est: Trajectory, cfg: dict) -> sync.OffsetEstimate:
+    """Step 1 under the ``sync`` settings."""
+    c = cfg["sync"]
+    return sync.estimate_offset(ref, est, window=c["window"], resample_dt=c["resample_dt"], min_motion=c["min_motion"],
+                                min_corr=c["min_corr"], min_peak_ratio=c["min_peak_ratio"],
+                                max_std=c["max_offset_std"], speed_interval=c["speed_interval"], fallback=c["offset"])
+
+
+def extrinsic_step(ref: Trajectory, est: Trajectory, cfg: dict, offset_std: float = 0.0) -> calibration.Extrinsic:
+    """Step 2 under the ``calibrate`` settings, on matched poses; ``offset_std``: Step 1's deviation."""
+    c = cfg["calibrate"]
+    return calibration.solve(ref, est, pair_step=c["pair_step"], min_rotation_deg=c["min_rotation_deg"],
+                             scale=c["scale"], max_rot_residual_deg=c["max_rot_residual_deg"],
+                             max_trans_residual_m=c["max_trans_residual_m"], max_condition=c["max_condition"],
+                             min_pairs=c["min_pairs"], outlier_iterations=c["outlier_iterations"],
+                             max_rot_std_deg=c["max_rot_std_deg"], max_trans_std_m=c["max_trans_std_m"],
+                             max_scale_std=c["max_scale_std"], offset_std=offset_std)
+
+
+def reference_at(ref: Trajectory, stamps: np.ndarray) -> Trajectory:
+    """The reference interpolated at ``stamps`` (reference clock): linear positions, slerp."""
+    p, q = geometry.interpolate(ref.t, ref.p, ref.q, stamps)
+    return Trajectory(stamps, p, q)
 
 
 def associate(ref: Trajectory, est: Trajectory, c: dict, offset: float):
@@ -147,22 +171,22 @@ def calibrate_stage(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict
     trajectories, needed only when the plan drops an estimated offset (Step 2 not trusted) and the
     poses are re-associated; the new indices are then returned, else None."""
     c = cfg["calibrate"]
-    step1 = sync_info.get("step1", {})
-    plan = evaluation_plan(cfg, step1)
-    info: dict = {"mode": cfg["mode"], "extrinsic": None}
+    step1_record = sync_info.get("step1", {})
+    plan = evaluation_plan(cfg, step1_record)
+    info: dict = {"mode": cfg["mode"], "extrinsic": None,
+                  "step2_status": "disabled" if cfg["mode"] == "ov_eval" or not c["enabled"] else "not run"}
     ext = None
     if plan["eval_source"] == "epa" and c["enabled"]:
-        ext = calibration.solve(ref, est, pair_step=c["pair_step"], min_rotation_deg=c["min_rotation_deg"],
-                                scale=c["scale"], max_rot_residual_deg=c["max_rot_residual_deg"],
-                                max_trans_residual_m=c["max_trans_residual_m"], max_condition=c["max_condition"],
-                                min_pairs=c["min_pairs"], outlier_iterations=c["outlier_iterations"])
+        # Step 2 compares each estimate pose with the reference at its very instant: a matched
+        # reference pose may be up to max_diff away, which biases the lever arm (1 cm at 8 m/s and a
+        # 50 Hz reference). Step 1's uncertainty is carried into Step 2's (a configured offset is exact).
+        ref_at = reference_at(cropped()[0], est.t + sync_info["offset_s"]) if cropped is not None else ref
+        ext = extrinsic_step(ref_at, est, cfg, (step1_record.get("std") or 0.0) if step1_record.get("used") else 0.0)
         info["extrinsic"] = ext.to_dict()
-        if ext.translation_unobservable():
-            log.warning("Step 2: translation unobservable along %s (left at 0)",
-                        ext.info["translation_unobservable_directions"])
-        plan = evaluation_plan(cfg, step1, ext)
+        info["step2_status"] = ext.status
+        plan = evaluation_plan(cfg, step1_record, ext)
         if not ext.trusted:
-            log.warning("Step 2 not trusted: %s; evaluating the ov_eval way", ext.reason)
+            log.warning("Step 2 %s: %s; evaluating the ov_eval way", ext.status, ext.reason)
     pairs = None
     if plan["offset_s"] != sync_info["offset_s"]:
         if cropped is None:
@@ -221,7 +245,10 @@ def drift_stage(tables: dict, cfg: dict):
     valid, seg_valid, time_valid = drift.valid_metrics(det, ape["trans_m"], ape["rot_deg"], seg, tp,
                                                        cfg["metrics"]["segments"])
     fs = det["fail_segments"]
+    curve = drift.success_curve(ape["t"], ape["dist_m"], ape["trans_m"], tp["i"].astype(int), tp["j"].astype(int),
+                                tp["trans_m"], det["thresholds"])
     summary = {"thresholds": det["thresholds"], "success_rate_distance_pct": det["success_rate_distance_pct"],
+               "success_auc_pct": curve.pop("auc_pct"), "success_curve": curve,
                "success_rate_time_pct": det["success_rate_time_pct"], "global_failed": det["global_failed"],
                "ape_p5_m": det["ape_p5_m"], "knee": det["knee"], "n_fail_segments": int(len(fs["index_start"])),
                "first_fail_t": float(fs["t_start"][0] - ape["t"][0]) if len(fs["t_start"]) else None,

@@ -157,3 +157,24 @@ def simulate(out_dir, seed: int = 7) -> dict:
                                                            "diverges_at_s": diverge, "format": fmt}
     io.write_json(out / "manifest.json", manifest)
     return manifest
+
+
+def observe(ref: Trajectory, rng: np.random.Generator, *, offset: float = 0.0, rotation: np.ndarray | None = None,
+            translation=(0.0, 0.0, 0.0), scale: float = 1.0, rate: float = 20.0, noise_rot_deg: float = 0.0,
+            noise_pos_m: float = 0.0, walk_rot_deg: float = 0.0, walk_pos_m: float = 0.0, margin: float = 0.0) -> Trajectory:
+    """A simulated estimate of a sensor rigidly mounted on the reference body, from the reference's
+    own motion: poses at ``rate`` on the estimate's clock (t_ref = t_est + offset), sensor frame
+    X = (rotation, translation), positions divided by ``scale``, white noise (orientation on the
+    right, deg; position, m) and random walks (per sqrt(s)), in an arbitrary world of its own."""
+    rot = np.eye(3) if rotation is None else np.asarray(rotation, float)
+    t_est = np.arange(ref.t[0] + margin + max(0.0, -offset), ref.t[-1] - margin - max(0.0, offset), 1.0 / rate)
+    p_b, q_b = geometry.interpolate(ref.t, ref.p, ref.q, t_est + offset)
+    r_b = geometry.quat_to_rot(q_b)
+    n, step = len(t_est), np.sqrt(1.0 / rate)
+    walk_r = np.cumsum(rng.normal(0, np.radians(walk_rot_deg) * step, (n, 3)), axis=0)
+    walk_p = np.cumsum(rng.normal(0, walk_pos_m * step, (n, 3)), axis=0)
+    r_b = geometry.so3_exp(walk_r) @ r_b @ geometry.so3_exp(rng.normal(0, np.radians(noise_rot_deg), (n, 3)))
+    p_b = p_b + walk_p + rng.normal(0, noise_pos_m, (n, 3))
+    r_c, p_c = r_b @ rot, p_b + np.einsum("nab,b->na", r_b, np.asarray(translation, float))
+    world = geometry.so3_exp(rng.normal(0, 1.0, 3))
+    return Trajectory.from_rp(t_est, world @ r_c, (p_c @ world.T + rng.normal(0, 5, 3)) / scale)

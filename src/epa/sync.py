@@ -100,8 +100,11 @@ class OffsetEstimate:
     estimated: float | None  # what the correlation found (None when it could not run)
     used: bool  # whether the estimate was trusted and used
     reason: str  # why it was (not) used
+    status: str = "trusted"  # one of STEP1_STATUS
+    std: float | None = None  # standard deviation of the estimate (s), delete-one-block jackknife
     peak_corr: float = float("nan")
     peak_ratio: float = float("nan")
+    beyond_window_corr: float = float("nan")  # the best local maximum of the correlation beyond ±window
     ref_motion_rad_s: float = float("nan")
     est_motion_rad_s: float = float("nan")
     dt: float = float("nan")
@@ -110,6 +113,12 @@ class OffsetEstimate:
 
     def to_dict(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if not k.startswith("curve_")}
+
+
+# What Step 1 concluded; anything but "trusted" means the estimate was not used.
+STEP1_STATUS = ("trusted", "disabled", "too little motion", "no overlap", "at window edge", "outside window",
+                "weak peak", "ambiguous", "uncertain")
+JACKKNIFE_BLOCKS = 10
 
 
 def _span(mask: np.ndarray) -> tuple[int, int]:
@@ -132,30 +141,93 @@ def _clip_spikes(w: np.ndarray) -> np.ndarray:
     return np.minimum(w, med + 20 * mad)
 
 
+def _peak(curve: np.ndarray) -> tuple[int, float]:
+    """Index of the maximum and its sub-sample refinement (a parabola through the neighbours)."""
+    k = int(np.argmax(curve))
+    frac = 0.0
+    if 0 < k < len(curve) - 1:
+        y0, y1, y2 = curve[k - 1], curve[k], curve[k + 1]
+        den = y0 - 2 * y1 + y2
+        if den < 0:
+            frac = float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5))
+    return k, frac
+
+
+def _block_sums(a: np.ndarray, b: np.ndarray, span: tuple[int, int], starts: np.ndarray, lags: np.ndarray):
+    """Over each block of b's support and for each lag: the correlation's products a[m + lag] b[m]
+    and the two energies under the overlap, a[m + lag]^2 and b[m]^2 where a is defined. Each is
+    (blocks, lags)."""
+    b0, b1 = span
+    bb = b[b0:b1 + 1]
+    a_defined = a != 0.0  # on_grid leaves a exactly zero outside its support
+    out = np.empty((3, len(starts), len(lags)))
+    for n, lag in enumerate(lags):
+        lo, hi = b0 + lag, b1 + 1 + lag
+        inside = slice(max(0, -lo), len(bb) - max(0, hi - len(a)))
+        seg, defined = np.zeros(len(bb)), np.zeros(len(bb))
+        seg[inside], defined[inside] = a[max(lo, 0):min(hi, len(a))], a_defined[max(lo, 0):min(hi, len(a))]
+        out[:, :, n] = np.add.reduceat(np.stack([seg * bb, seg * seg, defined * bb * bb]), starts, axis=1)
+    return out
+
+
+def _jackknife_std(a: np.ndarray, b: np.ndarray, span: tuple[int, int], lags: np.ndarray, k: int, reach: int,
+                   dt: float, blocks: int = JACKKNIFE_BLOCKS) -> float:
+    """Standard deviation of the peak lag (index k of ``lags``) by the delete-one-block jackknife.
+
+    The estimate signal's support is cut into ``blocks`` consecutive blocks; each replicate is the
+    normalised correlation without one block and finds its peak near k. Blocks span seconds,
+    longer than the signals' correlation time, so the replicates see correlated noise as it is.
+    The search around k starts at 16 samples and widens while a replicate peak sits on its edge;
+    one still on the edge at ``reach`` (the main lobe) means the offset is not pinned down:
+    infinite. The grid's quantisation (dt^2/12) is added."""
+    b0, b1 = span
+    starts = np.linspace(0, b1 + 1 - b0, blocks + 1).astype(int)[:-1]
+    half = min(16, reach)
+    while True:
+        near = np.arange(max(k - half, 0), min(k + half, len(lags) - 1) + 1)
+        num, energy_a, energy_b = (x.sum(axis=0) - x for x in _block_sums(a, b, span, starts, lags[near]))
+        replicates = num / np.sqrt(np.maximum(energy_a * energy_b, 1e-300))
+        peaks = [_peak(r) for r in replicates]
+        if all(0 < i < len(near) - 1 for i, _ in peaks):
+            break
+        if half >= reach:
+            return float("inf")
+        half = min(2 * half, reach)
+    shifts = np.array([(lags[near[i]] + frac) * dt for i, frac in peaks])
+    jack = np.sqrt((blocks - 1) / blocks * np.sum((shifts - shifts.mean()) ** 2))
+    return float(np.hypot(jack, dt / np.sqrt(12.0)))
+
+
 def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, resample_dt: float = 0.001,
                     min_motion: float = 0.05, min_corr: float = 0.3, min_peak_ratio: float = 1.05,
-                    fallback: float = 0.0, max_samples: int = 2_000_000) -> OffsetEstimate:
+                    max_std: float = 0.01, speed_interval: float = 0.1, fallback: float = 0.0, max_samples: int = 2_000_000) -> OffsetEstimate:
     """Time offset by cross-correlating angular-speed signals on a uniform timeline (FFT).
 
-    The peak is refined below one sample with a parabola through its neighbours. When the motion
-    is too weak or the peak weak or ambiguous, the fallback offset is returned with the reason.
+    The peak is refined below one sample with a parabola through its neighbours; its standard
+    deviation comes from a delete-one-block jackknife (:func:`_jackknife_std`). When the motion is
+    too weak, the peak weak, ambiguous, on the edge of the window or its deviation above
+    ``max_std``, the fallback offset is returned with the status and the reason.
     """
-    def fail(reason, **kw):
-        return OffsetEstimate(offset=fallback, estimated=None, used=False, reason=reason, **kw)
+    def fail(status, reason, **kw):
+        return OffsetEstimate(offset=fallback, estimated=kw.pop("estimated", None), used=False, reason=reason,
+                              status=status, **kw)
 
     if len(ref) < 4 or len(est) < 4:
-        return fail("too few poses for a correlation")
+        return fail("too little motion", "too few poses for a correlation")
     # The coarser trajectory only sees chord rates over its own sample interval: measure the finer
     # one over the same interval (the magnitude of a mean rate is not the mean of magnitudes).
     dt_ref, dt_est = np.median(np.diff(ref.t)), np.median(np.diff(est.t))
-    t_a, w_a = angular_speed(ref, max(1, int(round(dt_est / dt_ref))))
-    t_b, w_b = angular_speed(est, max(1, int(round(dt_ref / dt_est))))
+    # and over at least speed_interval: differencing consecutive noisy orientations turns white
+    # orientation noise into speed noise that grows with the rate and biases a gentle motion's peak.
+    interval = max(dt_ref, dt_est, speed_interval)
+    t_a, w_a = angular_speed(ref, max(1, int(round(interval / dt_ref))))
+    t_b, w_b = angular_speed(est, max(1, int(round(interval / dt_est))))
     motion_a, motion_b = float(np.std(w_a)), float(np.std(w_b))
     if min(motion_a, motion_b) < min_motion:
-        return fail(f"too little rotational motion (std of angular speed {min(motion_a, motion_b):.3g}"
+        return fail("too little motion", f"too little rotational motion (std of angular speed {min(motion_a, motion_b):.3g}"
                     f" rad/s < {min_motion})", ref_motion_rad_s=motion_a, est_motion_rad_s=motion_b)
     if t_b[0] > t_a[-1] + window or t_b[-1] < t_a[0] - window:
-        return fail(f"the stamps do not overlap within the ±{window} s search window",
+        return fail("no overlap", f"the stamps do not overlap within the ±{window} s search window",
                     ref_motion_rad_s=motion_a, est_motion_rad_s=motion_b)
     w_a, w_b = _clip_spikes(w_a), _clip_spikes(w_b)
     start = min(t_a[0], t_b[0]) - window
@@ -172,7 +244,7 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     a, in_a = on_grid(t_a, w_a)
     b, in_b = on_grid(t_b, w_b)
     if in_a.sum() < 4 or in_b.sum() < 4:
-        return fail(f"too few samples on the {dt:.3g} s correlation grid", ref_motion_rad_s=motion_a,
+        return fail("no overlap", f"too few samples on the {dt:.3g} s correlation grid", ref_motion_rad_s=motion_a,
                     est_motion_rad_s=motion_b)
     n = len(grid)
     nfft = 1 << int(np.ceil(np.log2(2 * n)))
@@ -180,29 +252,31 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     spec = np.fft.rfft(a, nfft) * np.conj(np.fft.rfft(b, nfft))
     full = np.fft.irfft(spec, nfft)
     kmax = int(round(window / dt))
-    lags = np.arange(-kmax, kmax + 1)
-    corr = full[lags % nfft]
+    # Every lag the FFT gives without wrapping (|lag| < n), so a better match beyond the window is
+    # seen rather than a lesser one inside it reported.
+    lags_all = np.arange(-(n - 1), n)
+    corr_all = full[lags_all % nfft]
     # Normalised cross-correlation: divide each lag by the energy of both signals under the overlap.
     # The estimate usually covers only part of the reference, so that slice's energy changes with
     # the lag and, for slow motion, would tilt the peak by tens of ms. Supports are index intervals:
     # the energies are prefix-sum differences.
     (a0, a1), (b0, b1) = _span(in_a), _span(in_b)
-    energy_a = _window_sums(a * a, b0 + lags, b1 + lags)  # a under the shifted support of b
-    energy_b = _window_sums(b * b, a0 - lags, a1 - lags)  # b under the shifted support of a
-    overlap = np.minimum(b1, a1 - lags) - np.maximum(b0, a0 - lags) + 1
+    energy_a = _window_sums(a * a, b0 + lags_all, b1 + lags_all)  # a under the shifted support of b
+    energy_b = _window_sums(b * b, a0 - lags_all, a1 - lags_all)  # b under the shifted support of a
+    overlap = np.minimum(b1, a1 - lags_all) - np.maximum(b0, a0 - lags_all) + 1
     enough = overlap >= 0.5 * (min(a1 - a0, b1 - b0) + 1)  # at least half the shorter signal overlaps
-    corr = np.where(enough, corr / np.sqrt(np.maximum(energy_a * energy_b, 1e-300)), -1.0)
-    k = int(np.argmax(corr))
+    corr_all = np.where(enough, corr_all / np.sqrt(np.maximum(energy_a * energy_b, 1e-300)), -1.0)
+    inner_all = corr_all[1:-1]
+    maxima_all = np.flatnonzero((inner_all >= corr_all[:-2]) & (inner_all > corr_all[2:])) + 1
+    beyond = maxima_all[np.abs(lags_all[maxima_all]) > kmax]
+    best_beyond = float(corr_all[beyond].max()) if len(beyond) else -1.0
+    in_window = np.abs(lags_all) <= kmax
+    lags, corr = lags_all[in_window], corr_all[in_window]
+    k, frac = _peak(corr)
     peak = float(corr[k])
-    frac = 0.0
-    if 0 < k < len(corr) - 1:
-        y0, y1, y2 = corr[k - 1], corr[k], corr[k + 1]
-        den = y0 - 2 * y1 + y2
-        if den < 0:
-            frac = float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5))
     estimated = float((lags[k] + frac) * dt)
-    # Second-best peak: the highest local maximum of the whole curve outside the main lobe, the lobe
-    # reaching from the nearest local minimum on the left of the peak to the nearest on the right.
+    # Second-best peak: the highest local maximum of the window's curve outside the main lobe, the
+    # lobe reaching from the nearest local minimum on the left of the peak to the nearest on the right.
     inner = corr[1:-1]
     minima = np.flatnonzero((inner <= corr[:-2]) & (inner <= corr[2:])) + 1
     maxima = np.flatnonzero((inner >= corr[:-2]) & (inner >= corr[2:])) + 1
@@ -211,14 +285,30 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     outside = maxima[(maxima < left) | (maxima > right)]
     second = float(corr[outside].max()) if len(outside) else 0.0
     ratio = peak / second if second > 0 else float("inf")
-    curve = dict(curve_lag=lags * dt, curve_corr=corr, peak_corr=peak, peak_ratio=ratio,
+    curve = dict(curve_lag=lags * dt, curve_corr=corr, peak_corr=peak, peak_ratio=ratio, beyond_window_corr=best_beyond,
                  ref_motion_rad_s=motion_a, est_motion_rad_s=motion_b, dt=dt)
     at_edge = abs(lags[k]) >= kmax - 1
-    if at_edge:
-        return fail(f"correlation peak at the edge of the ±{window} s search window", **curve)
+    if at_edge:  # never clamped: the true offset may lie beyond the window
+        return fail("at window edge", f"correlation peak at the edge of the ±{window} s search window"
+                    " (the offset may lie outside it: widen sync.window)", estimated=estimated, **curve)
+    # Beyond the window only a clearly better and itself strong match counts: quasi-periodic motion (a
+    # figure-8, a pendulum) repeats itself tens of seconds later almost as well, and that is not this
+    # offset; nor is a weak bump of a run that diverged.
+    if best_beyond > max(peak * min_peak_ratio, min_corr):
+        lag_beyond = float(lags_all[beyond[np.argmax(corr_all[beyond])]] * dt)
+        return fail("outside window", f"a better match ({best_beyond:.3f} at {lag_beyond:+.3f} s) lies outside the"
+                    f" ±{window} s search window than inside it ({peak:.3f}): widen sync.window",
+                    estimated=estimated, **curve)
     if peak < min_corr:
-        return fail(f"correlation peak {peak:.3f} below {min_corr}", **curve)
+        return fail("weak peak", f"correlation peak {peak:.3f} below {min_corr}", estimated=estimated, **curve)
     if ratio < min_peak_ratio:
-        return fail(f"ambiguous peak: best/second = {ratio:.3f} < {min_peak_ratio}", **curve)
-    out = OffsetEstimate(offset=estimated, estimated=estimated, used=True, reason="estimated", **curve)
-    return out
+        return fail("ambiguous", f"ambiguous peak: best/second = {ratio:.3f} < {min_peak_ratio}", estimated=estimated,
+                    **curve)
+    # the jackknife looks for replicate peaks within the main lobe, at most 0.25 s either side
+    reach = max(3, min(k - left, right - k, int(round(0.25 / dt))))
+    std = _jackknife_std(a, b, (b0, b1), lags, k, reach, dt)
+    curve["std"] = std
+    if not std <= max_std:
+        return fail("uncertain", f"offset {estimated * 1000:.1f} ms too uncertain: std {std * 1000:.3g} ms >"
+                    f" {max_std * 1000:.3g} ms", estimated=estimated, **curve)
+    return OffsetEstimate(offset=estimated, estimated=estimated, used=True, reason="estimated", **curve)

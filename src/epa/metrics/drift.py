@@ -15,7 +15,7 @@ from epa.metrics.accuracy import segment_key, stats
 
 def thresholds(settings: dict, ref_t: np.ndarray, ref_dist: np.ndarray, time_pairs) -> dict:
     """The thresholds in force: the fixed defaults, or derived from the reference's own motion."""
-    th = {k: settings[k] for k in ("rpe_trans_max_m", "jump_rise_m", "jump_rate_m_s", "jump_hold_m")}
+    th = {k: settings[k] for k in THRESHOLD_KEYS}
     th["mode"] = settings["mode"]
     if settings["mode"] == "scale_aware":
         i, j = time_pairs
@@ -74,21 +74,48 @@ def knee_threshold(ape: np.ndarray, lo: float = 5.0, hi: float = 30.0) -> dict:
     return {"threshold_m": thr, "mode": mode, "raw_m": raw, "clamped": thr != raw, "bounds_m": [lo, hi]}
 
 
-def detect(t, dist, ape_trans, ape_rot, time_i, time_j, time_trans, settings: dict) -> dict:
-    """Validity of every pose and interval, the fail segments and the success rates."""
+THRESHOLD_KEYS = ("rpe_trans_max_m", "jump_rise_m", "jump_rate_m_s", "jump_hold_m")
+# the success-rate curve: every drift threshold multiplied by these factors (log-spaced, 0.1-10)
+CURVE_FACTORS = np.logspace(-1, 1, 21)
+
+
+def _invalid(t, ape_trans, time_i, time_j, time_trans, th: dict):
+    """Invalid poses under thresholds ``th``, and the APE growth stretches."""
     n = len(t)
-    th = thresholds(settings, t, dist, (time_i, time_j))
     bad_pair = ~np.isfinite(time_trans) | (time_trans > th["rpe_trans_max_m"])
     invalid = _span_mask(n, time_i[bad_pair], time_j[bad_pair])
     stretches = growth_stretches(t, ape_trans, time_i, time_j, rise=th["jump_rise_m"], rate=th["jump_rate_m_s"],
                                  hold=th["jump_hold_m"])
     if stretches:
         invalid |= _span_mask(n, np.array([a for a, _ in stretches]), np.array([b for _, b in stretches]))
-    invalid |= ~np.isfinite(ape_trans)
+    return invalid | ~np.isfinite(ape_trans), stretches
+
+
+def _success_distance(dist, invalid) -> float:
+    """% of the path length whose intervals are valid (both ends valid)."""
     valid_iv = ~invalid[:-1] & ~invalid[1:]
-    seg_len, seg_dur = np.diff(dist), np.diff(t)
-    total_len, total_dur = float(dist[-1] - dist[0]), float(t[-1] - t[0])
-    sr_dist = 100.0 * seg_len[valid_iv].sum() / total_len if total_len > 0 else np.nan
+    total = float(dist[-1] - dist[0])
+    return 100.0 * np.diff(dist)[valid_iv].sum() / total if total > 0 else np.nan
+
+
+def success_curve(t, dist, ape_trans, time_i, time_j, time_trans, th: dict) -> dict:
+    """The distance success rate with every drift threshold multiplied by each of CURVE_FACTORS, and
+    its area: the mean over the log-spaced factors (%), so a ranking need not hinge on one threshold."""
+    rates = np.array([_success_distance(dist, _invalid(t, ape_trans, time_i, time_j, time_trans,
+                                                       {k: f * th[k] for k in THRESHOLD_KEYS})[0])
+                      for f in CURVE_FACTORS])
+    return {"factor": CURVE_FACTORS, "rpe_trans_max_m": CURVE_FACTORS * th["rpe_trans_max_m"],
+            "success_rate_distance_pct": rates, "auc_pct": float(np.mean(rates))}
+
+
+def detect(t, dist, ape_trans, ape_rot, time_i, time_j, time_trans, settings: dict) -> dict:
+    """Validity of every pose and interval, the fail segments and the success rates."""
+    th = thresholds(settings, t, dist, (time_i, time_j))
+    invalid, stretches = _invalid(t, ape_trans, time_i, time_j, time_trans, th)
+    valid_iv = ~invalid[:-1] & ~invalid[1:]
+    seg_dur = np.diff(t)
+    total_dur = float(t[-1] - t[0])
+    sr_dist = _success_distance(dist, invalid)
     sr_time = 100.0 * seg_dur[valid_iv].sum() / total_dur if total_dur > 0 else np.nan
 
     # maximal runs of invalid poses

@@ -399,7 +399,10 @@ def _grouped(plt, b, w, h):
 
 
 def _lines(plt, b, w, h):
-    """One line per algorithm (drift rate against segment length, RMSE over time)."""
+    """One line per algorithm (drift rate against segment length, RMSE over time, success rate
+    against the drift threshold)."""
+    from matplotlib.ticker import FuncFormatter
+
     d = b["data"]
     colors = d.get("colors") or OKABE_ITO
     panels = d["panels"]
@@ -409,12 +412,19 @@ def _lines(plt, b, w, h):
                         wspace=0.15 if d.get("sharey") else 0.35)
     for ax, panel in zip(axes[0], panels):
         for k, line in enumerate(panel["lines"]):
-            ax.plot(_arr(line["x"]), _arr(line["y"]), color=colors[line.get("color", k) % len(colors)],
+            # dashes per line where lines may coincide (several at 100 %)
+            style = ("-", "--", ":", "-.")[line.get("color", k) % 4] if d.get("dashes") else "-"
+            ax.plot(_arr(line["x"]), _arr(line["y"]), color=colors[line.get("color", k) % len(colors)], ls=style,
                     marker="o" if d.get("markers") else None, ms=3, label=line["label"])
         ax.set_title(panel.get("title", ""))
         ax.set_xlabel(d["xlabel"])
         if d.get("log"):
             _log_axis(ax)
+        if d.get("ylim"):
+            ax.set_ylim(*d["ylim"])
+        if d.get("logx"):
+            ax.set_xscale("log")
+            ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     axes[0, 0].set_ylabel(d["ylabel"])
     # one legend for every panel, under them: inside, it would hide some line of some panel
     handles = {}

@@ -22,7 +22,7 @@ from epa import io
 from epa.outputs import figures, tables
 
 CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")
-GRID_FIGURES = ("ate", "success_rate", "drift_rate", "rmse_time")
+GRID_FIGURES = ("ate", "success_rate", "success_curve", "drift_rate", "rmse_time")
 
 
 # ----------------------------------------------------------------------------- case artifacts
@@ -155,12 +155,14 @@ TEXT = {
            "fail": "Fail segments", "figures": "Figures", "none": "none", "offset": "Step 1 time offset",
            "extrinsic": "Step 2 extrinsic", "align": "Step 3 alignment", "used": "used", "not_used": "not used",
            "source": "evaluated as", "metric": "metric", "value": "value", "start": "start [s]", "end": "end [s]",
-           "consistency": "Consistency", "efficiency": "Efficiency", "unavailable": "not available"},
+           "consistency": "Consistency", "efficiency": "Efficiency", "unavailable": "not available",
+           "status": "status", "std": "std", "per_axis": "per axis x, y, z", "unobservable": "unobservable"},
     "zh": {"title": "评估：", "settings": "设置", "steps": "步骤 1-3", "metrics": "指标", "fail": "失效区段",
            "figures": "图", "none": "无", "offset": "步骤 1 时间偏移", "extrinsic": "步骤 2 外参",
            "align": "步骤 3 对齐", "used": "已使用", "not_used": "未使用", "source": "评估方式",
            "metric": "指标", "value": "数值", "start": "开始 [s]", "end": "结束 [s]", "consistency": "一致性",
-           "efficiency": "效率", "unavailable": "不可用"},
+           "efficiency": "效率", "unavailable": "不可用", "status": "状态", "std": "标准差",
+           "per_axis": "各轴 x, y, z", "unobservable": "不可观"},
 }
 
 
@@ -170,6 +172,10 @@ def _num(v) -> float:
         return float(v)
     except (TypeError, ValueError):
         return float("nan")
+
+
+def _axis_std(values, factor: float, unit: str, T: dict) -> str:
+    return " / ".join(T["unobservable"] if v is None else f"{_num(v) * factor:.3g}" for v in values) + f" {unit}"
 
 
 def report_md(doc: dict, case_name: str, figure_names: list[str], lang: str, fail: dict) -> str:
@@ -184,10 +190,14 @@ def report_md(doc: dict, case_name: str, figure_names: list[str], lang: str, fai
              f"## {T['steps']}", "",
              f"- {T['offset']}: {_num(m.get('time_offset_s')) * 1000:.3f} ms"
              f" ({T['used'] if step1.get('used') else T['not_used']}: {step1.get('reason', '')};"
-             f" peak {_num(step1.get('peak_corr')):.3f}, ratio {_num(step1.get('peak_ratio')):.3f})",
+             f" peak {_num(step1.get('peak_corr')):.3f}, ratio {_num(step1.get('peak_ratio')):.3f});"
+             f" {T['status']} `{step1.get('status')}`, {T['std']} {_num(step1.get('std')) * 1000:.3f} ms",
              f"- {T['extrinsic']}: " + (f"{_num(ext.get('rotation_deg')):.3f} deg, {_num(ext.get('translation_norm_m')):.4f} m"
                                         f" ({T['used'] if calib.get('plan', {}).get('apply_extrinsic') else T['not_used']}:"
-                                        f" {calib.get('plan', {}).get('reason', '')})" if ext else T["none"]),
+                                        f" {calib.get('plan', {}).get('reason', '')})" if ext else T["none"])
+             + f"; {T['status']} `{calib.get('step2_status')}`",
+             *([f"  - {T['std']} ({T['per_axis']}): rotation {_axis_std(ext.get('rotation_std_deg'), 1, 'deg', T)},"
+                f" translation {_axis_std(ext.get('translation_std_m'), 1000, 'mm', T)}"] if ext.get("rotation_std_deg") else []),
              f"- {T['align']}: {align.get('method')}, yaw {_num(align.get('yaw_deg')):.3f} deg,"
              f" scale {_num(align.get('scale')):.6f}",
              "", f"## {T['metrics']}", "", f"| {T['metric']} | {T['value']} |", "|---|---|"]
@@ -308,6 +318,20 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
         panels.append({"title": d, "lines": panel_lines})
     out["rmse_time"] = figures.bundle("lines", "RMSE over time across runs", {
         "panels": panels, "xlabel": "time [s]", "ylabel": "RMSE [m]", "colors": colors, "log": True})
+    with open(Path(summary_csv_path).parent / "success_curves.csv", encoding="utf-8", newline="") as fh:
+        curves = list(csv.DictReader(fh))
+    panels = []
+    for d in datasets:
+        panel_lines = []
+        for k, a in enumerate(algs):
+            rows = [r for r in curves if r["algorithm"] == a and r["dataset"] == d]
+            if rows:
+                panel_lines.append({"label": a, "x": [num(r, "factor") for r in rows],
+                                    "y": [num(r, "success_rate_distance_pct") for r in rows], "color": k})
+        panels.append({"title": d, "lines": panel_lines})
+    out["success_curve"] = figures.bundle("lines", "Success rate against the drift threshold", {
+        "panels": panels, "xlabel": "threshold / default", "ylabel": "success rate [% of path]", "colors": colors,
+        "logx": True, "sharey": True, "dashes": True, "ylim": [0, 102]})
     return out
 
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from epa import io
 from epa.chain import CaseFolder, case_dir, read_record
+from epa.metrics import statistics
 from epa.metrics.accuracy import segment_key
 
 RULE_SHORT = "=" * 38
@@ -101,15 +102,25 @@ def _nanmean(values) -> float:
 
 class _Cell:
     """A table cell: missing (None: no successful run), or numbers that may be nan.
-    ``pair`` cells hold rot / trans; the others a single number."""
+    ``pair`` cells hold rot / trans; the others a single number. ``runs`` (runs x numbers) holds
+    each run's own value of those numbers, for the spread over runs."""
 
-    def __init__(self, values=None, pair: bool = True):
+    def __init__(self, values=None, pair: bool = True, runs=None):
         self.values, self.pair = values, pair
+        self.runs = None if runs is None else np.atleast_2d(np.asarray(runs, float))
 
-    def fmt(self, decimals: int) -> str:
+    def fmt(self, decimals: int, spread: str = "none") -> str:
         if self.values is None:
             return "- / -" if self.pair else "-"
-        return " / ".join("nan" if np.isnan(v) else f"{v:.{decimals}f}" for v in self.values)
+        parts = []
+        for k, v in enumerate(self.values):
+            text = "nan" if np.isnan(v) else f"{v:.{decimals}f}"
+            if spread != "none" and self.runs is not None and not np.isnan(v):
+                pm = statistics.spread(self.runs[:, k], spread)
+                text += "" if np.isnan(pm) else f" $\\pm$ {pm:.{decimals}f}"
+            parts.append(text)
+        n = f" (n={len(self.runs)})" if spread != "none" and self.runs is not None else ""
+        return " / ".join(parts) + n
 
 
 
@@ -141,7 +152,8 @@ def _mean_over_runs(runs, of) -> _Cell:
     """The cell of a per-run pair: its mean over the runs (ov_eval's ATE cells)."""
     if not runs:
         return _Cell(None)
-    return _Cell(tuple(_nanmean(v) for v in zip(*(of(c) for c in runs))))
+    per_run = [tuple(_num(x) for x in of(c)) for c in runs]
+    return _Cell(tuple(_nanmean(v) for v in zip(*per_run)), runs=per_run)
 
 
 def _ate(runs, valid: bool) -> _Cell:
@@ -166,13 +178,24 @@ def _pooled(runs, table: str, valid: bool, length=None):
     return (np.concatenate(rot) if rot else np.zeros(0)), (np.concatenate(trans) if trans else np.zeros(0))
 
 
+def _per_run_means(runs, table, valid, length=None, scale=(1.0, 1.0)):
+    """Each run's own mean (rot, trans) of the pairs a pooled cell takes from it (runs without one
+    are left out): what the spread of a pooled cell is over."""
+    out = []
+    for c in runs:
+        rot, trans = _pooled([c], table, valid, length)
+        if rot.size:
+            out.append((float(rot.mean()) * scale[0], float(trans.mean()) * scale[1]))
+    return out
+
+
 def _mean_pair(runs, table, valid, length=None) -> _Cell:
     if not runs:
         return _Cell(None)
     rot, trans = _pooled(runs, table, valid, length)
     if _all_nan_valid(runs, valid) or rot.size == 0:
         return _Cell((np.nan, np.nan))
-    return _Cell((float(rot.mean()), float(trans.mean())))
+    return _Cell((float(rot.mean()), float(trans.mean())), runs=_per_run_means(runs, table, valid, length))
 
 
 def _drift_rate(runs, valid, length) -> _Cell:
@@ -181,7 +204,8 @@ def _drift_rate(runs, valid, length) -> _Cell:
     _, trans = _pooled(runs, "segments", valid, length)
     if _all_nan_valid(runs, valid) or trans.size == 0:
         return _Cell((np.nan,), pair=False)
-    return _Cell((float(np.mean(trans / float(length)) * 100),), pair=False)
+    per_run = [(t,) for _, t in _per_run_means(runs, "segments", valid, length, (1.0, 100.0 / float(length)))]
+    return _Cell((float(np.mean(trans / float(length)) * 100),), pair=False, runs=per_run)
 
 
 def _all_nan_valid(runs, valid):
@@ -189,15 +213,19 @@ def _all_nan_valid(runs, valid):
 
 
 def _nees(runs) -> _Cell:
-    have = [c.consistency for c in runs if c.consistency.get("available")]
-    if not have:
-        return _Cell(None)
-    return _Cell((_nanmean(h["nees_rot_mean"] for h in have), _nanmean(h["nees_pos_mean"] for h in have)))
+    return _mean_over_runs([c for c in runs if c.consistency.get("available")],
+                           lambda c: (c.consistency["nees_rot_mean"], c.consistency["nees_pos_mean"]))
+
+
+def _single_over_runs(runs, of) -> _Cell:
+    """The cell of a per-run number: its mean over the runs."""
+    cell = _mean_over_runs(runs, lambda c: (of(c),))
+    cell.pair = False
+    return cell
 
 
 def _ea_drift(runs) -> _Cell:
-    have = [c.efficiency for c in runs if c.efficiency.get("available")]
-    return _Cell((_nanmean(h["ea_drift"] for h in have),), pair=False) if have else _Cell(None, pair=False)
+    return _single_over_runs([c for c in runs if c.efficiency.get("available")], lambda c: c.efficiency["ea_drift"])
 
 
 def _runtime(grid, alg) -> list[_Cell]:
@@ -213,29 +241,34 @@ def _runtime(grid, alg) -> list[_Cell]:
 
 def _kitti(runs) -> _Cell:
     """KITTI devkit metric, mean over runs: (rotation deg/100 m, translation %)."""
-    have = [c.metrics["kitti"] for c in runs if (c.metrics.get("kitti") or {}).get("n_segments")]
-    if not have:
-        return _Cell(None)
-    return _Cell((_nanmean(k["rot_deg_per_100m"] for k in have), _nanmean(k["trans_pct"] for k in have)))
+    return _mean_over_runs([c for c in runs if (c.metrics.get("kitti") or {}).get("n_segments")],
+                           lambda c: (c.metrics["kitti"]["rot_deg_per_100m"], c.metrics["kitti"]["trans_pct"]))
 
 
 def _success(runs) -> _Cell:
-    if not runs:
-        return _Cell(None, pair=False)
-    return _Cell((_nanmean(c.drift["success_rate_distance_pct"] for c in runs),), pair=False)
+    return _single_over_runs(runs, lambda c: c.drift["success_rate_distance_pct"])
+
+
+def _success_auc(runs) -> _Cell:
+    return _single_over_runs(runs, lambda c: c.drift.get("success_auc_pct"))
 
 
 # ----------------------------------------------------------------------------- rendering
-def _latex_rows(header: list[str], rows: list[tuple[str, list[_Cell]]], decimals: int) -> list[str]:
+def _latex_rows(header: list[str], rows: list[tuple[str, list[_Cell]]], decimals: int, spread: str = "none") -> list[str]:
     lines = [" & " + " & ".join(r"\textbf{" + latex_escape(h) + "}" for h in header) + r" \\ \hline"]
     for name, cells in rows:
-        lines.append(latex_escape(name) + " & " + " & ".join(c.fmt(decimals) for c in cells) + r" \\")
+        lines.append(latex_escape(name) + " & " + " & ".join(c.fmt(decimals, spread) for c in cells) + r" \\")
     return lines
 
 
-def build_tables(grid: list[CaseResult], segments, decimals: int = 3,
-                 kitti: bool = False) -> list[tuple[str, str, list[str], int]]:
-    """(file name, title, latex row lines, number of columns) for every table, in report order."""
+SPREAD_TITLE = {"none": "", "std": " [± SAMPLE STD OVER RUNS, n = RUNS]",
+                "ci": " [± HALF-WIDTH OF THE 95% CI OF THE MEAN OVER RUNS, STUDENT T, n = RUNS]"}
+
+
+def build_tables(grid: list[CaseResult], segments, decimals: int = 3, kitti: bool = False,
+                 spread: str = "none") -> list[tuple[str, str, list[str], int]]:
+    """(file name, title, latex row lines, number of columns) for every table, in report order.
+    With ``spread`` (std / ci) each cell with runs also shows its spread over them and their number."""
     algs = sorted({c.algorithm for c in grid})
     datasets = sorted({c.dataset for c in grid})
     seg_labels = [f"{segment_key(s)}m" for s in segments]
@@ -246,11 +279,14 @@ def build_tables(grid: list[CaseResult], segments, decimals: int = 3,
         for a in algs:
             cells = [fn(_ok_runs(grid, a, d)) for d in datasets]
             rows.append((a, cells + [_average(cells, pair)]))
-        out.append((name, title, _latex_rows(datasets + ["Average"], rows, dec), len(datasets) + 2))
+        out.append((name, title + SPREAD_TITLE[spread], _latex_rows(datasets + ["Average"], rows, dec, spread),
+                    len(datasets) + 2))
 
     def per_segment(name, title, fn):
+        # these pool an algorithm's datasets: the spread is over every run of every dataset
         rows = [(a, [fn(_ok_runs(grid, a), s) for s in segments]) for a in algs]
-        out.append((name, title, _latex_rows(seg_labels, rows, decimals), len(segments) + 1))
+        out.append((name, title + SPREAD_TITLE[spread].replace("RUNS]", "RUNS OF ALL DATASETS]"),
+                    _latex_rows(seg_labels, rows, decimals, spread), len(segments) + 1))
 
     def has(alg, stage):
         return any(c.algorithm == alg and getattr(c, stage).get("available") for c in grid)
@@ -275,6 +311,8 @@ def build_tables(grid: list[CaseResult], segments, decimals: int = 3,
         if valid:
             per_dataset("success_rate", "DRIFT-VALID SUCCESS RATE LATEX TABLE (% PATH LENGTH)", _success, pair=False,
                         dec=2)
+            per_dataset("success_auc", "SUCCESS RATE AREA LATEX TABLE (% PATH, MEAN OVER DRIFT THRESHOLDS x0.1-x10)",
+                        _success_auc, pair=False, dec=2)
         per_dataset(prefix + "ate", f"{tag} ATE LATEX TABLE (ROT DEG / TRANS M)", lambda r: _ate(r, valid))
         if not valid:
             per_dataset("ate_2d", "FULL TRAJECTORY ATE 2D LATEX TABLE (YAW DEG / XY M)", _ate_2d)
@@ -285,7 +323,8 @@ def build_tables(grid: list[CaseResult], segments, decimals: int = 3,
         per_dataset(prefix + "rpe_time_1s", f"{tag} 1S TIME RPE LATEX TABLE (ROT DEG / TRANS M)",
                     lambda r: _mean_pair(r, "time", valid))
     for name, title, rows, header in extra:
-        out.append((name, title, _latex_rows(header, rows, decimals), len(header) + 1))
+        out.append((name, title + (SPREAD_TITLE[spread] if name != "runtime" else ""),
+                    _latex_rows(header, rows, decimals, spread), len(header) + 1))
     if kitti:
         per_dataset("kitti", "KITTI ODOMETRY LATEX TABLE (ROT DEG/100M / TRANS %, 100-800 M SEGMENTS)", _kitti)
     return out
@@ -299,7 +338,7 @@ def _stat(d: dict, *keys):
     return _num(d)
 
 
-def report_text(grid: list[CaseResult], segments, decimals: int = 3) -> str:
+def report_text(grid: list[CaseResult], segments, decimals: int = 3, spread: str = "none") -> str:
     lines = []
     datasets = sorted({c.dataset for c in grid})
     for ds in datasets:
@@ -348,8 +387,8 @@ def report_text(grid: list[CaseResult], segments, decimals: int = 3) -> str:
                 if c.status != "ok":
                     lines.append(f"        {c.run}: {c.status}")
     lines += [RULE_LONG, f"TOOL SOURCE: epa={sources['epa']}, ov_eval={sources['ov_eval']}", RULE_LONG]
-    for _, title, rows, _ in build_tables(grid, segments, decimals):
-        lines += [RULE_LONG, title, RULE_LONG, *rows, RULE_LONG]
+    for _, title, rows, _ in build_tables(grid, segments, decimals, spread=spread):
+        lines += [RULE_LONG, title, RULE_LONG, *(r.replace(" $\\pm$ ", " ± ") for r in rows), RULE_LONG]
     return "\n".join(lines) + "\n"
 
 
@@ -420,6 +459,98 @@ def ov_eval_text(grid: list[CaseResult], segments) -> str:
     return "\n".join(lines) + "\n"
 
 
+SUCCESS_CURVE_COLUMNS = ["algorithm", "dataset", "runs", "factor", "success_rate_distance_pct", "auc_pct"]
+
+
+def success_curves(grid: list[CaseResult]) -> list[dict]:
+    """results/success_curves.csv rows: per algorithm and dataset, the distance success rate (% path,
+    mean over the successful runs) with every drift threshold multiplied by each factor, and the area."""
+    from epa.metrics.drift import CURVE_FACTORS
+
+    rows = []
+    for alg in sorted({c.algorithm for c in grid}):
+        for ds in sorted({c.dataset for c in grid}):
+            curves = [c.drift["success_curve"]["success_rate_distance_pct"] for c in _ok_runs(grid, alg, ds)
+                      if c.drift.get("success_curve")]
+            if curves:
+                mean = np.nanmean(np.array(curves, float), axis=0)
+                rows += [{"algorithm": alg, "dataset": ds, "runs": len(curves), "factor": float(f),
+                          "success_rate_distance_pct": float(v), "auc_pct": float(np.mean(mean))}
+                         for f, v in zip(CURVE_FACTORS, mean)]
+    return rows
+
+
+# ----------------------------------------------------------------------------- algorithm comparison
+def _run_rpe(c, segments) -> float:
+    """One run's distance RPE: the mean over the segment lengths of its mean translation error (m)."""
+    return _nanmean(_stat(c.metrics, "rpe_distance", segment_key(s), "trans_m", "mean") for s in segments)
+
+
+def comparisons(grid: list[CaseResult], segments) -> list[tuple[str, str, dict]]:
+    """Every pair of algorithms compared on the ATE (translation RMSE per run) of the datasets both
+    have successful runs on (see :func:`epa.metrics.statistics.compare`)."""
+    algs = sorted({c.algorithm for c in grid})
+
+    def by_dataset(alg, of):
+        out = {}
+        for c in _ok_runs(grid, alg):
+            v = _num(of(c))
+            if np.isfinite(v):
+                out.setdefault(c.dataset, []).append(v)
+        return out
+
+    ate = {a: by_dataset(a, lambda c: _run_ate(c)[1]) for a in algs}
+    rpe = {a: by_dataset(a, lambda c: _run_rpe(c, segments)) for a in algs}
+    return [(a, b, statistics.compare(ate[a], ate[b], rpe[a], rpe[b]))
+            for i, a in enumerate(algs) for b in algs[i + 1:]]
+
+
+def _verdict(a: str, b: str, r: dict, short: bool = False) -> str:
+    if r["verdict"] == "cannot tell apart":
+        return "cannot tell apart" if short else f"the data cannot tell {a} and {b} apart (no test below p = {statistics.ALPHA})"
+    return r["verdict"].replace("a better", f"{a} better").replace("b better", f"{b} better")
+
+
+def comparison_text(pairs: list[tuple[str, str, dict]]) -> str:
+    """results/comparison.txt: for each pair of algorithms, the wins, the tests and the verdict."""
+    need = statistics.min_datasets_for()
+    lines = ["ALGORITHM COMPARISON (ATE: translation RMSE per run; RPE: mean over the segment lengths of the",
+             f"mean translation error; lower is better; two-sided tests at {statistics.ALPHA}, no correction",
+             "for the number of pairs; a dataset counts when both algorithms have a successful run on it)", RULE_LONG]
+    for a, b, r in pairs:
+        n = len(r["datasets"])
+        lines.append(f"{a} vs {b}: {n} shared dataset{'s' if n != 1 else ''}")
+        if not n:
+            lines += ["  nothing to compare", RULE_LONG]
+            continue
+        lines.append(f"  ATE better on: {a} {r['wins_a']}, {b} {r['wins_b']}" + (f", tied {r['ties']}" if r["ties"] else ""))
+        lines.append(f"  median ratio {a} / {b}: ATE {r['median_ratio_ate']:.3f}, RPE {r['median_ratio_rpe']:.3f}")
+        p = f"p = {r['p_datasets']:.3f}"
+        lines.append(f"  over datasets (Wilcoxon signed-rank, exact, paired by dataset): {p}"
+                     + ("" if r["datasets_testable"] else f" (only {n} datasets: at least {need} are needed to reach"
+                                                         f" p < {statistics.ALPHA})"))
+        for d, e in r["per_dataset"].items():
+            test = (f"Mann-Whitney p = {e['p_runs']:.3f}" if "p_runs" in e else "no test (fewer than 2 runs each)")
+            lines.append(f"  {d}: ATE {e['mean_a']:.4f} vs {e['mean_b']:.4f} m over {e['runs_a']} / {e['runs_b']} runs,"
+                         f" {test}")
+        lines += [f"  verdict: {_verdict(a, b, r)}", RULE_LONG]
+    return "\n".join(lines) + "\n"
+
+
+def comparison_tex(pairs: list[tuple[str, str, dict]]) -> str:
+    """results/comparison.tex: one row per pair of algorithms."""
+    header = ["pair", "datasets", "ATE wins", "median ATE ratio", "median RPE ratio", "p (datasets)", "verdict"]
+    rows = [" & ".join(r"\textbf{" + h + "}" for h in header) + r" \\ \hline"]
+    for a, b, r in pairs:
+        if not r["datasets"]:
+            continue
+        rows.append(" & ".join([f"{latex_escape(a)} vs {latex_escape(b)}", str(len(r["datasets"])),
+                                f"{r['wins_a']}--{r['wins_b']}", f"{r['median_ratio_ate']:.3f}",
+                                f"{r['median_ratio_rpe']:.3f}", f"{r['p_datasets']:.3f}",
+                                latex_escape(_verdict(a, b, r, short=True))]) + r" \\")
+    return tex_document("ALGORITHM COMPARISON (see comparison.txt)", rows, len(header))
+
+
 def tex_document(title: str, rows: list[str], ncols: int) -> str:
     """A table that \\input's into a paper: a tabular with the report's rows, titled in a comment."""
     spec = "l" + "c" * (ncols - 1)
@@ -428,10 +559,26 @@ def tex_document(title: str, rows: list[str], ncols: int) -> str:
 
 SUMMARY_FIXED = ["algorithm", "dataset", "run", "status", "eval_source", "n_matched", "ate_trans_rmse_m",
                  "ate_rot_rmse_deg", "time_rpe_1s_trans_mean_m", "time_rpe_1s_rot_mean_deg", "time_offset_s",
-                 "extrinsic_rot_deg", "extrinsic_trans_m", "success_rate_distance_pct", "success_rate_time_pct",
+                 "time_offset_std_s", "step1_status", "extrinsic_rot_deg", "extrinsic_trans_m", "extrinsic_rot_std_deg",
+                 "extrinsic_trans_std_m", "step2_status", "success_rate_distance_pct", "success_auc_pct", "success_rate_time_pct",
                  "global_failed", "knee_threshold_m", "fail_segments", "diverged_at_s", "nees_rot_mean",
                  "nees_pos_mean", "outside_3sigma_pct", "ea_drift", "frame_time_mean_ms", "kitti_trans_pct",
                  "kitti_rot_deg_per_100m", "notes"]
+
+
+def _largest(values):
+    """The largest per-axis deviation; None when an axis has none (unobservable) or none exist."""
+    return None if not values or any(v is None for v in values) else max(values)
+
+
+def _confidence(m: dict) -> dict:
+    """summary.csv's Step 1 / Step 2 confidence columns from a case's metrics.json."""
+    step1, calib = m.get("sync", {}).get("step1", {}), m.get("calibrate", {})
+    ext = calib.get("extrinsic") or {}
+    return {"time_offset_std_s": step1.get("std"), "step1_status": step1.get("status"),
+            "extrinsic_rot_std_deg": _largest(ext.get("rotation_std_deg")),
+            "extrinsic_trans_std_m": _largest(ext.get("translation_std_m")),
+            "step2_status": calib.get("step2_status")}
 
 
 def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict]]:
@@ -449,7 +596,7 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
                        time_rpe_1s_trans_mean_m=_stat(m, "rpe_time_1s", "trans_m", "mean"),
                        time_rpe_1s_rot_mean_deg=_stat(m, "rpe_time_1s", "rot_deg", "mean"),
                        time_offset_s=m.get("time_offset_s"), extrinsic_rot_deg=m.get("extrinsic_rot_deg"),
-                       extrinsic_trans_m=m.get("extrinsic_trans_m"),
+                       extrinsic_trans_m=m.get("extrinsic_trans_m"), **_confidence(m),
                        success_rate_distance_pct=_num(d.get("success_rate_distance_pct")),
                        success_rate_time_pct=_num(d.get("success_rate_time_pct")),
                        global_failed=d.get("global_failed"), knee_threshold_m=_stat(d, "knee", "threshold_m"),
@@ -472,17 +619,21 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
     return SUMMARY_FIXED + seg_cols, rows
 
 
-def summary_csv(grid, segments) -> str:
-    cols, rows = summary_rows(grid, segments)
+def records_csv(cols: list[str], rows: list[dict]) -> str:
+    """CSV of dict rows: missing values empty, floats to 9 significant digits."""
     buf = _io.StringIO()
     w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n", restval="")
     w.writeheader()
     for r in rows:
-        w.writerow({k: ("" if v is None else (f"{v:.9g}" if isinstance(v, float) else v)) for k, v in r.items()})
+        w.writerow({k: ("" if r.get(k) is None else (f"{r[k]:.9g}" if isinstance(r[k], float) else r[k])) for k in cols})
     return buf.getvalue()
 
 
-TABLE_NAMES = ("ate", "ate_2d", "rpe_distance", "drift_rate", "rpe_time_1s", "success_rate",
+def summary_csv(grid, segments) -> str:
+    return records_csv(*summary_rows(grid, segments))
+
+
+TABLE_NAMES = ("ate", "ate_2d", "rpe_distance", "drift_rate", "rpe_time_1s", "success_rate", "success_auc",
                "valid_ate", "valid_rpe_distance", "valid_drift_rate", "valid_rpe_time_1s", "nees", "ea_drift", "runtime")
 
 
@@ -496,11 +647,17 @@ def write_all(grid: list[CaseResult], results_dir, cfg: dict) -> None:
     results_dir = Path(results_dir)
     segments = cfg["metrics"]["segments"]
     decimals = cfg["tables"]["decimals"]
-    text = ov_eval_text(grid, segments) if cfg.get("mode") == "ov_eval" else report_text(grid, segments, decimals)
+    spread = cfg["tables"]["spread"]
+    text = (ov_eval_text(grid, segments) if cfg.get("mode") == "ov_eval" else
+            report_text(grid, segments, decimals, spread))
     io.write_text(results_dir / "error_comparison.txt", text)
     io.write_text(results_dir / "summary.csv", summary_csv(grid, segments))
-    for name, title, rows, n in build_tables(grid, segments, decimals, kitti=cfg["metrics"]["kitti"]):
+    for name, title, rows, n in build_tables(grid, segments, decimals, kitti=cfg["metrics"]["kitti"], spread=spread):
         io.write_text(results_dir / "tables" / f"{name}.tex", tex_document(title, rows, n))
+    io.write_text(results_dir / "success_curves.csv", records_csv(SUCCESS_CURVE_COLUMNS, success_curves(grid)))
+    pairs = comparisons(grid, segments)
+    io.write_text(results_dir / "comparison.txt", comparison_text(pairs))
+    io.write_text(results_dir / "comparison.tex", comparison_tex(pairs))
     write_across_runs(grid, results_dir)
 
 
@@ -527,12 +684,7 @@ def write_across_runs(grid: list[CaseResult], results_dir) -> None:
             io.write_csv(results_dir / "consistency" / alg / f"{ds}.csv", table)
             rows.append({"algorithm": alg, "dataset": ds, **summary})
     cols = ["algorithm", "dataset", "runs", "n_common", "rmse_pos_m", "rmse_rot_deg", "nees_pos_mean", "nees_rot_mean"]
-    buf = _io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n", restval="")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: ("" if r.get(k) is None else (f"{r[k]:.9g}" if isinstance(r[k], float) else r[k])) for k in cols})
-    io.write_text(results_dir / "consistency" / "summary.csv", buf.getvalue())
+    io.write_text(results_dir / "consistency" / "summary.csv", records_csv(cols, rows))
 
 
 def make(keys: list[str], results_dir, cfg: dict) -> list[tuple[str, str]]:

@@ -1,0 +1,104 @@
+"""Statistics over runs and datasets: the run-to-run spread of a table cell and the comparison of
+two algorithms (wins, paired test over datasets, test over runs per dataset, median ratio).
+
+Tests are two-sided at ALPHA, without correction for the number of pairs compared (said in the
+report). Exact null distributions are used (few datasets, few runs): with n datasets the smallest
+possible Wilcoxon p is 2 / 2^n, so fewer than 6 datasets can never reach 0.05, and that is said
+rather than a p presented as evidence.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+ALPHA = 0.05
+SPREAD_KINDS = ("none", "std", "ci")
+
+
+def spread(values, kind: str) -> float:
+    """The ± of a cell over its runs: the sample standard deviation (n - 1), or the half-width of
+    the 95 % confidence interval of the mean (Student t, n - 1 degrees of freedom). nan with
+    fewer than two values."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    if kind == "none" or v.size < 2:
+        return np.nan
+    std = float(v.std(ddof=1))
+    if kind == "std":
+        return std
+    from scipy import stats
+
+    return float(stats.t.ppf(0.975, v.size - 1) * std / np.sqrt(v.size))
+
+
+def wilcoxon_exact(diff) -> float:
+    """Two-sided exact p of the Wilcoxon signed-rank test on paired differences (zeros dropped,
+    ties given mid-ranks); 1.0 without non-zero differences."""
+    d = np.asarray(diff, float)
+    d = d[d != 0]
+    n = d.size
+    if n == 0:
+        return 1.0
+    from scipy import stats
+
+    ranks = stats.rankdata(np.abs(d))
+    observed = ranks[d > 0].sum()
+    # every sign assignment is equally likely under the null: enumerate them (n is a few datasets);
+    # beyond 16 the normal approximation is good and the enumeration too long
+    if n > 16:
+        return float(stats.wilcoxon(d).pvalue)
+    signs = (np.arange(2 ** n)[:, None] >> np.arange(n)) & 1
+    sums = signs @ ranks
+    centre = ranks.sum() / 2
+    return float(np.mean(np.abs(sums - centre) >= abs(observed - centre) - 1e-9))
+
+
+def mann_whitney(a, b) -> float:
+    """Two-sided p of the Mann-Whitney U test over two algorithms' runs on one dataset (exact
+    without ties)."""
+    from scipy import stats
+
+    return float(stats.mannwhitneyu(a, b, alternative="two-sided").pvalue)
+
+
+def min_datasets_for(alpha: float = ALPHA) -> int:
+    """The fewest paired datasets whose exact Wilcoxon test can reach p < alpha."""
+    n = 1
+    while 2.0 / 2 ** n >= alpha:
+        n += 1
+    return n
+
+
+def compare(a: dict, b: dict, rpe_a: dict, rpe_b: dict) -> dict:
+    """Algorithm A against B. ``a`` / ``b``: dataset -> the runs' ATE (lower is better);
+    ``rpe_a`` / ``rpe_b``: dataset -> the runs' RPE. Only datasets where both have runs count."""
+    shared = sorted(set(a) & set(b))
+    mean_a = np.array([np.mean(a[d]) for d in shared])
+    mean_b = np.array([np.mean(b[d]) for d in shared])
+    out = {"datasets": shared, "wins_a": int(np.sum(mean_a < mean_b)), "wins_b": int(np.sum(mean_b < mean_a)),
+           "ties": int(np.sum(mean_a == mean_b))}
+    out["median_ratio_ate"] = float(np.median(mean_a / mean_b)) if shared else np.nan
+    rpe = [d for d in shared if d in rpe_a and d in rpe_b]
+    out["median_ratio_rpe"] = (float(np.median([np.mean(rpe_a[d]) / np.mean(rpe_b[d]) for d in rpe]))
+                               if rpe else np.nan)
+    out["p_datasets"] = wilcoxon_exact(mean_a - mean_b) if shared else np.nan
+    out["datasets_testable"] = len(shared) >= min_datasets_for()
+    out["per_dataset"] = {}
+    for d in shared:
+        entry = {"runs_a": len(a[d]), "runs_b": len(b[d]), "mean_a": float(np.mean(a[d])),
+                 "mean_b": float(np.mean(b[d]))}
+        if len(a[d]) >= 2 and len(b[d]) >= 2:
+            entry["p_runs"] = mann_whitney(a[d], b[d])
+        out["per_dataset"][d] = entry
+    significant_runs = [d for d, e in out["per_dataset"].items() if e.get("p_runs", 1.0) < ALPHA]
+    if out["datasets_testable"] and out["p_datasets"] < ALPHA:
+        better = "a" if np.median(mean_a - mean_b) < 0 else "b"
+        out["verdict"] = f"{better} better over datasets"
+    elif significant_runs:
+        out["verdict"] = "differ on " + ", ".join(
+            f"{d} ({'a' if out['per_dataset'][d]['mean_a'] < out['per_dataset'][d]['mean_b'] else 'b'} better)"
+            for d in significant_runs)
+    else:
+        out["verdict"] = "cannot tell apart"
+    out["significant_datasets"] = significant_runs
+    return out
