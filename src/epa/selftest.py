@@ -67,7 +67,8 @@ def _worst(std_lists) -> list:
 def report(results: list[dict], ref_name: str, rate: float) -> str:
     """The self-test's table: per noise level, what was trusted and how far from the truth."""
     lines = [f"epa selftest: Steps 1-2 on simulated {rate:g} Hz estimates of the motion in {ref_name}",
-             "(median / max over the trials; errors against the known truth, std as reported)", ""]
+             "(median / max over the trials; errors against the known truth: the offset's, the rotation's angle, the",
+             " lever arm's length; std as reported: the offset's, the largest per-axis one of rotation and lever arm)", ""]
     head = (f"{'noise':8} {'Step 1 trusted':>14} {'offset err ms':>14} {'std ms':>13} {'in 3 std':>9}  "
             f"{'Step 2 trusted':>14} {'rot err deg':>13} {'std deg':>13} {'trans err mm':>13} {'std mm':>13}")
     lines += [head, "-" * len(head)]

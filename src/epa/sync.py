@@ -153,47 +153,57 @@ def _peak(curve: np.ndarray) -> tuple[int, float]:
     return k, frac
 
 
-def _block_sums(a: np.ndarray, b: np.ndarray, span: tuple[int, int], starts: np.ndarray, lags: np.ndarray):
-    """Over each block of b's support and for each lag: the correlation's products a[m + lag] b[m]
-    and the two energies under the overlap, a[m + lag]^2 and b[m]^2 where a is defined. Each is
-    (blocks, lags)."""
+def _block_sums(a: np.ndarray, b: np.ndarray, span: tuple[int, int], starts: np.ndarray, lag: int) -> np.ndarray:
+    """Over each block of b's support, at one lag: the correlation's products a[m + lag] b[m] and the
+    two energies under the overlap, a[m + lag]^2 and b[m]^2 where a is defined. (3, blocks)."""
     b0, b1 = span
+    lo, hi = b0 + lag, b1 + 1 + lag
     bb = b[b0:b1 + 1]
-    a_defined = a != 0.0  # on_grid leaves a exactly zero outside its support
-    out = np.empty((3, len(starts), len(lags)))
-    for n, lag in enumerate(lags):
-        lo, hi = b0 + lag, b1 + 1 + lag
-        inside = slice(max(0, -lo), len(bb) - max(0, hi - len(a)))
-        seg, defined = np.zeros(len(bb)), np.zeros(len(bb))
-        seg[inside], defined[inside] = a[max(lo, 0):min(hi, len(a))], a_defined[max(lo, 0):min(hi, len(a))]
-        out[:, :, n] = np.add.reduceat(np.stack([seg * bb, seg * seg, defined * bb * bb]), starts, axis=1)
-    return out
+    if lo < 0 or hi > len(a):  # the shifted support runs off the grid: pad with "not defined"
+        seg = np.zeros(len(bb))
+        seg[max(0, -lo):len(bb) - max(0, hi - len(a))] = a[max(lo, 0):min(hi, len(a))]
+    else:
+        seg = a[lo:hi]
+    defined = seg != 0.0  # on_grid leaves a exactly zero outside its support
+    return np.stack([np.add.reduceat(seg * bb, starts), np.add.reduceat(seg * seg, starts),
+                     np.add.reduceat(np.where(defined, bb * bb, 0.0), starts)])
 
 
-def _jackknife_std(a: np.ndarray, b: np.ndarray, span: tuple[int, int], lags: np.ndarray, k: int, reach: int,
-                   dt: float, blocks: int = JACKKNIFE_BLOCKS) -> float:
-    """Standard deviation of the peak lag (index k of ``lags``) by the delete-one-block jackknife.
+def _jackknife_std(a: np.ndarray, b: np.ndarray, span: tuple[int, int], peak_lag: int, reach: int, dt: float,
+                   blocks: int = JACKKNIFE_BLOCKS) -> float:
+    """Standard deviation of the correlation peak's lag by the delete-one-block jackknife.
 
     The estimate signal's support is cut into ``blocks`` consecutive blocks; each replicate is the
-    normalised correlation without one block and finds its peak near k. Blocks span seconds,
-    longer than the signals' correlation time, so the replicates see correlated noise as it is.
-    The search around k starts at 16 samples and widens while a replicate peak sits on its edge;
-    one still on the edge at ``reach`` (the main lobe) means the offset is not pinned down:
-    infinite. The grid's quantisation (dt^2/12) is added."""
-    b0, b1 = span
-    starts = np.linspace(0, b1 + 1 - b0, blocks + 1).astype(int)[:-1]
-    half = min(16, reach)
+    normalised correlation without one block and finds its peak near ``peak_lag``. Blocks span
+    seconds, longer than the signals' correlation time, so the replicates see correlated noise as it
+    is. The replicates are computed on a 5 ms grid (sums of the 1 ms samples; the main lobe of
+    signals measured over >= 0.1 s is hundreds of ms wide, so a parabola still finds its top to a
+    small fraction of the grid). The search starts at 16 grid steps and widens while a replicate
+    peak sits on its edge; one still on the edge at ``reach`` samples (the main lobe) means the
+    offset is not pinned down: infinite. The quantisation of the full grid (dt^2/12) is added."""
+    q = max(1, int(round(0.005 / dt)))
+    n = len(a) // q * q
+    a_c, b_c = a[:n].reshape(-1, q).sum(axis=1), b[:n].reshape(-1, q).sum(axis=1)
+    span_c = (span[0] // q, min(span[1] // q, len(b_c) - 1))
+    starts = np.linspace(0, span_c[1] + 1 - span_c[0], blocks + 1).astype(int)[:-1]
+    centre, reach_c = int(round(peak_lag / q)), max(3, reach // q)
+    columns: dict[int, np.ndarray] = {}
+    half = min(16, reach_c)
     while True:
-        near = np.arange(max(k - half, 0), min(k + half, len(lags) - 1) + 1)
-        num, energy_a, energy_b = (x.sum(axis=0) - x for x in _block_sums(a, b, span, starts, lags[near]))
+        lags = np.arange(centre - half, centre + half + 1)
+        for lag in lags:
+            if lag not in columns:  # widening reuses what is computed
+                columns[lag] = _block_sums(a_c, b_c, span_c, starts, int(lag))
+        sums = np.stack([columns[lag] for lag in lags], axis=-1)  # (3, blocks, lags)
+        num, energy_a, energy_b = sums.sum(axis=1, keepdims=True) - sums
         replicates = num / np.sqrt(np.maximum(energy_a * energy_b, 1e-300))
         peaks = [_peak(r) for r in replicates]
-        if all(0 < i < len(near) - 1 for i, _ in peaks):
+        if all(0 < i < len(lags) - 1 for i, _ in peaks):
             break
-        if half >= reach:
+        if half >= reach_c:
             return float("inf")
-        half = min(2 * half, reach)
-    shifts = np.array([(lags[near[i]] + frac) * dt for i, frac in peaks])
+        half = min(2 * half, reach_c)
+    shifts = np.array([(lags[i] + frac) * q * dt for i, frac in peaks])
     jack = np.sqrt((blocks - 1) / blocks * np.sum((shifts - shifts.mean()) ** 2))
     return float(np.hypot(jack, dt / np.sqrt(12.0)))
 
@@ -306,7 +316,7 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
                     **curve)
     # the jackknife looks for replicate peaks within the main lobe, at most 0.25 s either side
     reach = max(3, min(k - left, right - k, int(round(0.25 / dt))))
-    std = _jackknife_std(a, b, (b0, b1), lags, k, reach, dt)
+    std = _jackknife_std(a, b, (b0, b1), int(lags[k]), reach, dt)
     curve["std"] = std
     if not std <= max_std:
         return fail("uncertain", f"offset {estimated * 1000:.1f} ms too uncertain: std {std * 1000:.3g} ms >"
