@@ -3,7 +3,7 @@ directions flagged and not applied, ambiguous or out-of-window offsets refused, 
 import numpy as np
 import pytest
 
-from epa import calibration, chain, geometry, io, pipeline, settings, simulate, sync
+from epa import calibration, chain, geometry, io, settings, simulate, sync
 from epa.trajectory import Trajectory
 
 
@@ -25,7 +25,7 @@ def simulated_trials(n: int):
         offset = step1.offset if step1.used else truth["offset"]
         _, i_est = sync.associate(ref, est, offset=offset)
         matched = est.select(i_est)
-        step2 = calibration.solve(pipeline.reference_at(ref, matched.t + offset), matched,
+        step2 = calibration.solve(ref.at(matched.t + offset), matched,
                                   scale=truth["scale"] != 1.0, offset_std=step1.std if step1.used else 0.0)
         yield truth, step1, step2
 

@@ -55,8 +55,8 @@ def example(tmp_path_factory):
     cases = [{"key": key, "truth": str(root / "data/truth" / f"{key.split('/')[1]}.txt"),
               "estimate": str(next((root / "data/algorithms").glob(key + ".*")))} for key in manifest["cases"]]
     out = root / "results"
-    run_stages(cases, out, cfg, stages=[s for s in ("load", "crop", "sync", "calibrate", "align", "metrics", "drift",
-                                                    "consistency", "efficiency")])
+    run_stages(cases, out, cfg, stages=["load", "crop", "sync", "calibrate", "align", "metrics", "drift", "consistency",
+                                        "efficiency"])
     assert tables.make(sorted(manifest["cases"]), out, cfg) == []
     return out, manifest
 

@@ -95,8 +95,7 @@ def solve(ref: Trajectory, est: Trajectory, *, pair_step: float = 1.0, min_rotat
     if offset_std > 0:
         ends = []
         for sign in (1.0, -1.0):
-            p, q = geometry.interpolate(ref.t, ref.p, ref.q, ref.t + sign * offset_std)
-            ends.append(_fit(Trajectory(ref.t, p, q), est, **fit)[0])
+            ends.append(_fit(ref.at(ref.t + sign * offset_std), est, **fit)[0])
         d_rot = geometry.so3_log(ends[0].R @ ends[1].R.T) / 2
         d_x = (np.r_[ends[0].t, ends[0].scale] - np.r_[ends[1].t, ends[1].scale])[:len(cov_x)] / 2
         cov_rot, cov_x = cov_rot + np.outer(d_rot, d_rot), cov_x + np.outer(d_x, d_x)
@@ -144,7 +143,7 @@ def _fit(ref: Trajectory, est: Trajectory, *, pair_step, min_rotation_deg, scale
     # (body axes). Pairs overlap in time, so the residuals are grouped in blocks (see _sandwich).
     block = np.floor((ref.t[i] - ref.t[0]) / (2.0 * pair_step)).astype(int)
     jac_r = geometry.skew(beta[keep] @ r_x.T)
-    cov_rot, null_rot = _sandwich(jac_r, alpha[keep] - beta[keep] @ r_x.T, block[keep], max_condition)
+    cov_rot, null_rot, _ = _sandwich(jac_r, alpha[keep] - beta[keep] @ r_x.T, block[keep], max_condition)
 
     # Translation (and scale): every pair, rotation now known.
     eye = np.eye(3)
@@ -159,10 +158,10 @@ def _fit(ref: Trajectory, est: Trajectory, *, pair_step, min_rotation_deg, scale
     info.update(tinfo)
     t_x = x[:3]
     s = float(x[3]) if scale else 1.0
-    cov_x, null_x = _sandwich(m[keep_t], np.einsum("kab,b->ka", m[keep_t], x) - b[keep_t], block[keep_t], max_condition)
+    cov_x, null_x, h_pinv = _sandwich(m[keep_t], np.einsum("kab,b->ka", m[keep_t], x) - b[keep_t], block[keep_t],
+                                      max_condition)
     # the rotation's own uncertainty moves R_X t_B: d(residual)/d(rotation) = s [R_X t_B]x
     lever = geometry.skew(s * rtb[keep_t])
-    h_pinv = _pinv(np.einsum("kai,kaj->ij", m[keep_t], m[keep_t]), max_condition)[0]
     gain = h_pinv @ np.einsum("kai,kaj->ij", m[keep_t], lever)
     cov_x = cov_x + gain @ cov_rot @ gain.T
     return Extrinsic(R=r_x, t=t_x, scale=s, info=info), cov_rot, null_rot, cov_x, null_x
@@ -173,6 +172,7 @@ def _verdict(ext: Extrinsic, scale: bool, max_rot_residual_deg, max_trans_residu
     """Status, trust and reason of a solved extrinsic: unobservable, large residual, uncertain or trusted."""
     info, s, rot_rms = ext.info, ext.scale, ext.info["rotation_residual_rms_deg"]
     unobservable, residual, uncertain = [], [], []
+    relative_scale_std = [info["scale_std"] / abs(s)] if scale and s and info["scale_std"] is not None else []
     if info["rotation_unobservable_axes"]:
         unobservable.append("rotation about " + _axes(info["rotation_unobservable_axes"]))
     if info["translation_unobservable_directions"]:
@@ -185,7 +185,7 @@ def _verdict(ext: Extrinsic, scale: bool, max_rot_residual_deg, max_trans_residu
         residual.append(f"translation residual {info['translation_residual_rms_m']:.3g} m > {max_trans_residual_m}")
     for name, std, limit, unit in (("rotation", info["rotation_std_deg"], max_rot_std_deg, " deg"),
                                    ("translation", info["translation_std_m"], max_trans_std_m, " m"),
-                                   ("relative scale", [info["scale_std"] / abs(s)] if scale and s and info["scale_std"] is not None else [], max_scale_std, "")):
+                                   ("relative scale", relative_scale_std, max_scale_std, "")):
         worst = max((v for v in std if v is not None), default=0.0)
         if worst > limit:
             uncertain.append(f"{name} std {worst:.3g}{unit} > {limit}")
@@ -225,7 +225,8 @@ def _sandwich(jac: np.ndarray, resid: np.ndarray, block: np.ndarray, max_conditi
     """Covariance of a least-squares solution, H^+ S H^+ with H = sum J^T J, from residuals that are
     correlated in time: S sums the outer products of the gradient J^T r over time blocks and of
     each block with the next (overlapping motion pairs correlate only across neighbouring blocks),
-    scaled by G/(G-1) for G blocks. No noise level is assumed: it comes from the residuals."""
+    scaled by G/(G-1) for G blocks. No noise level is assumed: it comes from the residuals.
+    Returns the covariance, the unobservable directions and H^+."""
     h_pinv, null, _ = _pinv(np.einsum("kai,kaj->ij", jac, jac), max_condition)
     grad = np.einsum("kai,ka->ki", jac, resid)
     ids, inverse = np.unique(block, return_inverse=True)
@@ -239,7 +240,7 @@ def _sandwich(jac: np.ndarray, resid: np.ndarray, block: np.ndarray, max_conditi
     s = (v * np.clip(eig, 0, None)) @ v.T  # the cross terms can leave it slightly indefinite
     g = len(ids)
     cov = h_pinv @ s @ h_pinv * (g / (g - 1) if g > 1 else np.inf)
-    return cov, null
+    return cov, null, h_pinv
 
 
 def _uncertainty(cov_rot, null_rot, cov_x, null_x, scale: bool) -> dict:

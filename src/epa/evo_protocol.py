@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from epa import alignment, geometry, sync
+from epa import alignment, sync
 from epa.errors import EpaError
 from epa.metrics import accuracy, relations
 from epa.trajectory import Trajectory
@@ -91,11 +91,9 @@ def synchronise(ref: Trajectory, est: Trajectory, o: EvoOptions) -> tuple[Trajec
         return ref.select(i_ref), est.select(i_est)
     if len(est) > len(ref):  # the estimate is denser: resample it at the reference's stamps in its own clock
         r = ref.select(i_ref)
-        p, q = geometry.interpolate(est.t, est.p, est.q, r.t - o.t_offset)
-        return r, Trajectory(r.t - o.t_offset, p, q)
+        return r, est.at(r.t - o.t_offset)
     e = est.select(i_est)
-    p, q = geometry.interpolate(ref.t, ref.p, ref.q, e.t + o.t_offset)
-    return Trajectory(e.t + o.t_offset, p, q), e
+    return ref.at(e.t + o.t_offset), e
 
 
 def align(ref: Trajectory, est: Trajectory, o: EvoOptions) -> tuple[Trajectory, alignment.Similarity | None]:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import alignment, calibration, geometry, readers, sync
+from epa import alignment, calibration, readers, sync
 from epa.metrics import accuracy, efficiency
 from epa.readers import bags, text
 from epa.errors import EpaError
@@ -120,12 +120,6 @@ def extrinsic_step(ref: Trajectory, est: Trajectory, cfg: dict, offset_std: floa
                              max_scale_std=c["max_scale_std"], offset_std=offset_std)
 
 
-def reference_at(ref: Trajectory, stamps: np.ndarray) -> Trajectory:
-    """The reference interpolated at ``stamps`` (reference clock): linear positions, slerp."""
-    p, q = geometry.interpolate(ref.t, ref.p, ref.q, stamps)
-    return Trajectory(stamps, p, q)
-
-
 def associate(ref: Trajectory, est: Trajectory, c: dict, offset: float):
     """Matched indices under the ``sync`` settings ``c`` and a time offset; too few pairs is an error."""
     i_ref, i_est = sync.associate(ref, est, policy=c["policy"], max_diff=c["max_diff"], offset=offset)
@@ -180,7 +174,7 @@ def calibrate_stage(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict
         # Step 2 compares each estimate pose with the reference at its very instant: a matched
         # reference pose may be up to max_diff away, which biases the lever arm (1 cm at 8 m/s and a
         # 50 Hz reference). Step 1's uncertainty is carried into Step 2's (a configured offset is exact).
-        ref_at = reference_at(cropped()[0], est.t + sync_info["offset_s"]) if cropped is not None else ref
+        ref_at = cropped()[0].at(est.t + sync_info["offset_s"]) if cropped is not None else ref
         ext = extrinsic_step(ref_at, est, cfg, (step1_record.get("std") or 0.0) if step1_record.get("used") else 0.0)
         info["extrinsic"] = ext.to_dict()
         info["step2_status"] = ext.status

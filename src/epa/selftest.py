@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa import geometry, pipeline, simulate, sync
+from epa import geometry, pipeline, simulate
+from epa.errors import EpaError
 from epa.trajectory import Trajectory
 
 # name: white orientation noise (deg), white position noise (m), random walks (deg, m per sqrt(s))
@@ -32,13 +33,12 @@ def trial(ref: Trajectory, cfg: dict, rng: np.random.Generator, level: str, rate
            "offset_std_s": found.std}
     # Step 2 on the offset Step 1 found (or, when it was not trusted, the true one: Step 2 alone)
     offset = found.offset if found.used else truth["offset"]
-    i_ref, i_est = sync.associate(ref, est, policy=cfg["sync"]["policy"], max_diff=cfg["sync"]["max_diff"],
-                                  offset=offset)
-    if len(i_ref) < cfg["calibrate"]["min_pairs"]:
-        return {**out, "step2_status": "too little motion", "step2_reason": f"only {len(i_ref)} poses matched"}
+    try:
+        _, i_est, _ = pipeline.associate(ref, est, cfg["sync"], offset)
+    except EpaError as exc:
+        return {**out, "step2_status": "too little motion", "step2_reason": exc.message}
     matched = est.select(i_est)
-    ext = pipeline.extrinsic_step(pipeline.reference_at(ref, matched.t + offset), matched, cfg,
-                                  found.std if found.used else 0.0)
+    ext = pipeline.extrinsic_step(ref.at(matched.t + offset), matched, cfg, found.std if found.used else 0.0)
     out.update(step2_status=ext.status, step2_reason=ext.reason)
     if "rotation_std_deg" in ext.info:
         out.update(rotation_error_deg=float(np.degrees(geometry.rotation_angle(ext.R @ truth["rotation"].T))),
@@ -78,21 +78,23 @@ def report(results: list[dict], ref_name: str, rate: float) -> str:
         inside = [abs(r["offset_error_s"]) <= 3 * r["offset_std_s"] for r in s1]
         s2 = [r for r in rows if r["step2_status"] == "trusted"]
         lines.append(
-            f"{level:8} {len(s1):>6} of {len(rows):<5} {_fmt([r['offset_error_s'] and abs(r['offset_error_s']) for r in s1], 1e3, '.2f'):>14}"
+            f"{level:8} {len(s1):>6} of {len(rows):<5} {_fmt([abs(r['offset_error_s']) for r in s1], 1e3, '.2f'):>14}"
             f" {_fmt([r['offset_std_s'] for r in s1], 1e3, '.2f'):>13} {sum(inside):>4} of {len(s1):<2}  "
             f"{len(s2):>6} of {len(rows):<5} {_fmt([r.get('rotation_error_deg') for r in s2], 1, '.3f'):>13}"
             f" {_fmt(_worst([r.get('rotation_std_deg') for r in s2]), 1, '.3f'):>13}"
             f" {_fmt([r.get('translation_error_m') for r in s2], 1e3, '.1f'):>13}"
             f" {_fmt(_worst([r.get('translation_std_m') for r in s2]), 1e3, '.1f'):>13}")
     lines.append("")
-    statuses = {}
+    not_trusted = {}  # (step, status): an example reason
     for r in results:
-        for step in ("step1_status", "step2_status"):
-            if r[step] != "trusted":
-                statuses.setdefault(f"{step[:5]} {r[step]}", r.get("step2_reason") if step == "step2_status" else None)
-    if statuses:
+        if r["step1_status"] != "trusted":
+            not_trusted.setdefault((1, r["step1_status"]), None)
+        if r["step2_status"] != "trusted":
+            not_trusted.setdefault((2, r["step2_status"]), r.get("step2_reason"))
+    if not_trusted:
         lines.append("not trusted in some trials:")
-        lines += [f"  Step {k[4]} {k[6:]}" + (f" (e.g. {why})" if why else "") for k, why in statuses.items()]
+        lines += [f"  Step {step} {status}" + (f" (e.g. {why})" if why else "")
+                  for (step, status), why in not_trusted.items()]
     unobservable = {r["unobservable"] for r in results if r.get("unobservable")}
     if unobservable:
         lines.append("this motion leaves part of the extrinsic unobservable: " + "; ".join(sorted(unobservable)))

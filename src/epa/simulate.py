@@ -161,15 +161,16 @@ def simulate(out_dir, seed: int = 7) -> dict:
 
 def observe(ref: Trajectory, rng: np.random.Generator, *, offset: float = 0.0, rotation: np.ndarray | None = None,
             translation=(0.0, 0.0, 0.0), scale: float = 1.0, rate: float = 20.0, noise_rot_deg: float = 0.0,
-            noise_pos_m: float = 0.0, walk_rot_deg: float = 0.0, walk_pos_m: float = 0.0, margin: float = 0.0) -> Trajectory:
+            noise_pos_m: float = 0.0, walk_rot_deg: float = 0.0, walk_pos_m: float = 0.0,
+            margin: float = 0.0) -> Trajectory:
     """A simulated estimate of a sensor rigidly mounted on the reference body, from the reference's
     own motion: poses at ``rate`` on the estimate's clock (t_ref = t_est + offset), sensor frame
     X = (rotation, translation), positions divided by ``scale``, white noise (orientation on the
     right, deg; position, m) and random walks (per sqrt(s)), in an arbitrary world of its own."""
     rot = np.eye(3) if rotation is None else np.asarray(rotation, float)
     t_est = np.arange(ref.t[0] + margin + max(0.0, -offset), ref.t[-1] - margin - max(0.0, offset), 1.0 / rate)
-    p_b, q_b = geometry.interpolate(ref.t, ref.p, ref.q, t_est + offset)
-    r_b = geometry.quat_to_rot(q_b)
+    body = ref.at(t_est + offset)
+    p_b, r_b = body.p, body.r
     n, step = len(t_est), np.sqrt(1.0 / rate)
     walk_r = np.cumsum(rng.normal(0, np.radians(walk_rot_deg) * step, (n, 3)), axis=0)
     walk_p = np.cumsum(rng.normal(0, walk_pos_m * step, (n, 3)), axis=0)

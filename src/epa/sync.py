@@ -141,6 +141,12 @@ def _clip_spikes(w: np.ndarray) -> np.ndarray:
     return np.minimum(w, med + 20 * mad)
 
 
+def _local_maxima(curve: np.ndarray) -> np.ndarray:
+    """Indices of the interior local maxima (the last sample of a flat top)."""
+    inner = curve[1:-1]
+    return np.flatnonzero((inner >= curve[:-2]) & (inner > curve[2:])) + 1
+
+
 def _peak(curve: np.ndarray) -> tuple[int, float]:
     """Index of the maximum and its sub-sample refinement (a parabola through the neighbours)."""
     k = int(np.argmax(curve))
@@ -210,7 +216,8 @@ def _jackknife_std(a: np.ndarray, b: np.ndarray, span: tuple[int, int], peak_lag
 
 def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, resample_dt: float = 0.001,
                     min_motion: float = 0.05, min_corr: float = 0.3, min_peak_ratio: float = 1.05,
-                    max_std: float = 0.01, speed_interval: float = 0.1, fallback: float = 0.0, max_samples: int = 2_000_000) -> OffsetEstimate:
+                    max_std: float = 0.01, speed_interval: float = 0.1, fallback: float = 0.0,
+                    max_samples: int = 2_000_000) -> OffsetEstimate:
     """Time offset by cross-correlating angular-speed signals on a uniform timeline (FFT).
 
     The peak is refined below one sample with a parabola through its neighbours; its standard
@@ -276,8 +283,7 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     overlap = np.minimum(b1, a1 - lags_all) - np.maximum(b0, a0 - lags_all) + 1
     enough = overlap >= 0.5 * (min(a1 - a0, b1 - b0) + 1)  # at least half the shorter signal overlaps
     corr_all = np.where(enough, corr_all / np.sqrt(np.maximum(energy_a * energy_b, 1e-300)), -1.0)
-    inner_all = corr_all[1:-1]
-    maxima_all = np.flatnonzero((inner_all >= corr_all[:-2]) & (inner_all > corr_all[2:])) + 1
+    maxima_all = _local_maxima(corr_all)
     beyond = maxima_all[np.abs(lags_all[maxima_all]) > kmax]
     best_beyond = float(corr_all[beyond].max()) if len(beyond) else -1.0
     in_window = np.abs(lags_all) <= kmax
@@ -289,7 +295,7 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     # lobe reaching from the nearest local minimum on the left of the peak to the nearest on the right.
     inner = corr[1:-1]
     minima = np.flatnonzero((inner <= corr[:-2]) & (inner <= corr[2:])) + 1
-    maxima = np.flatnonzero((inner >= corr[:-2]) & (inner >= corr[2:])) + 1
+    maxima = _local_maxima(corr)
     left = minima[minima < k].max(initial=0)
     right = minima[minima > k].min(initial=len(corr) - 1)
     outside = maxima[(maxima < left) | (maxima > right)]

@@ -39,6 +39,11 @@ class Trajectory:
             cov_ros=None if self.cov_ros is None else self.cov_ros[idx],
         )
 
+    def at(self, stamps: np.ndarray) -> "Trajectory":
+        """The poses at ``stamps``: linear positions, slerp orientations (clamped at the ends)."""
+        p, q = geometry.interpolate(self.t, self.p, self.q, stamps)
+        return Trajectory(np.asarray(stamps, float), p, q)
+
     def shifted(self, dt: float) -> "Trajectory":
         return replace(self, t=self.t + dt)
 

@@ -90,15 +90,10 @@ def compare(a: dict, b: dict, rpe_a: dict, rpe_b: dict) -> dict:
         if len(a[d]) >= 2 and len(b[d]) >= 2:
             entry["p_runs"] = mann_whitney(a[d], b[d])
         out["per_dataset"][d] = entry
-    significant_runs = [d for d, e in out["per_dataset"].items() if e.get("p_runs", 1.0) < ALPHA]
-    if out["datasets_testable"] and out["p_datasets"] < ALPHA:
-        better = "a" if np.median(mean_a - mean_b) < 0 else "b"
-        out["verdict"] = f"{better} better over datasets"
-    elif significant_runs:
-        out["verdict"] = "differ on " + ", ".join(
-            f"{d} ({'a' if out['per_dataset'][d]['mean_a'] < out['per_dataset'][d]['mean_b'] else 'b'} better)"
-            for d in significant_runs)
-    else:
-        out["verdict"] = "cannot tell apart"
-    out["significant_datasets"] = significant_runs
+    # the verdict: which is better over the datasets ("a" / "b", None when not shown), else on
+    # which datasets their runs differ and which is better there; neither: they cannot be told apart
+    out["better_over_datasets"] = (("a" if np.median(mean_a - mean_b) < 0 else "b")
+                                   if out["datasets_testable"] and out["p_datasets"] < ALPHA else None)
+    out["better_on_dataset"] = {d: "a" if e["mean_a"] < e["mean_b"] else "b"
+                                for d, e in out["per_dataset"].items() if e.get("p_runs", 1.0) < ALPHA}
     return out

@@ -164,8 +164,9 @@ def _ate_2d(runs) -> _Cell:
     return _mean_over_runs(runs, _run_ate_2d)
 
 
-def _pooled(runs, table: str, valid: bool, length=None):
-    rot, trans = [], []
+def _per_run(runs, table: str, valid: bool, length=None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each run's (rot, trans) errors of the pairs a pooled cell takes from it."""
+    out = []
     for c in runs:
         t = getattr(c, table)
         sel = np.ones(len(t.get("rot_deg", [])), bool)
@@ -173,39 +174,39 @@ def _pooled(runs, table: str, valid: bool, length=None):
             sel &= t["length_m"] == float(length)
         if valid:
             sel &= t["valid"] > 0
-        rot.append(t["rot_deg"][sel])
-        trans.append(t["trans_m"][sel])
-    return (np.concatenate(rot) if rot else np.zeros(0)), (np.concatenate(trans) if trans else np.zeros(0))
-
-
-def _per_run_means(runs, table, valid, length=None, scale=(1.0, 1.0)):
-    """Each run's own mean (rot, trans) of the pairs a pooled cell takes from it (runs without one
-    are left out): what the spread of a pooled cell is over."""
-    out = []
-    for c in runs:
-        rot, trans = _pooled([c], table, valid, length)
-        if rot.size:
-            out.append((float(rot.mean()) * scale[0], float(trans.mean()) * scale[1]))
+        out.append((t["rot_deg"][sel], t["trans_m"][sel]))
     return out
+
+
+def _pooled(runs, table: str, valid: bool, length=None):
+    per_run = _per_run(runs, table, valid, length)
+    return tuple(np.concatenate([r[k] for r in per_run]) if per_run else np.zeros(0) for k in (0, 1))
+
+
+def _pooled_cell(runs, table, valid, length, of, width: int) -> _Cell:
+    """A cell pooling the pairs of all runs, ``of(rot, trans)`` giving its ``width`` numbers; its
+    spread is over each run's own ``of`` (runs without pairs left out)."""
+    per_run = _per_run(runs, table, valid, length)
+    rot, trans = (np.concatenate([r[k] for r in per_run]) for k in (0, 1))
+    if _all_nan_valid(runs, valid) or rot.size == 0:
+        return _Cell((np.nan,) * width)
+    return _Cell(of(rot, trans), runs=[of(r, t) for r, t in per_run if r.size])
 
 
 def _mean_pair(runs, table, valid, length=None) -> _Cell:
     if not runs:
         return _Cell(None)
-    rot, trans = _pooled(runs, table, valid, length)
-    if _all_nan_valid(runs, valid) or rot.size == 0:
-        return _Cell((np.nan, np.nan))
-    return _Cell((float(rot.mean()), float(trans.mean())), runs=_per_run_means(runs, table, valid, length))
+    return _pooled_cell(runs, table, valid, length, lambda rot, trans: (float(rot.mean()), float(trans.mean())),
+                        2)
 
 
 def _drift_rate(runs, valid, length) -> _Cell:
     if not runs:
         return _Cell(None, pair=False)
-    _, trans = _pooled(runs, "segments", valid, length)
-    if _all_nan_valid(runs, valid) or trans.size == 0:
-        return _Cell((np.nan,), pair=False)
-    per_run = [(t,) for _, t in _per_run_means(runs, "segments", valid, length, (1.0, 100.0 / float(length)))]
-    return _Cell((float(np.mean(trans / float(length)) * 100),), pair=False, runs=per_run)
+    cell = _pooled_cell(runs, "segments", valid, length, lambda _, trans: (float(np.mean(trans / float(length)) * 100),),
+                        1)
+    cell.pair = False
+    return cell
 
 
 def _all_nan_valid(runs, valid):
@@ -506,9 +507,12 @@ def comparisons(grid: list[CaseResult], segments) -> list[tuple[str, str, dict]]
 
 
 def _verdict(a: str, b: str, r: dict, short: bool = False) -> str:
-    if r["verdict"] == "cannot tell apart":
-        return "cannot tell apart" if short else f"the data cannot tell {a} and {b} apart (no test below p = {statistics.ALPHA})"
-    return r["verdict"].replace("a better", f"{a} better").replace("b better", f"{b} better")
+    name = {"a": a, "b": b}
+    if r["better_over_datasets"]:
+        return f"{name[r['better_over_datasets']]} better over datasets"
+    if r["better_on_dataset"]:
+        return "differ on " + ", ".join(f"{d} ({name[w]} better)" for d, w in r["better_on_dataset"].items())
+    return "cannot tell apart" if short else f"the data cannot tell {a} and {b} apart (no test below p = {statistics.ALPHA})"
 
 
 def comparison_text(pairs: list[tuple[str, str, dict]]) -> str:
