@@ -23,12 +23,13 @@ class Similarity:
 
     def apply(self, traj: Trajectory) -> Trajectory:
         """The trajectory in the target world frame. The local orientation error is unchanged by a
-        world rotation; the position covariance turns with it and scales by s^2."""
+        world rotation; the position covariance turns with it and scales by s^2. Printed rotation
+        blocks (evo's commands on KITTI) turn as evo turns them: R times the printed matrix."""
         r, p = self.apply_rp(traj.r, traj.p)
-        cov = {}
+        extra = {} if traj.r_printed is None else {"r_printed": r}
         if traj.cov_rot is not None and traj.cov_pos is not None:
-            cov = {"cov_rot": traj.cov_rot, "cov_pos": self.s ** 2 * self.R @ traj.cov_pos @ self.R.T}
-        return Trajectory.from_rp(traj.t, r, p, **cov)
+            extra.update(cov_rot=traj.cov_rot, cov_pos=self.s ** 2 * self.R @ traj.cov_pos @ self.R.T)
+        return Trajectory.from_rp(traj.t, r, p, **extra)
 
     def apply_rp(self, r: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rotations (N, 3, 3) and positions (N, 3) in the target world frame."""

@@ -31,6 +31,10 @@ def add_parsers(sub) -> None:
             for name in positionals:
                 f.add_argument(name)
             _add_options(f, kind, timed=form != "kitti")
+            if form in ("bag", "bag2", "mcap"):
+                f.add_argument("--tf_cache_lookup_frequency", type=float, default=10.0,
+                               help="a TF id (/tf:parent.child) is looked up at this rate (Hz), from the first "
+                                    "TF message on, as evo's setting of that name (default: 10)")
 
 
 def _add_options(f, kind: str, timed: bool) -> None:
@@ -67,24 +71,35 @@ def _add_options(f, kind: str, timed: bool) -> None:
 
 
 def _read(args, which: str):
+    bag = args.form in ("bag", "bag2", "mcap")
+    return read_source(args.form, args.bag if bag else _path(args, which),
+                       getattr(args, f"{which}_topic") if bag else None, reference=which == "ref",
+                       unsorted=args.unsorted, tf_rate=getattr(args, "tf_cache_lookup_frequency", 10.0))
+
+
+def read_source(form: str, path, topic: str | None = None, *, reference: bool = False, unsorted: str = "error",
+                tf_rate: float = 10.0):
+    """One side of an evo command: a file of ``form`` or a bag topic, or a TF id ``/tf:parent.child``
+    (optionally ``:/tf_static``) looked up at ``tf_rate`` Hz as evo does."""
     from epa import readers, settings
 
     opts = readers.options(settings.defaults(), "reference")
-    opts["unsorted"] = args.unsorted
-    if args.form in ("bag", "bag2", "mcap"):
-        path, topic = args.bag, getattr(args, f"{which}_topic")
-        if ":" in topic:  # evo's TF id: /tf:parent.child
-            topic, _, frames = topic.partition(":")
-            parent, _, child = frames.split(":")[0].partition(".")
+    opts["unsorted"] = unsorted
+    if form in ("bag", "bag2", "mcap"):
+        if ":" in topic:  # evo's TF id: /tf:parent.child(:/tf_static)
+            tf_topic, _, frames = topic.partition(":")
+            frames, _, static_topic = frames.partition(":")
+            parent, _, child = frames.partition(".")
             if not parent or not child:
-                raise EpaError(f"TF id {getattr(args, f'{which}_topic')!r} should look like /tf:parent.child",
-                               path=path)
-            opts["frames"] = (parent, child)
+                raise EpaError(f"TF id {topic!r} should look like /tf:parent.child", path=str(path))
+            if tf_rate <= 0:
+                raise EpaError(f"--tf_cache_lookup_frequency must be positive, not {tf_rate}")
+            opts.update(frames=(parent, child), tf_rate=tf_rate, static_topic=static_topic or "/tf_static")
+            topic = tf_topic
         opts["topic"] = topic
     else:
-        path = _path(args, which)
-        opts["format"] = "euroc" if (args.form == "euroc" and which == "ref") else (
-            "kitti" if args.form == "kitti" else "tum")
+        opts["format"] = "euroc" if (form == "euroc" and reference) else ("kitti" if form == "kitti" else "tum")
+        opts["kitti_printed"] = form == "kitti"  # evo computes on the printed rotation blocks
     try:
         return readers.read(path, opts)
     except EpaError as exc:

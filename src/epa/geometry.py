@@ -61,6 +61,12 @@ def rot_to_quat(r: np.ndarray) -> np.ndarray:
     return np.where(q[..., 3:4] < 0, -q, q)
 
 
+def nearest_rotation(m: np.ndarray) -> np.ndarray:
+    """The rotation nearest (Frobenius) to each (..., 3, 3) matrix near SO(3): U V^T of its SVD."""
+    u, _, vt = np.linalg.svd(m)
+    return u @ vt
+
+
 def rotation_angle(r: np.ndarray) -> np.ndarray:
     """Angle (rad) of rotation matrices, computed via the quaternion (accurate near 0 and pi)."""
     return quat_angle(rot_to_quat(r))

@@ -20,13 +20,16 @@ class Trajectory:
     cov_pos: np.ndarray | None = field(default=None, repr=False)
     # The full 6x6 pose covariance as ROS gives it (x y z, rotation about x y z), when the source is ROS.
     cov_ros: np.ndarray | None = field(default=None, repr=False)
+    # Rotation blocks (N, 3, 3) exactly as a KITTI file prints them (orthonormal only to ~1e-7), kept
+    # for evo's commands alone: evo computes on the printed matrices, epica elsewhere on ``q``.
+    r_printed: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.t)
 
     @property
     def r(self) -> np.ndarray:
-        return geometry.quat_to_rot(self.q)
+        return geometry.quat_to_rot(self.q) if self.r_printed is None else self.r_printed
 
     def select(self, idx) -> "Trajectory":
         return replace(
@@ -37,6 +40,7 @@ class Trajectory:
             cov_rot=None if self.cov_rot is None else self.cov_rot[idx],
             cov_pos=None if self.cov_pos is None else self.cov_pos[idx],
             cov_ros=None if self.cov_ros is None else self.cov_ros[idx],
+            r_printed=None if self.r_printed is None else self.r_printed[idx],
         )
 
     def at(self, stamps: np.ndarray) -> "Trajectory":
@@ -52,4 +56,6 @@ class Trajectory:
 
     @staticmethod
     def from_rp(t, r, p, **extra) -> "Trajectory":
-        return Trajectory(np.asarray(t, float), np.asarray(p, float), geometry.rot_to_quat(r), **extra)
+        """From rotation matrices; when they are printed ones (``r_printed``), q is their nearest rotation."""
+        rot = r if extra.get("r_printed") is None else geometry.nearest_rotation(r)
+        return Trajectory(np.asarray(t, float), np.asarray(p, float), geometry.rot_to_quat(rot), **extra)

@@ -11,7 +11,10 @@ as evo 1.38 does. From E:
   whose reference distance is 0 are left out).
 
 Vectorised over all poses or pairs; angles come from quaternions (accurate near 0). Translation
-and angle are the library's ATE and RPE formulas; only rot_part and full need E itself.
+and angle are the library's ATE and RPE formulas; rot_part and full need E itself, as matrices.
+KITTI's printed rotation blocks are orthonormal only to ~1e-7; evo computes on them as printed, so
+when a trajectory carries them (``r_printed``, evo's commands only) every relation is evo's matrix
+arithmetic: that is what matches evo to 1e-6 on the smallest RPE statistics.
 """
 
 from __future__ import annotations
@@ -42,26 +45,60 @@ def _angle(relation: str, rad: np.ndarray) -> np.ndarray:
     return np.degrees(rad) if relation == "angle_deg" else rad
 
 
-def _matrix_relation(relation: str, q_e: np.ndarray, t_e: np.ndarray) -> np.ndarray:
-    """rot_part or full of error poses E = (q_e, t_e): the entries of R(E) (and t(E)) against identity."""
-    rot = np.linalg.norm(geometry.quat_to_rot(q_e) - np.eye(3), axis=(-2, -1))
+def _printed(*trajs: Trajectory) -> bool:
+    return any(t.r_printed is not None for t in trajs)
+
+
+def _transposed(r: np.ndarray) -> np.ndarray:
+    return np.swapaxes(r, -1, -2)
+
+
+def _ape_error_poses(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """E = P^-1 Q as (rotations, translations), P^-1 taken as evo takes it, [R^T, -R^T p]: exact
+    evo arithmetic also on KITTI's printed, not quite orthonormal, rotation blocks."""
+    r_t = _transposed(est.r)
+    return r_t @ ref.r, np.einsum("nij,nj->ni", r_t, ref.p - est.p)
+
+
+def _relative_motions(traj: Trajectory, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r_t = _transposed(traj.r[i])
+    return r_t @ traj.r[j], np.einsum("nij,nj->ni", r_t, traj.p[j] - traj.p[i])
+
+
+def _rpe_error_poses(ref: Trajectory, est: Trajectory, i, j) -> tuple[np.ndarray, np.ndarray]:
+    """E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j) as (rotations, translations), in evo's matrix arithmetic."""
+    r_ref, t_ref = _relative_motions(ref, i, j)
+    r_est, t_est = _relative_motions(est, i, j)
+    r_t = _transposed(r_ref)
+    return r_t @ r_est, np.einsum("nij,nj->ni", r_t, t_est - t_ref)
+
+
+def _of_error_poses(relation: str, r_e: np.ndarray, t_e: np.ndarray) -> np.ndarray:
+    """The relation's value of error poses E = (r_e, t_e). The angle is that of E's nearest rotation,
+    as scipy's from_matrix (evo's so3_log_angle) takes it."""
+    if relation == "trans_part":
+        return np.linalg.norm(t_e, axis=-1)
+    if relation in ("angle_deg", "angle_rad"):
+        return _angle(relation, geometry.rotation_angle(geometry.nearest_rotation(r_e)))
+    rot = np.linalg.norm(r_e - np.eye(3), axis=(-2, -1))
     return rot if relation == "rot_part" else np.sqrt(rot ** 2 + np.sum(t_e ** 2, axis=-1))  # full: last row is 0
 
 
 def ape(ref: Trajectory, est: Trajectory, relation: str = "trans_part") -> np.ndarray:
     """Per matched pose: the relation's value of E = P^-1 Q. Translation and angle are the ATE's
-    (accuracy.ape): |t(E)| = |p_est - p_ref| and angle(E) = angle(Q P^T)."""
+    (accuracy.ape): |t(E)| = |p_est - p_ref| and angle(E) = angle(Q P^T), except on printed rotation
+    blocks, where the angle is evo's (of the matrix product)."""
     _check(relation, rpe=False)
-    if relation in ("trans_part", "point_distance", "angle_deg", "angle_rad"):
+    if relation in ("trans_part", "point_distance") or (relation.startswith("angle") and not _printed(ref, est)):
         trans, rot_deg = accuracy.ape(ref, est)
         return trans if relation in ("trans_part", "point_distance") else _angle(relation, np.radians(rot_deg))
-    q_inv = geometry.quat_conj(est.q)
-    return _matrix_relation(relation, geometry.quat_mul(q_inv, ref.q), geometry.quat_rotate(q_inv, ref.p - est.p))
+    return _of_error_poses(relation, *_ape_error_poses(ref, est))
 
 
 def rpe(ref: Trajectory, est: Trajectory, i: np.ndarray, j: np.ndarray, relation: str = "trans_part") -> np.ndarray:
     """Per pair (i, j): the relation's value of E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j). Translation and
-    angle are the RPE's (geometry.relative_errors)."""
+    angle are the RPE's (geometry.relative_errors), except on printed rotation blocks (evo's matrix
+    arithmetic, _rpe_error_poses)."""
     _check(relation, rpe=True)
     if relation in ("point_distance", "point_distance_error_ratio"):
         d_ref = np.linalg.norm(ref.p[j] - ref.p[i], axis=1)
@@ -70,13 +107,10 @@ def rpe(ref: Trajectory, est: Trajectory, i: np.ndarray, j: np.ndarray, relation
             return diff
         moved = d_ref != 0
         return diff[moved] / d_ref[moved] * 100
-    if relation in ("trans_part", "angle_deg", "angle_rad"):
+    if relation in ("trans_part", "angle_deg", "angle_rad") and not _printed(ref, est):
         rot_deg, trans = geometry.relative_errors(geometry.pose_discrepancy(ref.q, est.q), ref.p, est.p, i, j)
         return trans if relation == "trans_part" else _angle(relation, np.radians(rot_deg))
-    q_ref, t_ref = geometry.relative_motions(ref.q, ref.p, i, j)
-    q_est, t_est = geometry.relative_motions(est.q, est.p, i, j)
-    q_inv = geometry.quat_conj(q_ref)
-    return _matrix_relation(relation, geometry.quat_mul(q_inv, q_est), geometry.quat_rotate(q_inv, t_est - t_ref))
+    return _of_error_poses(relation, *_rpe_error_poses(ref, est, i, j))
 
 
 def evo_statistics(errors: np.ndarray) -> dict[str, float]:

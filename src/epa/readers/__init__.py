@@ -68,7 +68,8 @@ def read(path, opts: dict, *, notes: list | None = None, kitti_times=None) -> Tr
         own: list[str] = []
         try:
             traj = bags.read_bag(path, opts.get("topic"), frames=opts.get("frames"), stamp=opts.get("stamp", "header"),
-                                 static_topic=opts.get("static_topic") or "/tf_static", notes=own)
+                                 static_topic=opts.get("static_topic") or "/tf_static", tf_rate=opts.get("tf_rate"),
+                                 notes=own)
         except EpaError as exc:
             if exc.path is None:
                 raise EpaError(exc.message, path=f"{path} topic {opts.get('topic')}") from None
@@ -82,7 +83,7 @@ def read(path, opts: dict, *, notes: list | None = None, kitti_times=None) -> Tr
                        path=str(path))
     traj = text.read_trajectory(path, opts.get("format", "auto"), time_unit=opts.get("time_unit", "auto"),
                                 on_unsorted=opts.get("unsorted", "error"), kitti_rate=opts.get("kitti_rate", 10.0),
-                                kitti_times=kitti_times, notes=notes)
+                                kitti_times=kitti_times, kitti_printed=opts.get("kitti_printed", False), notes=notes)
     if traj.cov_rot is not None and opts.get("orientation_covariance") == "global":
         traj = Trajectory(traj.t, traj.p, traj.q, cov_rot=geometry.local_covariance(traj.r, traj.cov_rot),
                           cov_pos=traj.cov_pos)

@@ -124,8 +124,10 @@ def _stamp(header) -> float:
 
 
 def read_bag(path, topic: str | None = None, *, frames: tuple[str, str] | list | None = None,
-             stamp: str = "header", static_topic: str = "/tf_static", notes: list | None = None) -> Trajectory:
-    """The trajectory of one topic of a bag (or one TF chain, given ``frames`` parent, child)."""
+             stamp: str = "header", static_topic: str = "/tf_static", tf_rate: float | None = None,
+             notes: list | None = None) -> Trajectory:
+    """The trajectory of one topic of a bag (or one TF chain, given ``frames`` parent, child). A TF
+    chain is sampled at the stamps of its busiest link, or with ``tf_rate`` (Hz) as evo samples it."""
     path = Path(path)
     with _Open(path) as reader:
         available = {t: reader.topics[t].msgtype for t in reader.topics}
@@ -145,7 +147,7 @@ def read_bag(path, topic: str | None = None, *, frames: tuple[str, str] | list |
             if not frames or len(frames) != 2:
                 raise EpaError(f"topic {topic} is TF: give the parent and child frame (frames: [parent, child])",
                                path=str(path))
-            return _read_tf(reader, path, topic, static_topic, tuple(frames), stamp, notes)
+            return _read_tf(reader, path, topic, static_topic, tuple(frames), stamp, notes, tf_rate)
         conns = [c for c in reader.connections if c.topic == topic]
         try:
             traj = _read_poses(reader, conns, msgtype, stamp)
@@ -285,16 +287,23 @@ def _finish(t, p, q, cov36) -> Trajectory:
 
 
 # ----------------------------------------------------------------------------- TF
-def _tf_edges(reader, topic: str, stamp: str) -> dict[tuple[str, str], list]:
+def _tf_edges(reader, topic: str, stamp: str) -> tuple[dict[tuple[str, str], tuple[list, list]], int | None]:
+    """Per (frame_id, child_frame_id): its rows (t, x, y, z, qx, qy, qz, qw) and their stamps in
+    integer ns; and the stamp of the topic's first transform, in message order (where evo starts)."""
     conns = [c for c in reader.connections if c.topic == topic]
-    edges: dict[tuple[str, str], list] = {}
+    edges: dict[tuple[str, str], tuple[list, list]] = {}
+    first_ns = None
     for conn, record_ns, raw in reader.messages(connections=conns):
         msg = reader.deserialize(raw, conn.msgtype)
         for tf in msg.transforms:
             (pos, quat, _) = _pose_of(tf, "geometry_msgs/msg/TransformStamped")
+            ns = tf.header.stamp.sec * 10**9 + tf.header.stamp.nanosec if stamp == "header" else int(record_ns)
             t = _stamp(tf.header) if stamp == "header" else record_ns / 1e9
-            edges.setdefault((tf.header.frame_id.lstrip("/"), tf.child_frame_id.lstrip("/")), []).append((t, *pos, *quat))
-    return edges
+            rows, stamps = edges.setdefault((tf.header.frame_id.lstrip("/"), tf.child_frame_id.lstrip("/")), ([], []))
+            rows.append((t, *pos, *quat))
+            stamps.append(ns)
+            first_ns = ns if first_ns is None else first_ns
+    return edges, first_ns
 
 
 def _chain(edges: set[tuple[str, str]], parent: str, child: str) -> list[tuple[str, str, bool]] | None:
@@ -331,10 +340,11 @@ def _interp(rows: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return geometry.interpolate(rows[:, 0], rows[:, 1:4], rows[:, 4:8], t)
 
 
-def _read_tf(reader, path: Path, topic: str, static_topic: str, frames: tuple[str, str], stamp: str, notes):
+def _read_tf(reader, path: Path, topic: str, static_topic: str, frames: tuple[str, str], stamp: str, notes,
+             rate: float | None = None):
     parent, child = (f.lstrip("/") for f in frames)
-    dynamic = _tf_edges(reader, topic, stamp)
-    static = _tf_edges(reader, static_topic, stamp) if static_topic in reader.topics else {}
+    dynamic, first_ns = _tf_edges(reader, topic, stamp)
+    static = _tf_edges(reader, static_topic, stamp)[0] if static_topic in reader.topics else {}
     steps = _chain(set(dynamic) | set(static), parent, child)
     if steps is None:
         known = sorted({f for e in set(dynamic) | set(static) for f in e})
@@ -343,32 +353,45 @@ def _read_tf(reader, path: Path, topic: str, static_topic: str, frames: tuple[st
         raise EpaError(f"{what}; the TF frames are {', '.join(known) or 'none'}", path=f"{path} topic {topic}")
     series = {}
     for a, b, _ in steps:
-        rows = np.array(dynamic.get((a, b)) or static[(a, b)], float)
-        rows = rows[np.argsort(rows[:, 0], kind="stable")]
-        series[(a, b)] = (rows, (a, b) not in dynamic)
-    moving = [e for e, (_, is_static) in series.items() if not is_static]
+        rows, ns = dynamic.get((a, b)) or static[(a, b)]
+        order = np.argsort(np.asarray(ns), kind="stable")
+        series[(a, b)] = (np.array(rows, float)[order], np.asarray(ns, np.int64)[order], (a, b) not in dynamic)
+    moving = [e for e, (_, _, is_static) in series.items() if not is_static]
     if not moving:
         raise EpaError(f"the chain {parent} -> {child} is static (only {static_topic}): no trajectory",
                        path=f"{path} topic {topic}")
-    # the stamps of the dynamic link with most messages; the others are interpolated within their span
-    t = series[max(moving, key=lambda e: len(series[e][0]))][0][:, 0]
+    if rate is not None:
+        # evo looks up through ROS 1's tf2_py, which carries every stamp as a double of seconds
+        # (fromSec(to_sec())): up to 1.2e-7 s off for epoch stamps, 1e-7 m in the poses. So do we.
+        series = {e: (rows, _through_double_seconds(ns), is_static) for e, (rows, ns, is_static) in series.items()}
+        t_ns = _through_double_seconds(_evo_lookup_stamps(first_ns, min(int(series[e][1][-1]) for e in moving), rate))
+        sampled = f"every {1 / rate:g} s from the first message of {topic}, as evo"
+    else:
+        # the stamps of the dynamic link with most messages; the others are interpolated within their span
+        t_ns = series[max(moving, key=lambda e: len(series[e][0]))][1]
+        sampled = f"at the stamps of {topic}"
     for e in moving:
-        rows = series[e][0]
-        t = t[(t >= rows[0, 0]) & (t <= rows[-1, 0])]
-    t = np.unique(t)
-    if len(steps) == 1 and not steps[0][2]:  # one direct link: its own poses, bit for bit
+        ns = series[e][1]
+        t_ns = t_ns[(t_ns >= ns[0]) & (t_ns <= ns[-1])]
+    t_ns = np.unique(t_ns)
+    if rate is None and len(steps) == 1 and not steps[0][2]:  # one direct link: its own poses, bit for bit
         rows = series[(steps[0][0], steps[0][1])][0]
         rows = rows[np.concatenate([[True], np.diff(rows[:, 0]) > 0])]
         if notes is not None:
             notes.append(f"bag TF {parent} -> {child} ({len(rows)} poses of {topic}, {stamp} stamps)")
         q = rows[:, 4:8]
         return Trajectory(rows[:, 0], rows[:, 1:4], q / np.linalg.norm(q, axis=1, keepdims=True))
-    r_total, p_total = np.broadcast_to(np.eye(3), (len(t), 3, 3)).copy(), np.zeros((len(t), 3))
+    if len(t_ns) == 0:
+        raise EpaError(f"the transforms of {parent} -> {child} never overlap in time", path=f"{path} topic {topic}")
+    # interpolate in time since the first stamp: ns differences are exact, epoch seconds are not
+    origin = int(t_ns[0])
+    since = (t_ns - origin) * 1e-9
+    r_total, p_total = np.broadcast_to(np.eye(3), (len(t_ns), 3, 3)).copy(), np.zeros((len(t_ns), 3))
     for a, b, inverted in steps:
-        rows, is_static = series[(a, b)]
+        rows, ns, is_static = series[(a, b)]
         if is_static:
-            rows = rows[-1:]
-        p_e, q_e = _interp(rows, t)
+            rows, ns = rows[-1:], ns[-1:]
+        p_e, q_e = _interp(np.column_stack([(ns - origin) * 1e-9, rows[:, 1:]]), since)
         r_e = geometry.quat_to_rot(q_e / np.linalg.norm(q_e, axis=1, keepdims=True))
         if inverted:
             r_e = r_e.transpose(0, 2, 1)
@@ -377,10 +400,28 @@ def _read_tf(reader, path: Path, topic: str, static_topic: str, frames: tuple[st
         r_total = r_total @ r_e
     if notes is not None:
         chain_text = " -> ".join([parent] + [b if not inv else a for a, b, inv in steps])
-        notes.append(f"bag TF {chain_text} ({len(t)} poses at the stamps of {topic}, {stamp} stamps)")
-    if len(t) == 0:
-        raise EpaError(f"the transforms of {parent} -> {child} never overlap in time", path=f"{path} topic {topic}")
+        notes.append(f"bag TF {chain_text} ({len(t_ns)} poses {sampled}, {stamp} stamps)")
+    t = (t_ns // 10**9) + (t_ns % 10**9) / 1e9  # seconds as ROS's to_sec gives them
     return Trajectory.from_rp(t, r_total, p_total)
+
+
+def _through_double_seconds(ns: np.ndarray) -> np.ndarray:
+    """Stamps (int ns) after ROS 1's to_sec() and Time.fromSec(): floor the seconds, round the ns."""
+    t = (ns // 10**9) + (ns % 10**9) / 1e9
+    sec = np.floor(t)
+    return sec.astype(np.int64) * 10**9 + np.round((t - sec) * 1e9).astype(np.int64)
+
+
+def _evo_lookup_stamps(start_ns: int, latest_ns: int, rate: float) -> np.ndarray:
+    """evo's TF lookup instants (tf_cache.get_trajectory): from the topic's first stamp, one step of
+    1/rate s (a ROS Duration: whole ns, truncated) at a time, up to the chain's latest common time."""
+    if latest_ns < start_ns:
+        return np.array([latest_ns], np.int64)
+    period = 1.0 / rate
+    step_ns = int(period) * 10**9 + int((period - int(period)) * 1e9)
+    if step_ns <= 0:
+        raise EpaError(f"TF lookup rate {rate} Hz is too high (steps under 1 ns)")
+    return np.arange(start_ns, latest_ns + 1, step_ns, dtype=np.int64)
 
 
 # ----------------------------------------------------------------------------- writing (tests, benchmarks)

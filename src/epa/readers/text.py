@@ -368,7 +368,8 @@ def read_named_csv(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -
                    cov_rot=cov.get("rot"), cov_pos=cov.get("pos"))
 
 
-def read_kitti(tab: _Table, *, times: np.ndarray | None = None, rate: float = 10.0, **_) -> Trajectory:
+def read_kitti(tab: _Table, *, times: np.ndarray | None = None, rate: float = 10.0, keep_printed: bool = False,
+               **_) -> Trajectory:
     rows = tab.rows
     if rows.shape[1] != 12:
         tab.fail(0, f"KITTI needs 12 columns (3x4 row-major pose), found {rows.shape[1]}")
@@ -386,10 +387,9 @@ def read_kitti(tab: _Table, *, times: np.ndarray | None = None, rate: float = 10
     if bad.any():
         tab.fail(int(np.argmax(bad)), f"rotation block is not a rotation (det = {det[bad][0]:.4g})")
     # Project onto SO(3): KITTI files print about 7 digits, so R^T R is only approximately I.
-    u, _, vt = np.linalg.svd(r)
-    r = u @ vt
     _check_positions(tab, m[:, :, 3])
-    traj = Trajectory(t, m[:, :, 3].copy(), geometry.rot_to_quat(r))
+    traj = Trajectory(t, m[:, :, 3].copy(), geometry.rot_to_quat(geometry.nearest_rotation(r)),
+                      r_printed=r.copy() if keep_printed else None)
     return _check_order(traj, tab, "error")
 
 
@@ -434,10 +434,12 @@ def kitti_times_for(path: Path) -> Path | None:
 
 
 def read_trajectory(path, fmt: str = "auto", *, time_unit: str = "auto", on_unsorted: str = "error",
-                    kitti_rate: float = 10.0, kitti_times=None, notes: list | None = None) -> Trajectory:
+                    kitti_rate: float = 10.0, kitti_times=None, kitti_printed: bool = False,
+                    notes: list | None = None) -> Trajectory:
     """Read any supported trajectory file into seconds and unit quaternions. Every interpretation the
     file did not state (detected format, nanoseconds, sorting, KITTI times) is logged as a warning
-    and appended to ``notes``."""
+    and appended to ``notes``. ``kitti_printed`` also keeps KITTI's printed rotation blocks (evo's
+    commands compute on them)."""
     path = Path(path)
     if fmt not in FORMATS:
         raise EpaError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}", path=str(path))
@@ -454,7 +456,8 @@ def read_trajectory(path, fmt: str = "auto", *, time_unit: str = "auto", on_unso
             tab.notes.append(f"KITTI stamps from {tpath.name}")
         else:
             tab.notes.append(f"KITTI stamps at {kitti_rate} Hz (no times file; load.kitti_rate)")
-    traj = READERS[fmt](tab, time_unit=time_unit, on_unsorted=on_unsorted, times=times, rate=kitti_rate)
+    traj = READERS[fmt](tab, time_unit=time_unit, on_unsorted=on_unsorted, times=times, rate=kitti_rate,
+                        keep_printed=kitti_printed)
     if len(traj) < 2:
         raise EpaError(f"only {len(traj)} pose(s); at least 2 are needed", path=str(path))
     for note in tab.notes:
