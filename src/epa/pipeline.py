@@ -38,7 +38,8 @@ def load(ref_path, est_path, cfg: dict, reference: tuple[Trajectory, list[str]] 
                                                             text.kitti_times_for(Path(ref_path)))
     est_notes: list[str] = []
     est = readers.read(est_path, est_opts, notes=est_notes, kitti_times=est_times)
-    info = {"ref_file": Path(ref_path).name, "est_file": Path(est_path).name, "n_ref": len(ref), "n_est": len(est),
+    info = {"ref_file": Path(ref_path).name, "est_file": Path(est_path).name, "est_path": str(est_path),
+            "n_ref": len(ref), "n_est": len(est),
             "ref_length_m": ref.length(), "est_length_m": est.length(),
             "ref_span_s": [float(ref.t[0]), float(ref.t[-1])], "est_span_s": [float(est.t[0]), float(est.t[-1])],
             "ref_notes": ref_notes, "est_notes": est_notes}
@@ -98,6 +99,8 @@ def sync_stage(ref: Trajectory, est: Trajectory, cfg: dict):
         offset = c["offset"]
     i_ref, i_est, assoc = associate(ref, est, c, offset)
     info.update(assoc)
+    # ov_eval warns on these (a bad length ratio, a coarse reference): mode ov_eval prints what it prints
+    info["matched_length_m"] = {"ref": ref.select(i_ref).length(), "est": est.select(i_est).length()}
     return (i_ref, i_est), info, curve
 
 

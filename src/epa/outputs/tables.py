@@ -42,6 +42,7 @@ class CaseResult:
     run: str
     status: str = "ok"
     load: dict = field(default_factory=dict)
+    sync: dict = field(default_factory=dict)  # 03_sync/sync.json
     metrics: dict = field(default_factory=dict)
     drift: dict = field(default_factory=dict)
     segments: dict = field(default_factory=dict)
@@ -68,6 +69,7 @@ def collect(keys: list[str], results_dir) -> list[CaseResult]:
         if reason is not None:
             res.status = reason if reason.startswith("internal error") else "failed: " + reason
         else:
+            res.sync = io.read_json(case.path("sync", "sync.json"))
             res.metrics = io.read_json(case.path("metrics", "metrics.json"))
             res.drift = drift
             res.segments = {**io.read_csv(case.path("metrics", "rpe_segments.csv")),
@@ -393,49 +395,62 @@ def report_text(grid: list[CaseResult], segments, decimals: int = 3, spread: str
     return "\n".join(lines) + "\n"
 
 
-def _ov_stats(values) -> tuple[float, float]:
-    """Mean and standard deviation as ov_eval's Statistics: the sample deviation (n - 1), nan for one value."""
-    v = np.asarray(list(values), float)
-    return float(v.mean()), (float(v.std(ddof=1)) if v.size > 1 else np.nan)
-
-
 def _c(x: float, fmt: str) -> str:
     """A number as C's printf prints it (glibc prints the NaN of 0/0 as -nan)."""
     return "-nan" if np.isnan(x) else fmt % x
 
 
+# ov_core's colors.h: ov_eval colours its warnings and errors, also when its output goes to a file
+YELLOW, RED, RESET = "\033[33m", "\033[31m", "\033[0m"
+
+
+def _ov_eval_warnings(c: CaseResult) -> str:
+    """What ov_eval's ResultTrajectory prints for one run at its INFO level: the length-ratio warning
+    (its constructor, on the matched poses before alignment; without RESET, as written) and the
+    coarse-reference warning (calculate_rpe: summed reference steps / matched poses above 0.5 m)."""
+    out = ""
+    lengths, n = c.sync.get("matched_length_m"), c.sync.get("n_matched")
+    if not lengths or not n:
+        return out
+    ratio = lengths["est"] / lengths["ref"] if lengths["ref"] else np.nan
+    if ratio > 1.1 or ratio < 0.9:
+        out += (f"{YELLOW}[TRAJ]: Trajectory is a bad ratio of {ratio:.2f} length (est {lengths['est']:.2f}, "
+                f"gt {lengths['ref']:.2f})\n{YELLOW}[TRAJ]: {c.load.get('est_path', c.load.get('est_file'))}\n")
+    step = lengths["ref"] / n
+    if step > 0.5:
+        out += (f"{YELLOW}[COMP]: average groundtruth position difference {step:.2f} > 0.50 is too large\n{RESET}"
+                f"{YELLOW}[COMP]: this will prevent the RPE from finding valid trajectory segments!!!\n{RESET}"
+                f"{YELLOW}[COMP]: the recommendation is to use a higher frequency groundtruth, or relax this "
+                f"trajectory segment logic...\n{RESET}")
+    return out
+
+
 def ov_eval_text(grid: list[CaseResult], segments) -> str:
-    """error_comparison.txt in mode ov_eval: what ov_eval's error_comparison (v2.7 and later) prints,
-    line for line ([COMP] lines, ATE, ATE 2D and RPE tables), so a diff shows only the numbers.
-    Deviations: a cell without a successful run reads `- / -`, where ov_eval would stop or print 0."""
+    """error_comparison.txt in mode ov_eval: what ov_eval's error_comparison (v2.7 and later) prints to
+    its standard output, byte for byte, so a diff shows only the numbers. error_comparison fixes its
+    print level at INFO, so its DEBUG lines (per-dataset means, the per-segment medians) never show;
+    its warnings and errors keep their colour codes. Deviations: a cell without a successful run reads
+    `- / -`, where ov_eval would stop (a run it cannot read) or print 0.000 (no RPE segment)."""
     datasets = sorted({c.dataset for c in grid})
     algs = sorted({c.algorithm for c in grid})
-    lines = []
+    out = "Setting printing level to: INFO\n"
     for ds in datasets:
         info = next((c.load for c in grid if c.dataset == ds and c.load), None)
         if info:
-            lines.append(f"[COMP]: {info['n_ref']} poses in {info['ref_file']} => length of {info['ref_length_m']:.2f} meters")
+            out += f"[COMP]: {info['n_ref']} poses in {info['ref_file']} => length of {info['ref_length_m']:.2f} meters\n"
     cells: dict[str, dict] = {"ate": {}, "ate_2d": {}}
     for alg in algs:
-        lines += [RULE_SHORT, f"[COMP]: processing {alg} algorithm"]
         for ds in datasets:
             runs = _ok_runs(grid, alg, ds)
             if not runs:
-                lines.append(f"[COMP]: {alg} dataset does not have any runs for {ds}!!!!!")
+                out += f"{RED}[COMP]: {alg} dataset does not have any runs for {ds}!!!!!\n{RESET}"
                 continue
-            lines.append(f"[COMP]: processing {alg} algorithm => {ds} dataset")
-            for name, label, fmt_std, of in (("ate", "ATE", "%.3f", _run_ate), ("ate_2d", "ATE 2D", "%.5f", _run_ate_2d)):
+            for c in runs:
+                out += _ov_eval_warnings(c)
+            for name, of in (("ate", _run_ate), ("ate_2d", _run_ate_2d)):
                 ori, pos = zip(*(of(c) for c in runs))
-                (m_ori, s_ori), (m_pos, s_pos) = _ov_stats(ori), _ov_stats(pos)
-                cells[name][(alg, ds)] = (m_ori, m_pos)
-                lines.append(f"\t{label}: mean_ori = {m_ori:.3f} | mean_pos = {m_pos:.3f} ({len(runs)} runs)")
-                lines.append(f"\t{label}: std_ori  = {_c(s_ori, fmt_std)} | std_pos  = {_c(s_pos, fmt_std)}")
-            for seg in segments:
-                rot, trans = _pooled(runs, "segments", False, seg)
-                med = (np.median(rot), np.median(trans)) if rot.size else (0.0, 0.0)
-                lines.append(f"\tRPE: seg {int(seg)} - median_ori = {med[0]:.4f} | median_pos = {med[1]:.4f} "
-                             f"({rot.size} samples)")
-    lines += ["", ""]
+                cells[name][(alg, ds)] = (float(np.mean(ori)), float(np.mean(pos)))
+    lines = []
     header = "".join(f" & \\textbf{{{latex_escape(ds)}}}" for ds in datasets) + " & \\textbf{Average} \\\\\\hline"
     for name, title in (("ate", "ATE LATEX TABLE"), ("ate_2d", "ATE 2D LATEX TABLE")):
         lines += [RULE_LONG, title, RULE_LONG, header]
@@ -444,9 +459,9 @@ def ov_eval_text(grid: list[CaseResult], segments) -> str:
             for ds in datasets:
                 v = cells[name].get((alg, ds))
                 row += " & - / -" if v is None else f" & {v[0]:.3f} / {v[1]:.3f}"
-            row += (f" & {np.mean([v[0] for v in have]):.3f} / {np.mean([v[1] for v in have]):.3f} \\\\" if have
-                    else " & - / - \\\\")
-            lines.append(row)
+            # no dataset at all: ov_eval divides 0 by 0 and glibc prints -nan
+            mean = (np.mean([v[0] for v in have]), np.mean([v[1] for v in have])) if have else (np.nan, np.nan)
+            lines.append(row + f" & {_c(mean[0], '%.3f')} / {_c(mean[1], '%.3f')} \\\\")
         lines.append(RULE_LONG)
     lines += [RULE_LONG, "RPE LATEX TABLE", RULE_LONG,
               "".join(f" & \\textbf{{{int(seg)}m}}" for seg in segments) + " \\\\\\hline"]
@@ -457,7 +472,7 @@ def ov_eval_text(grid: list[CaseResult], segments) -> str:
             row += f" & {rot.mean():.3f} / {trans.mean():.3f}" if rot.size else " & - / -"
         lines.append(row + " \\\\")
     lines.append(RULE_LONG)
-    return "\n".join(lines) + "\n"
+    return out + "\n".join(lines) + "\n"
 
 
 SUCCESS_CURVE_COLUMNS = ["algorithm", "dataset", "runs", "factor", "success_rate_distance_pct", "auc_pct"]
