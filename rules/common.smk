@@ -106,8 +106,16 @@ def make_grid_figures(params, log):
         fh.write("\n".join(map(str, written)) + "\n")
 
 
+def idle_truths():
+    """mode ov_eval: the references no case uses (ov_eval lists every reference of the folder)."""
+    if EPA["mode"] != "ov_eval":
+        return {}
+    used = {c.dataset for c in CASES}
+    return {ds: str(path) for ds, path in sorted(TRUTH.items()) if ds not in used}
+
+
 def make_tables(params, log):
-    failed = epa_grid.call(workers(), epa_tables.make, params.cases, RESULTS, params.settings)
+    failed = epa_grid.call(workers(), epa_tables.make, params.cases, RESULTS, params.settings, params.idle_truths)
     lines = [f"{len(params.cases)} cases, {len(failed)} without a result"] + [f"{k}: {r}" for k, r in failed]
     with open(log[0], "w") as fh:
         fh.write("\n".join(lines) + "\n")

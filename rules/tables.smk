@@ -2,6 +2,7 @@
 rule tables:
     input:
         expand(manifest("efficiency"), batch=BATCHES),
+        idle_truths=lambda wc: list(idle_truths().values()),
     output:
         text=report(f"{RESULTS}/error_comparison.txt", caption="../docs/report_caption.rst", category="Tables"),
         summary=report(f"{RESULTS}/summary.csv", caption="../docs/report_caption.rst", category="Tables"),
@@ -12,7 +13,9 @@ rule tables:
         success_curves=f"{RESULTS}/success_curves.csv",
     params:
         cases=lambda wc: sorted(CASE_BY_KEY),  # a function: braces in a name are not wildcards
-        settings={"tables": EPA["tables"], "metrics": EPA["metrics"], "efficiency": EPA["efficiency"], "mode": EPA["mode"]},
+        idle_truths=lambda wc: idle_truths(),
+        settings={"tables": EPA["tables"], "metrics": EPA["metrics"], "efficiency": EPA["efficiency"], "mode": EPA["mode"],
+                  "load": EPA["load"], "sources": EPA.get("sources")},
         version=EPA_VERSION,
     log:
         f"{RESULTS}/logs/tables.log",

@@ -83,24 +83,29 @@ def test_mode_ov_eval_writes_ov_evals_layout(tmp_path):
         c["truth_source"] = readers.options(cfg, "reference", dataset="drone_figure8")
         c["estimate_source"] = readers.options(cfg, "estimate", algorithm=c["key"].split("/")[0])
     run_stages(cases, out, cfg)
-    tables.make([c["key"] for c in cases], out, cfg)
+    idle = tmp_path / "sim/truth/handheld_office.txt"  # a reference no case uses: ov_eval lists it too
+    tables.make([c["key"] for c in cases], out, cfg, {"handheld_office": str(idle)})
     text = (out / "error_comparison.txt").read_text()
     lines = text.splitlines()
+    n_idle = sum(1 for line in idle.read_text().splitlines() if line.strip() and not line.startswith("#"))
+    assert re.fullmatch(rf"\[COMP\]: {n_idle} poses in handheld_office\.txt => length of \d+\.\d\d meters", lines[2])
+    assert "\033[31m[COMP]: vo_drifty dataset does not have any runs for handheld_office!!!!!" in text
+    lines = lines[:2] + [line for line in lines[2:] if "handheld_office" not in line]
     # error_comparison fixes its print level at INFO: its first line says so, then the reference
     # lines, the warnings, and the tables; none of its DEBUG lines (per-dataset means, medians)
     assert lines[0] == "Setting printing level to: INFO"
     assert re.fullmatch(r"\[COMP\]: \d+ poses in drone_figure8\.txt => length of \d+\.\d\d meters", lines[1])
-    assert lines[2] == "=" * 44 and lines[3] == "ATE LATEX TABLE"
+    assert lines[2] == "\033[0m" + "=" * 44 and lines[3] == "ATE LATEX TABLE"  # the error's RESET follows its newline
     assert "processing" not in text and "median" not in text and "\t" not in text
     k = lines.index("ATE 2D LATEX TABLE")
     assert lines[k - 1] == lines[k + 1] == "=" * 44
-    assert lines[k + 2] == r" & \textbf{drone\_figure8} & \textbf{Average} \\\hline"
+    assert lines[k + 2] == r" & \textbf{drone\_figure8} & \textbf{handheld\_office} & \textbf{Average} \\\hline"
     import json
 
     runs = [json.loads((out / f"cases/vio_body/drone_figure8/{r}/06_metrics/metrics.json").read_text())["ate_2d"]
             for r in ("run1", "run2")]
     yaw, xy = np.mean([m["yaw_deg"]["rmse"] for m in runs]), np.mean([m["trans_xy_m"]["rmse"] for m in runs])
-    assert lines[k + 3] == rf"vio\_body & {yaw:.3f} / {xy:.3f} & {yaw:.3f} / {xy:.3f} \\"
+    assert lines[k + 3] == rf"vio\_body & {yaw:.3f} / {xy:.3f} & - / - & {yaw:.3f} / {xy:.3f} \\"
     assert "RPE LATEX TABLE" in lines and lines[-1] == "=" * 44
     assert text.count("=" * 44) == 9 and "=" * 45 not in text
     assert lines[lines.index("RPE LATEX TABLE") + 2].endswith(r"\textbf{48m} \\\hline")
@@ -125,10 +130,12 @@ def test_mode_ov_eval_prints_ov_evals_warnings_and_errors(tmp_path):
     other = copy.deepcopy(ok)
     other.algorithm, other.dataset, other.load = "vo", "V1_01", {**ok.load, "ref_file": "V1_01.txt"}
     other.sync = {"n_matched": 100, "matched_length_m": {"ref": 50.0, "est": 50.0}}
-    text = tables.ov_eval_text([ok, coarse, other], [8.0])
+    idle = {"V2_01": {"ref_file": "V2_01.txt", "n_ref": 7, "ref_length_m": 3.0}}  # a reference without runs
+    text = tables.ov_eval_text([ok, coarse, other], [8.0], idle)
     y, r, x = "\033[33m", "\033[31m", "\033[0m"
     assert text.startswith("Setting printing level to: INFO\n[COMP]: 10 poses in MH_01.txt => length of 80.00 meters\n"
                            "[COMP]: 10 poses in V1_01.txt => length of 80.00 meters\n"
+                           "[COMP]: 7 poses in V2_01.txt => length of 3.00 meters\n"
                            f"{y}[TRAJ]: Trajectory is a bad ratio of 0.88 length (est 70.00, gt 80.00)\n"
                            f"{y}[TRAJ]: algorithms/vio_body/MH_01/run1.txt\n"
                            f"{y}[TRAJ]: Trajectory is a bad ratio of 1.40 length (est 84.00, gt 60.00)\n"
@@ -138,6 +145,8 @@ def test_mode_ov_eval_prints_ov_evals_warnings_and_errors(tmp_path):
                            f"{y}[COMP]: the recommendation is to use a higher frequency groundtruth, or relax this "
                            f"trajectory segment logic...\n{x}"
                            f"{r}[COMP]: vio_body dataset does not have any runs for V1_01!!!!!\n{x}"
+                           f"{r}[COMP]: vio_body dataset does not have any runs for V2_01!!!!!\n{x}"
                            f"{r}[COMP]: vo dataset does not have any runs for MH_01!!!!!\n{x}"
+                           f"{r}[COMP]: vo dataset does not have any runs for V2_01!!!!!\n{x}"
                            "============================================\nATE LATEX TABLE\n")
-    assert "vio\\_body & 1.000 / 0.100 & - / - & 1.000 / 0.100 \\\\" in text.splitlines()
+    assert "vio\\_body & 1.000 / 0.100 & - / - & - / - & 1.000 / 0.100 \\\\" in text.splitlines()

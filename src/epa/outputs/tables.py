@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import io as _io
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,8 +18,11 @@ import numpy as np
 
 from epa import io
 from epa.chain import CaseFolder, case_dir, read_record
+from epa.errors import EpaError
 from epa.metrics import statistics
 from epa.metrics.accuracy import segment_key
+
+log = logging.getLogger("epa")
 
 RULE_SHORT = "=" * 38
 RULE_LONG = "=" * 44
@@ -425,17 +429,20 @@ def _ov_eval_warnings(c: CaseResult) -> str:
     return out
 
 
-def ov_eval_text(grid: list[CaseResult], segments) -> str:
+def ov_eval_text(grid: list[CaseResult], segments, idle_truths: dict | None = None) -> str:
     """error_comparison.txt in mode ov_eval: what ov_eval's error_comparison (v2.7 and later) prints to
     its standard output, byte for byte, so a diff shows only the numbers. error_comparison fixes its
     print level at INFO, so its DEBUG lines (per-dataset means, the per-segment medians) never show;
     its warnings and errors keep their colour codes. Deviations: a cell without a successful run reads
-    `- / -`, where ov_eval would stop (a run it cannot read) or print 0.000 (no RPE segment)."""
-    datasets = sorted({c.dataset for c in grid})
+    `- / -`, where ov_eval would stop (a run it cannot read) or print 0.000 (no RPE segment).
+    ``idle_truths``: {dataset: load-like info} of the references no algorithm has a run for, which
+    ov_eval lists too (a [COMP] line, an error per algorithm, a `- / -` column)."""
+    idle_truths = idle_truths or {}
+    datasets = sorted({c.dataset for c in grid} | set(idle_truths))
     algs = sorted({c.algorithm for c in grid})
     out = "Setting printing level to: INFO\n"
     for ds in datasets:
-        info = next((c.load for c in grid if c.dataset == ds and c.load), None)
+        info = next((c.load for c in grid if c.dataset == ds and c.load), idle_truths.get(ds))
         if info:
             out += f"[COMP]: {info['n_ref']} poses in {info['ref_file']} => length of {info['ref_length_m']:.2f} meters\n"
     cells: dict[str, dict] = {"ate": {}, "ate_2d": {}}
@@ -661,13 +668,13 @@ def table_names(cfg: dict) -> tuple[str, ...]:
     return TABLE_NAMES + (("kitti",) if cfg["metrics"]["kitti"] else ())
 
 
-def write_all(grid: list[CaseResult], results_dir, cfg: dict) -> None:
+def write_all(grid: list[CaseResult], results_dir, cfg: dict, idle_truths: dict | None = None) -> None:
     """error_comparison.txt, summary.csv and tables/<name>.tex under ``results_dir``."""
     results_dir = Path(results_dir)
     segments = cfg["metrics"]["segments"]
     decimals = cfg["tables"]["decimals"]
     spread = cfg["tables"]["spread"]
-    text = (ov_eval_text(grid, segments) if cfg.get("mode") == "ov_eval" else
+    text = (ov_eval_text(grid, segments, idle_truths) if cfg.get("mode") == "ov_eval" else
             report_text(grid, segments, decimals, spread))
     io.write_text(results_dir / "error_comparison.txt", text)
     io.write_text(results_dir / "summary.csv", summary_csv(grid, segments))
@@ -706,11 +713,27 @@ def write_across_runs(grid: list[CaseResult], results_dir) -> None:
     io.write_text(results_dir / "consistency" / "summary.csv", records_csv(cols, rows))
 
 
-def make(keys: list[str], results_dir, cfg: dict) -> list[tuple[str, str]]:
-    """The tables rule: read every case, write every table; returns the failed cases."""
+def make(keys: list[str], results_dir, cfg: dict, idle_truths: dict | None = None) -> list[tuple[str, str]]:
+    """The tables rule: read every case, write every table; returns the failed cases.
+    ``idle_truths`` ({dataset: path}, mode ov_eval): references without any run, read here for the
+    [COMP] line ov_eval prints for every reference."""
     grid = collect(keys, results_dir)
-    write_all(grid, results_dir, cfg)
+    idle = {}
+    for ds, path in (idle_truths or {}).items():
+        try:
+            idle[ds] = reference_info(path, cfg, ds)
+        except EpaError as exc:  # no case needs it: a warning, not a failed grid
+            log.warning("reference %s without runs left out of error_comparison.txt: %s", ds, exc.one_line())
+    write_all(grid, results_dir, cfg, idle)
     return failed_cases(grid)
+
+
+def reference_info(path, cfg: dict, dataset: str) -> dict:
+    """A reference's pose count and path length, as the load stage records them."""
+    from epa import readers
+
+    ref = readers.read(path, readers.options(cfg, "reference", dataset=dataset))
+    return {"ref_file": Path(path).name, "n_ref": len(ref), "ref_length_m": ref.length()}
 
 
 def failure_report(summary_path, most: int = 20) -> str:
