@@ -294,4 +294,5 @@ def case_record(load_info: dict, sync_info: dict, calib_info: dict, align_info: 
             "extrinsic_rot_deg": ext.get("rotation_deg") if applied else None,
             "extrinsic_trans_m": ext.get("translation_norm_m") if applied else None,
             "alignment": align_info, **{k: v for k, v in summary.items() if k != "n_matched"},
-            "load": load_info, "sync": sync_info, "calibrate": calib_info}
+            # the estimate's path as invoked stays in load.json: metrics.json is the same from `epa eval` and the grid
+            "load": {k: v for k, v in load_info.items() if k != "est_path"}, "sync": sync_info, "calibrate": calib_info}
