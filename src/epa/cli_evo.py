@@ -19,6 +19,7 @@ FORMS = {"tum": ("ref_file", "est_file"), "euroc": ("state_gt_csv", "est_file"),
          "bag": ("bag", "ref_topic", "est_topic"), "bag2": ("bag", "ref_topic", "est_topic"),
          "mcap": ("bag", "ref_topic", "est_topic")}
 RESULT_FORMAT = "epica-result/1"
+TF_LOOKUP_HZ = 10.0  # evo's setting tf_cache_lookup_frequency
 
 
 def add_parsers(sub) -> None:
@@ -32,7 +33,7 @@ def add_parsers(sub) -> None:
                 f.add_argument(name)
             _add_options(f, kind, timed=form != "kitti")
             if form in ("bag", "bag2", "mcap"):
-                f.add_argument("--tf_cache_lookup_frequency", type=float, default=10.0,
+                f.add_argument("--tf_cache_lookup_frequency", type=float, default=TF_LOOKUP_HZ,
                                help="a TF id (/tf:parent.child) is looked up at this rate (Hz), from the first "
                                     "TF message on, as evo's setting of that name (default: 10)")
 
@@ -74,11 +75,11 @@ def _read(args, which: str):
     bag = args.form in ("bag", "bag2", "mcap")
     return read_source(args.form, args.bag if bag else _path(args, which),
                        getattr(args, f"{which}_topic") if bag else None, reference=which == "ref",
-                       unsorted=args.unsorted, tf_rate=getattr(args, "tf_cache_lookup_frequency", 10.0))
+                       unsorted=args.unsorted, tf_rate=getattr(args, "tf_cache_lookup_frequency", TF_LOOKUP_HZ))
 
 
 def read_source(form: str, path, topic: str | None = None, *, reference: bool = False, unsorted: str = "error",
-                tf_rate: float = 10.0):
+                tf_rate: float = TF_LOOKUP_HZ):
     """One side of an evo command: a file of ``form`` or a bag topic, or a TF id ``/tf:parent.child``
     (optionally ``:/tf_static``) looked up at ``tf_rate`` Hz as evo does."""
     from epa import readers, settings

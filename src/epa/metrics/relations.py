@@ -49,28 +49,25 @@ def _printed(*trajs: Trajectory) -> bool:
     return any(t.r_printed is not None for t in trajs)
 
 
-def _transposed(r: np.ndarray) -> np.ndarray:
-    return np.swapaxes(r, -1, -2)
+def _between(r_a: np.ndarray, p_a: np.ndarray, r_b: np.ndarray, p_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A^-1 B as (rotations, translations), A^-1 taken as evo's se3_inverse takes it, [R^T, -R^T p]:
+    evo's arithmetic exactly, also on KITTI's printed, not quite orthonormal, rotation blocks (the
+    matrix twin of geometry.relative_motions, which works on quaternions)."""
+    r_t = np.swapaxes(r_a, -1, -2)
+    return r_t @ r_b, np.einsum("nij,nj->ni", r_t, p_b - p_a)
 
 
 def _ape_error_poses(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
-    """E = P^-1 Q as (rotations, translations), P^-1 taken as evo takes it, [R^T, -R^T p]: exact
-    evo arithmetic also on KITTI's printed, not quite orthonormal, rotation blocks."""
-    r_t = _transposed(est.r)
-    return r_t @ ref.r, np.einsum("nij,nj->ni", r_t, ref.p - est.p)
-
-
-def _relative_motions(traj: Trajectory, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    r_t = _transposed(traj.r[i])
-    return r_t @ traj.r[j], np.einsum("nij,nj->ni", r_t, traj.p[j] - traj.p[i])
+    """E = P^-1 Q."""
+    return _between(est.r, est.p, ref.r, ref.p)
 
 
 def _rpe_error_poses(ref: Trajectory, est: Trajectory, i, j) -> tuple[np.ndarray, np.ndarray]:
-    """E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j) as (rotations, translations), in evo's matrix arithmetic."""
-    r_ref, t_ref = _relative_motions(ref, i, j)
-    r_est, t_est = _relative_motions(est, i, j)
-    r_t = _transposed(r_ref)
-    return r_t @ r_est, np.einsum("nij,nj->ni", r_t, t_est - t_ref)
+    """E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)."""
+    r_ref, r_est = ref.r, est.r
+    motion_ref = _between(r_ref[i], ref.p[i], r_ref[j], ref.p[j])
+    motion_est = _between(r_est[i], est.p[i], r_est[j], est.p[j])
+    return _between(*motion_ref, *motion_est)
 
 
 def _of_error_poses(relation: str, r_e: np.ndarray, t_e: np.ndarray) -> np.ndarray:

@@ -473,9 +473,9 @@ def ov_eval_text(grid: list[CaseResult], segments, idle_truths: dict | None = No
     lines += [RULE_LONG, "RPE LATEX TABLE", RULE_LONG,
               "".join(f" & \\textbf{{{int(seg)}m}}" for seg in segments) + " \\\\\\hline"]
     for alg in algs:
-        row = latex_escape(alg)
+        row, runs = latex_escape(alg), _ok_runs(grid, alg)
         for seg in segments:
-            rot, trans = _pooled(_ok_runs(grid, alg), "segments", False, seg)
+            rot, trans = _pooled(runs, "segments", False, seg)
             row += f" & {rot.mean():.3f} / {trans.mean():.3f}" if rot.size else " & - / -"
         lines.append(row + " \\\\")
     lines.append(RULE_LONG)

@@ -401,13 +401,17 @@ def _read_tf(reader, path: Path, topic: str, static_topic: str, frames: tuple[st
     if notes is not None:
         chain_text = " -> ".join([parent] + [b if not inv else a for a, b, inv in steps])
         notes.append(f"bag TF {chain_text} ({len(t_ns)} poses {sampled}, {stamp} stamps)")
-    t = (t_ns // 10**9) + (t_ns % 10**9) / 1e9  # seconds as ROS's to_sec gives them
-    return Trajectory.from_rp(t, r_total, p_total)
+    return Trajectory.from_rp(_to_sec(t_ns), r_total, p_total)
+
+
+def _to_sec(ns: np.ndarray) -> np.ndarray:
+    """Stamps (int ns) in seconds as ROS 1's Time.to_sec() gives them: secs + nsecs / 1e9."""
+    return (ns // 10**9) + (ns % 10**9) / 1e9
 
 
 def _through_double_seconds(ns: np.ndarray) -> np.ndarray:
     """Stamps (int ns) after ROS 1's to_sec() and Time.fromSec(): floor the seconds, round the ns."""
-    t = (ns // 10**9) + (ns % 10**9) / 1e9
+    t = _to_sec(ns)
     sec = np.floor(t)
     return sec.astype(np.int64) * 10**9 + np.round((t - sec) * 1e9).astype(np.int64)
 
