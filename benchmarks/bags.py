@@ -7,6 +7,7 @@ PoseStamped topic (200 Hz) and, interleaved over the same 500 s, an image-like t
 640x480x3 bytes per message (400 messages: ~370 MB), plus the same bags without the images. Reads
 the pose topic with ``epa traj`` (in-process, best of 3) and with evo's ``read_bag_trajectory``.
 """
+
 import argparse
 import shutil
 import tempfile
@@ -32,12 +33,30 @@ def write(path: Path, storage: str, poses: Trajectory, n_images: int) -> None:
         def image(t):
             sec = int(t)
             stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int((t - sec) * 1e9))
-            header = (T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id="cam") if storage == "ros1"
-                      else T["std_msgs/msg/Header"](stamp=stamp, frame_id="cam"))
-            return T["sensor_msgs/msg/Image"](header=header, height=480, width=640, encoding="rgb8", is_bigendian=0,
-                                              step=640 * 3, data=data)
-        extra = {"/camera/image_raw": ("sensor_msgs/msg/Image", [(int(t * 1e9), image(t)) for t in stamps])}
-    bags.write_bag(path, {"/pose": ("geometry_msgs/msg/PoseStamped", poses)}, storage=storage, extra=extra)
+            header = (
+                T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id="cam")
+                if storage == "ros1"
+                else T["std_msgs/msg/Header"](stamp=stamp, frame_id="cam")
+            )
+            return T["sensor_msgs/msg/Image"](
+                header=header,
+                height=480,
+                width=640,
+                encoding="rgb8",
+                is_bigendian=0,
+                step=640 * 3,
+                data=data,
+            )
+
+        extra = {
+            "/camera/image_raw": (
+                "sensor_msgs/msg/Image",
+                [(int(t * 1e9), image(t)) for t in stamps],
+            )
+        }
+    bags.write_bag(
+        path, {"/pose": ("geometry_msgs/msg/PoseStamped", poses)}, storage=storage, extra=extra
+    )
 
 
 def size(path: Path) -> int:
@@ -69,7 +88,7 @@ def main():
             for n_images in (0, args.images):
                 path = tmp / f"{n_images}_{name}"
                 write(path, storage, poses, n_images)
-                ours = best(lambda: bags.read_bag(path, "/pose"))
+                ours = best(lambda path=path: bags.read_bag(path, "/pose"))
                 assert len(bags.read_bag(path, "/pose")) == args.poses
                 evo = float("nan")
                 if not args.skip_evo:
@@ -77,9 +96,10 @@ def main():
                     from rosbags.rosbag1 import Reader as R1
                     from rosbags.rosbag2 import Reader as R2
 
-                    def read_evo():
-                        with (R1(path) if storage == "ros1" else R2(path)) as reader:
+                    def read_evo(path=path, storage=storage):
+                        with R1(path) if storage == "ros1" else R2(path) as reader:
                             file_interface.read_bag_trajectory(reader, "/pose")
+
                     evo = best(read_evo, repeat=1)
                 label = f"{storage} poses{' + images' if n_images else ''}"
                 print(f"{label:<28} {size(path) / 1e6:8.1f} {ours:7.2f} {evo:7.2f}", flush=True)

@@ -6,7 +6,7 @@
 2. epa eval on one EuRoC case (../shared/data), wall time and peak memory.
 3. Steps 1+2 vs the metrics stage on the 100,000-pose pair.
 """
-import resource
+
 import subprocess
 import sys
 import tempfile
@@ -39,13 +39,29 @@ def big_pair(tmp: Path, n=100_000):
 def main():
     tmp = Path(tempfile.mkdtemp())
     ref, est = big_pair(tmp)
-    epa_s = timed(["epa", "eval", str(tmp / "ref.txt"), str(tmp / "est.txt"), "--out", str(tmp / "o")])
+    epa_s = timed(
+        ["epa", "eval", str(tmp / "ref.txt"), str(tmp / "est.txt"), "--out", str(tmp / "o")]
+    )
     print(f"epa eval, 100k poses: {epa_s:.2f} s")
     if "--skip-evo" not in sys.argv:
         evo_s = timed(["evo_ape", "tum", str(tmp / "ref.txt"), str(tmp / "est.txt"), "-a"])
-        evo_s += timed(["evo_rpe", "tum", str(tmp / "ref.txt"), str(tmp / "est.txt"), "-a", "--delta", "8",
-                        "--delta_unit", "m", "--all_pairs"])
-        print(f"evo_ape + evo_rpe (8 m, all pairs): {evo_s:.2f} s  -> speed-up {evo_s / epa_s:.1f}x")
+        evo_s += timed(
+            [
+                "evo_rpe",
+                "tum",
+                str(tmp / "ref.txt"),
+                str(tmp / "est.txt"),
+                "-a",
+                "--delta",
+                "8",
+                "--delta_unit",
+                "m",
+                "--all_pairs",
+            ]
+        )
+        print(
+            f"evo_ape + evo_rpe (8 m, all pairs): {evo_s:.2f} s  -> speed-up {evo_s / epa_s:.1f}x"
+        )
     cfg = settings.defaults()
     t0 = time.perf_counter()
     off = sync.estimate_offset(ref, est)
@@ -54,12 +70,22 @@ def main():
     steps = time.perf_counter() - t0
     t0 = time.perf_counter()
     pipeline.metrics_stage(ref.select(ir), est.select(ie), cfg)
-    print(f"Steps 1+2: {steps:.2f} s; metrics stage: {time.perf_counter() - t0:.2f} s (same 100k pair)")
+    print(
+        f"Steps 1+2: {steps:.2f} s; metrics stage: {time.perf_counter() - t0:.2f} s (same 100k pair)"
+    )
     data = Path(__file__).resolve().parents[2] / "shared/data"
     if data.is_dir():
-        cmd = ["/usr/bin/time", "-f", "%e s %M KB", "epa", "eval",
-               str(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt"),
-               str(data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv"), "--out", str(tmp / "e")]
+        cmd = [
+            "/usr/bin/time",
+            "-f",
+            "%e s %M KB",
+            "epa",
+            "eval",
+            str(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt"),
+            str(data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv"),
+            "--out",
+            str(tmp / "e"),
+        ]
         out = subprocess.run(cmd, capture_output=True, text=True)
         print("epa eval, one EuRoC case (MH_01 OpenVINS):", out.stderr.strip().splitlines()[-1])
 

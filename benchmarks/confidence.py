@@ -9,6 +9,7 @@ of commit REV (default: the last commit without the confidence figures), and pri
 total time (the best of --repeat runs). The Step 1 jackknife, the Step 2 covariances and the
 success-rate curve live in the sync, calibrate and drift stages.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -42,7 +43,8 @@ if euroc.is_dir():
     cases = []
     for f in sorted(rpg.rglob("*.txt")):
         seq = next(s for s in names if s in str(f))
-        cases.append({"key": f"{f.parent.parent.name}/{seq}/{f.stem}", "truth": str(gt / names[seq]), "estimate": str(f)})
+        key = f"{f.parent.parent.name}/{seq}/{f.stem}"
+        cases.append({"key": key, "truth": str(gt / names[seq]), "estimate": str(f)})
     grids["euroc"] = (cases, gt, rpg)
 result = {}
 for name, (cases, truth, algs) in grids.items():
@@ -65,8 +67,14 @@ print(json.dumps(result))
 def measure(src: Path, repeat: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "PYTHONPATH": str(src)}
-        out = subprocess.run([sys.executable, "-c", CHILD, tmp, str(repeat), str(DATA)], env=env, check=True,
-                             capture_output=True, text=True, cwd=tmp)
+        out = subprocess.run(
+            [sys.executable, "-c", CHILD, tmp, str(repeat), str(DATA)],
+            env=env,
+            check=True,
+            capture_output=True,
+            text=True,
+            cwd=tmp,
+        )
         return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -77,15 +85,22 @@ def main() -> None:
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         base = Path(tmp) / "base"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base), args.base], check=True,
-                       capture_output=True)
+        subprocess.run(
+            ["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base), args.base],
+            check=True,
+            capture_output=True,
+        )
         try:
             before = measure(base / "src", args.repeat)
         finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)], check=True)
+            subprocess.run(
+                ["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)], check=True
+            )
     now = measure(ROOT / "src", args.repeat)
     for name in now:
-        print(f"\n{name}: {now[name]['cases']} cases, stage time in one process (s), best of {args.repeat}")
+        print(
+            f"\n{name}: {now[name]['cases']} cases, stage time in one process (s), best of {args.repeat}"
+        )
         print(f"{'stage':12} {args.base:>10} {'now':>10} {'change':>10}")
         for stage, t in now[name]["stages"].items():
             b = before[name]["stages"].get(stage, float("nan"))

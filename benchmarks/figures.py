@@ -9,6 +9,7 @@ docs/performance.md and the closing note, never in a timed test.
 2. In one process: the time to build each case figure's bundle and to draw each kind (median over
    the example's cases, after matplotlib is imported), and bytes per case folder.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -25,8 +26,26 @@ from pathlib import Path
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--profile", str(ROOT / "profiles/default")]
-METRIC_STAGES = ("load", "crop", "sync", "calibrate", "align", "metrics", "drift", "consistency", "efficiency")
+SNAKEMAKE = [
+    sys.executable,
+    "-m",
+    "snakemake",
+    "-s",
+    str(ROOT / "Snakefile"),
+    "--profile",
+    str(ROOT / "profiles/default"),
+]
+METRIC_STAGES = (
+    "load",
+    "crop",
+    "sync",
+    "calibrate",
+    "align",
+    "metrics",
+    "drift",
+    "consistency",
+    "efficiency",
+)
 
 
 def job_seconds(results: Path) -> dict[str, float]:
@@ -41,14 +60,30 @@ def job_seconds(results: Path) -> dict[str, float]:
 
 def run_example(cwd: Path, per_case: bool) -> tuple[float, dict[str, float]]:
     cfg = yaml.safe_load((ROOT / "config/config.yaml").read_text())
-    cfg.update(truth_dir=str(cwd / "sim/truth"), algorithms_dir=str(cwd / "sim/algorithms"), results_dir="results")
+    cfg.update(
+        truth_dir=str(cwd / "sim/truth"),
+        algorithms_dir=str(cwd / "sim/algorithms"),
+        results_dir="results",
+    )
     cfg["report"] = {"per_case": per_case}
     (cwd / "cfg.yaml").write_text(yaml.safe_dump(cfg))
     shutil.rmtree(cwd / "results", ignore_errors=True)
     shutil.rmtree(cwd / ".snakemake", ignore_errors=True)
     t0 = time.perf_counter()
-    subprocess.run([*SNAKEMAKE, "--directory", str(cwd), "--configfile", str(cwd / "cfg.yaml"), "--cores", "2",
-                    "--quiet"], check=True, capture_output=True)
+    subprocess.run(
+        [
+            *SNAKEMAKE,
+            "--directory",
+            str(cwd),
+            "--configfile",
+            str(cwd / "cfg.yaml"),
+            "--cores",
+            "2",
+            "--quiet",
+        ],
+        check=True,
+        capture_output=True,
+    )
     return time.perf_counter() - t0, job_seconds(cwd / "results")
 
 
@@ -68,10 +103,14 @@ def in_process(results: Path) -> dict:
                 t0 = time.perf_counter()
                 figures.render(b, Path(tmp) / name, formats=("png",))
                 draw[name].append(time.perf_counter() - t0)
-            size.append(sum(p.stat().st_size for p in (case_root / "10_report").rglob("*") if p.is_file()))
-    return {"bundles_s": statistics.median(build),
-            "draw_s": {k: round(statistics.median(v), 3) for k, v in draw.items()},
-            "report_folder_mb": {"median": statistics.median(size) / 1e6, "max": max(size) / 1e6}}
+            size.append(
+                sum(p.stat().st_size for p in (case_root / "10_report").rglob("*") if p.is_file())
+            )
+    return {
+        "bundles_s": statistics.median(build),
+        "draw_s": {k: round(statistics.median(v), 3) for k, v in draw.items()},
+        "report_folder_mb": {"median": statistics.median(size) / 1e6, "max": max(size) / 1e6},
+    }
 
 
 def main():
@@ -88,9 +127,13 @@ def main():
     wall_off, _ = run_example(cwd, per_case=False)
     wall_on, jobs = run_example(cwd, per_case=True)
     metric = sum(jobs.get(s, 0.0) for s in METRIC_STAGES)
-    print(f"example --cores 2: {wall_off:.1f} s without per-case reports, {wall_on:.1f} s with them")
-    print(f"job time: metric stages {metric:.1f} s; report {jobs.get('report', 0):.1f} s; "
-          f"figures (grid) {jobs.get('figures', 0):.1f} s; tables {jobs.get('tables', 0):.1f} s")
+    print(
+        f"example --cores 2: {wall_off:.1f} s without per-case reports, {wall_on:.1f} s with them"
+    )
+    print(
+        f"job time: metric stages {metric:.1f} s; report {jobs.get('report', 0):.1f} s; "
+        f"figures (grid) {jobs.get('figures', 0):.1f} s; tables {jobs.get('tables', 0):.1f} s"
+    )
     print("in process:", in_process(cwd / "results"))
     if not args.out:
         shutil.rmtree(tmp, ignore_errors=True)

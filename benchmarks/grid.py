@@ -12,6 +12,7 @@ docs/performance.md and the closing note, never in a timed test.
    memory of the Snakemake process, and a check that the tables equal per-case execution (every
    stage run case by case in one process, then the same table code).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,10 +35,14 @@ SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile")]
 def run(cmd, cwd=None, check=True) -> tuple[float, int, str]:
     """Wall seconds and peak RSS (MB, the largest process) of a command."""
     t0 = time.perf_counter()
-    out = subprocess.run(["/usr/bin/time", "-f", "%M", *cmd], cwd=cwd, capture_output=True, text=True)
+    out = subprocess.run(
+        ["/usr/bin/time", "-f", "%M", *cmd], cwd=cwd, capture_output=True, text=True
+    )
     wall = time.perf_counter() - t0
     if check and out.returncode != 0:
-        raise SystemExit(f"failed: {' '.join(map(str, cmd))}\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}")
+        raise SystemExit(
+            f"failed: {' '.join(map(str, cmd))}\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}"
+        )
     rss_kb = int(out.stderr.strip().splitlines()[-1]) if out.stderr.strip() else 0
     return wall, rss_kb // 1024, out.stdout + out.stderr
 
@@ -47,7 +52,9 @@ def smk(cwd, *args):
 
 
 def write_cfg(cwd: Path, extra: str = "") -> None:
-    (cwd / "cfg.yaml").write_text(f"truth_dir: truth\nalgorithms_dir: algorithms\nresults_dir: results\n{extra}")
+    (cwd / "cfg.yaml").write_text(
+        f"truth_dir: truth\nalgorithms_dir: algorithms\nresults_dir: results\n{extra}"
+    )
 
 
 # ----------------------------------------------------------------------------- the EuRoC grid
@@ -55,20 +62,34 @@ def euroc_grid(cwd: Path) -> list[tuple[Path, Path]]:
     """The 52 real cases, laid out as a grid (files linked, not copied into the project)."""
     gt = DATA / "rpng_open_vins/ov_data/euroc_mav"
     rpg = DATA / "uzh-rpg_rpg_trajectory_evaluation/results"
-    seqs = {"MH_01": "MH_01_easy", "MH_03": "MH_03_medium", "MH_04": "MH_04_difficult", "MH_05": "MH_05_difficult"}
+    seqs = {
+        "MH_01": "MH_01_easy",
+        "MH_03": "MH_03_medium",
+        "MH_04": "MH_04_difficult",
+        "MH_05": "MH_05_difficult",
+    }
     (cwd / "truth").mkdir(parents=True)
     for short, name in seqs.items():
         os.symlink(gt / f"{name}.txt", cwd / "truth" / f"{short}.txt")
     runs: dict[tuple[str, str, str], Path] = {}
     for alg in ("vio_mono", "vio_stereo"):
         for s in ("MH_01", "MH_03", "MH_05"):
-            runs[alg, s, "run0"] = rpg / f"euroc_mono_stereo/laptop/{alg}/laptop_{alg}_{s}/stamped_traj_estimate.txt"
+            runs[alg, s, "run0"] = (
+                rpg / f"euroc_mono_stereo/laptop/{alg}/laptop_{alg}_{s}/stamped_traj_estimate.txt"
+            )
     for s in seqs:
-        runs["vislam_rp", s, "run0"] = rpg / f"euroc_vislam_mono/laptop/vislam_rp/laptop_vislam_rp_{s}/stamped_traj_estimate0.txt"
+        runs["vislam_rp", s, "run0"] = (
+            rpg
+            / f"euroc_vislam_mono/laptop/vislam_rp/laptop_vislam_rp_{s}/stamped_traj_estimate0.txt"
+        )
         for k in range(10):
-            runs["vislam_ba", s, f"run{k}"] = (rpg / f"euroc_vislam_mono/laptop/vislam_ba/laptop_vislam_ba_{s}/"
-                                               f"stamped_ba_estimate{k}.txt")
-    runs["openvins", "MH_01", "run0"] = DATA / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv"
+            runs["vislam_ba", s, f"run{k}"] = (
+                rpg / f"euroc_vislam_mono/laptop/vislam_ba/laptop_vislam_ba_{s}/"
+                f"stamped_ba_estimate{k}.txt"
+            )
+    runs["openvins", "MH_01", "run0"] = (
+        DATA / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv"
+    )
     runs["openvins", "MH_04", "run0"] = DATA / "qmy0519_open_vins-master/traj_estimate.txt"
     pairs = []
     for (alg, s, r), src in runs.items():
@@ -94,16 +115,36 @@ def bench_euroc(tmp: Path, skip_evo: bool) -> dict:
     pairs = euroc_grid(cwd)
     write_cfg(cwd)
     wf, rss, _ = smk(cwd, "--cores", "2", "--quiet")
-    lib = in_pairs([["epa", "eval", str(r), str(e), "--out", str(tmp / "lib" / f"{k}")] for k, (r, e) in enumerate(pairs)])
+    lib = in_pairs(
+        [
+            ["epa", "eval", str(r), str(e), "--out", str(tmp / "lib" / f"{k}")]
+            for k, (r, e) in enumerate(pairs)
+        ]
+    )
     out = {"cases": len(pairs), "workflow_s": wf, "workflow_rss_mb": rss, "library_loop_s": lib}
     if not skip_evo:
         evo_cmds = []
         for k, (r, e) in enumerate(pairs):
-            tum = tmp / "evo" / f"{k}.tum"  # evo reads TUM; the OpenVINS CSV is converted once, outside the timing
+            tum = (
+                tmp / "evo" / f"{k}.tum"
+            )  # evo reads TUM; the OpenVINS CSV is converted once, outside the timing
             tum.parent.mkdir(exist_ok=True)
             io.write_tum(tum, text.read_trajectory(e))
-            evo_cmds += [["evo_ape", "tum", str(r), str(tum), "-a"],
-                         ["evo_rpe", "tum", str(r), str(tum), "-a", "--delta", "8", "--delta_unit", "m", "--all_pairs"]]
+            evo_cmds += [
+                ["evo_ape", "tum", str(r), str(tum), "-a"],
+                [
+                    "evo_rpe",
+                    "tum",
+                    str(r),
+                    str(tum),
+                    "-a",
+                    "--delta",
+                    "8",
+                    "--delta_unit",
+                    "m",
+                    "--all_pairs",
+                ],
+            ]
         out["evo_loop_s"] = in_pairs(evo_cmds)
     return out
 
@@ -113,7 +154,9 @@ def in_process(grid_dir: Path, results_dir: Path) -> tuple[float, dict, list[str
     from epa import cases as epa_cases
     from epa import chain, settings
 
-    cfg = settings.resolve({"truth_dir": str(grid_dir / "truth"), "algorithms_dir": str(grid_dir / "algorithms")})
+    cfg = settings.resolve(
+        {"truth_dir": str(grid_dir / "truth"), "algorithms_dir": str(grid_dir / "algorithms")}
+    )
     _, cases = epa_cases.discover(grid_dir / "truth", grid_dir / "algorithms")
     t0 = time.perf_counter()
     for c in cases:
@@ -185,8 +228,10 @@ def bench_large(tmp: Path, n_cases: int, check: bool = True) -> dict:
     ref_dir = cwd / "per_case"
     out["per_case_in_process_s"], cfg, keys = in_process(cwd, ref_dir)
     tables.make(keys, ref_dir, cfg)
-    same = all((cwd / "results" / f).read_bytes() == (ref_dir / f).read_bytes()
-               for f in ("error_comparison.txt", "summary.csv"))
+    same = all(
+        (cwd / "results" / f).read_bytes() == (ref_dir / f).read_bytes()
+        for f in ("error_comparison.txt", "summary.csv")
+    )
     out["tables_identical_to_per_case"] = same
     return out
 
@@ -197,7 +242,9 @@ def main():
     ap.add_argument("--skip-large", action="store_true")
     ap.add_argument("--cases", default="1000,10000")
     ap.add_argument("--out", help="keep the grids here (default: a temporary folder)")
-    ap.add_argument("--no-check", action="store_true", help="skip the per-case comparison of the large grids")
+    ap.add_argument(
+        "--no-check", action="store_true", help="skip the per-case comparison of the large grids"
+    )
     args = ap.parse_args()
     tmp = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="epa_grid_"))
     tmp.mkdir(parents=True, exist_ok=True)

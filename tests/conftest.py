@@ -16,8 +16,15 @@ def run_stages(cases: list[dict], out: Path, cfg: dict, stages=None) -> dict:
     manifests = {}
     for stage in stages or chain.NAMES:
         manifests[stage] = out / "batches/all" / f"{stage}.json"
-        grid.run_job(stage, cases, out, cfg, manifests[stage], manifests.get(chain.previous(stage)),
-                     out / f"logs/{stage}.log")
+        grid.run_job(
+            stage,
+            cases,
+            out,
+            cfg,
+            manifests[stage],
+            manifests.get(chain.previous(stage)),
+            out / f"logs/{stage}.log",
+        )
     return manifests
 
 

@@ -1,5 +1,6 @@
 """Bad inputs found by trying the tool as a new user would: each a one-line error naming the file
 (and line), never a traceback or a silently wrong number."""
+
 import os
 import stat
 
@@ -7,10 +8,9 @@ import numpy as np
 import pytest
 
 from epa import alignment, cases, chain, io, pipeline, settings
-from epa.readers import text
 from epa.errors import EpaError
-from epa.trajectory import Trajectory
 from epa.readers import text
+from epa.trajectory import Trajectory
 
 POSES = "1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0 1\n3.0 2 1 0 0 0 0 1\n"
 
@@ -65,16 +65,26 @@ def test_a_static_reference_fails_the_case_instead_of_nan_success(tmp_path):
     still = Trajectory(t, np.zeros((len(t), 3)), np.tile([0, 0, 0, 1.0], (len(t), 1)))
     io.write_tum(tmp_path / "ref.txt", still)
     io.write_tum(tmp_path / "est.txt", still)
-    cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}})
+    cfg = settings.resolve(
+        {"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}}
+    )
     with pytest.raises(EpaError, match="the reference does not move"):
         chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "out", cfg)
     # the alignment meets it first: with no motion its rotation is undetermined
-    assert chain.failure_of(tmp_path / "out/05_align/transform.json").startswith("align: the reference does not move")
+    assert chain.failure_of(tmp_path / "out/05_align/transform.json").startswith(
+        "align: the reference does not move"
+    )
 
 
 def test_first_n_error_says_how_many_poses_matched():
-    traj = Trajectory(np.arange(50.0), np.random.default_rng(0).normal(size=(50, 3)), np.tile([0, 0, 0, 1.0], (50, 1)))
-    with pytest.raises(EpaError, match=r"needs at least 3 poses: align.first_n is 2 \(50 poses matched\)"):
+    traj = Trajectory(
+        np.arange(50.0),
+        np.random.default_rng(0).normal(size=(50, 3)),
+        np.tile([0, 0, 0, 1.0], (50, 1)),
+    )
+    with pytest.raises(
+        EpaError, match=r"needs at least 3 poses: align.first_n is 2 \(50 poses matched\)"
+    ):
         alignment.fit(traj, traj, method="se3", first_n=2)
 
 
@@ -89,11 +99,14 @@ def test_a_dangling_link_is_a_failed_case_not_a_missing_one(tmp_path):
         text.read_trajectory(found[0].estimate)
 
 
-@pytest.mark.parametrize("content,message", [
-    ("truth_dir: t\n", "names no algorithms_dir (the bundled example's would be used)"),
-    ("- a\n- b\n", "a config must be a mapping of settings, not a list"),
-    ("a: [\n", "not valid YAML"),
-])
+@pytest.mark.parametrize(
+    "content,message",
+    [
+        ("truth_dir: t\n", "names no algorithms_dir (the bundled example's would be used)"),
+        ("- a\n- b\n", "a config must be a mapping of settings, not a list"),
+        ("a: [\n", "not valid YAML"),
+    ],
+)
 def test_user_config_files_are_checked(tmp_path, content, message):
     (tmp_path / "my.yaml").write_text(content)
     with pytest.raises(EpaError) as err:
@@ -112,26 +125,40 @@ def test_results_follow_the_umask_not_mkstemps_0600(tmp_path):
     assert stat.S_IMODE((tmp_path / "x.txt").stat().st_mode) == 0o666 & ~io._UMASK
 
 
-@pytest.mark.parametrize("rows,line,what", [
-    ("1403636592.5 0 0 0 0 0 0 1\n1403636592600000000 1 0 0 0 0 0 1\n1403636592.7 2 0 0 0 0 0 1\n", 2,
-     "timestamp 1403636592600000000 is in nanoseconds but most stamps are seconds: the file mixes units"),
-    ("1403636592500000000 0 0 0 0 0 0 1\n1403636592.6 1 0 0 0 0 0 1\n1403636592700000000 2 0 0 0 0 0 1\n", 2,
-     "timestamp 1403636592.6 is in seconds but most stamps are nanoseconds: the file mixes units"),
-])
+@pytest.mark.parametrize(
+    "rows,line,what",
+    [
+        (
+            "1403636592.5 0 0 0 0 0 0 1\n1403636592600000000 1 0 0 0 0 0 1\n1403636592.7 2 0 0 0 0 0 1\n",
+            2,
+            "timestamp 1403636592600000000 is in nanoseconds but most stamps are seconds: the file mixes units",
+        ),
+        (
+            "1403636592500000000 0 0 0 0 0 0 1\n1403636592.6 1 0 0 0 0 0 1\n1403636592700000000 2 0 0 0 0 0 1\n",
+            2,
+            "timestamp 1403636592.6 is in seconds but most stamps are nanoseconds: the file mixes units",
+        ),
+    ],
+)
 def test_a_file_mixing_second_and_nanosecond_stamps_is_refused(tmp_path, rows, line, what):
     assert f"m.txt:{line}: {what}" in read_error(tmp_path, "m.txt", rows)
 
 
 def test_every_inference_is_a_note_in_load_json(tmp_path):
     # nanosecond stamps without a header saying so, and a repeated stamp sorted away
-    rows = "".join(f"{1_700_000_000_000_000_000 + k * 50_000_000} {k * 0.1} 0 0 0 0 0 1\n" for k in range(400))
+    rows = "".join(
+        f"{1_700_000_000_000_000_000 + k * 50_000_000} {k * 0.1} 0 0 0 0 0 1\n" for k in range(400)
+    )
     rows += rows.splitlines(keepends=True)[-1]
     (tmp_path / "est.txt").write_text(rows)
     cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": ".", "load": {"unsorted": "sort"}})
     notes: list = []
     traj = text.read_trajectory(tmp_path / "est.txt", on_unsorted="sort", notes=notes)
     assert len(traj) == 400
-    assert notes == ["format tum (8 columns)", "stamps read as nanoseconds (above 1e12, so not seconds)",
-                     "0 backward and 1 repeated timestamps: sorted, kept the first of each repeat"]
+    assert notes == [
+        "format tum (8 columns)",
+        "stamps read as nanoseconds (above 1e12, so not seconds)",
+        "0 backward and 1 repeated timestamps: sorted, kept the first of each repeat",
+    ]
     _, _, info, _ = pipeline.load(tmp_path / "est.txt", tmp_path / "est.txt", cfg)
     assert info["est_notes"] == notes and info["ref_notes"] == notes

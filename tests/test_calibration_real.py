@@ -1,15 +1,20 @@
 """Step 2 on real EuRoC MH_01: ORB-SLAM3 stereo (rectified cam0) and mono (raw cam0, scale) vs Kalibr."""
+
 import numpy as np
 import pytest
 import yaml
 
-from epa import calibration, geometry, io, sync
+from epa import calibration, geometry, sync
 from epa.readers import text
 
 
 @pytest.fixture(scope="module")
 def euroc(data):
-    kalibr = (data / "rpng_open_vins/config/euroc_mav/kalibr_imucam_chain.yaml").read_text().split("\n", 1)[1]
+    kalibr = (
+        (data / "rpng_open_vins/config/euroc_mav/kalibr_imucam_chain.yaml")
+        .read_text()
+        .split("\n", 1)[1]
+    )
     chain = yaml.safe_load(kalibr)
     t0, t1 = np.array(chain["cam0"]["T_imu_cam"]), np.array(chain["cam1"]["T_imu_cam"])
     gt = text.read_trajectory(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt")
@@ -39,7 +44,9 @@ def test_stereo_recovers_extrinsic(data, euroc):
     ext = solve(data, gt, "f_dataset-MH01_stereo.txt")
     assert ext.trusted
     rot_vs_raw = np.degrees(geometry.rotation_angle(ext.R.T @ t0[:3, :3]))
-    rot_vs_rect = np.degrees(geometry.rotation_angle(ext.R.T @ t0[:3, :3] @ rectification(t0, t1).T))
+    rot_vs_rect = np.degrees(
+        geometry.rotation_angle(ext.R.T @ t0[:3, :3] @ rectification(t0, t1).T)
+    )
     trans_cm = 100 * np.linalg.norm(ext.t - t0[:3, 3])
     # ORB-SLAM3 stereo reports the rectified left camera, 0.62 deg from raw cam0: against that frame
     # the solve is within 0.25 deg; against raw Kalibr cam0 it is bounded by that rectification.
@@ -57,7 +64,13 @@ def test_mono_recovers_extrinsic_and_scale(data, euroc):
 
 def test_body_frame_estimate_gives_near_identity(data, euroc):
     gt, _, _ = euroc
-    est = text.read_trajectory(data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv")
+    est = text.read_trajectory(
+        data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv"
+    )
     ir, ie = sync.associate(gt, est, offset=sync.estimate_offset(gt, est).offset)
     ext = calibration.solve(gt.select(ir), est.select(ie))
-    assert ext.trusted and np.degrees(geometry.rotation_angle(ext.R)) < 1.0 and np.linalg.norm(ext.t) < 0.03
+    assert (
+        ext.trusted
+        and np.degrees(geometry.rotation_angle(ext.R)) < 1.0
+        and np.linalg.norm(ext.t) < 0.03
+    )

@@ -1,6 +1,7 @@
 """Every row of the bad-input catalogue (tests/catalogue.py, docs/bad-inputs.md) run as a user would:
 a one-line error naming the file (and line), exit status 2, no traceback and no partial output; or a
 correct result with a note saying what was inferred. In a grid the other cases finish."""
+
 import csv
 import json
 import logging
@@ -9,12 +10,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import catalogue
 import pytest
 
-import catalogue
 from epa import cases, chain, cli, grid, settings
-from epa.outputs import tables
 from epa.errors import EpaError
+from epa.outputs import tables
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,7 +32,9 @@ def _no_partial_output(out: Path, metrics_stand: bool = False) -> None:
     if metrics_stand:  # a later stage's error: the accuracy is complete and stays
         assert "ate" in json.loads(metrics.read_text())
     elif metrics.exists():
-        assert json.loads(metrics.read_text()).get("status") == "failed", "a failed case has a metrics result"
+        assert json.loads(metrics.read_text()).get("status") == "failed", (
+            "a failed case has a metrics result"
+        )
 
 
 def _eval_paths(tmp: Path, b: catalogue.Bad) -> tuple[Path, Path, list[str]]:
@@ -81,22 +84,35 @@ def _bag(tmp: Path, est: Path, setup: str) -> Path:
     from epa.readers import bags
 
     good = _traj(catalogue.T, catalogue.P, catalogue.Q)
-    storage = {"bag-sqlite3": "sqlite3", "bag-mcap": "mcap", "bag-no-db": "sqlite3"}.get(setup, "ros1")
+    storage = {"bag-sqlite3": "sqlite3", "bag-mcap": "mcap", "bag-no-db": "sqlite3"}.get(
+        setup, "ros1"
+    )
     if setup == "bag-one":
         bags.write_bag(est, {"/pose": ("geometry_msgs/msg/PoseStamped", good)})
         return est
     if setup == "bag-repeated":
         t = catalogue.T.copy()
         t[10] = t[9]
-        bags.write_bag(est, {"/pose": ("geometry_msgs/msg/PoseStamped", _traj(t, catalogue.P, catalogue.Q))})
+        bags.write_bag(
+            est, {"/pose": ("geometry_msgs/msg/PoseStamped", _traj(t, catalogue.P, catalogue.Q))}
+        )
         return est
     from rosbags.typesys import Stores, get_typestore
 
-    string = get_typestore(Stores.ROS1_NOETIC if storage == "ros1" else Stores.ROS2_HUMBLE).types["std_msgs/msg/String"]
-    bags.write_bag(est, {"/pose": ("geometry_msgs/msg/PoseStamped", good), "/gt": ("geometry_msgs/msg/PoseStamped", good),
-                         "/tf": ("tf2_msgs/msg/TFMessage", good),
-                         "/empty": ("geometry_msgs/msg/PoseStamped", _traj(good.t[:0], good.p[:0], good.q[:0]))},
-                   storage=storage, extra={"/chatter": ("std_msgs/msg/String", [(1, string(data="hello"))])})
+    string = get_typestore(Stores.ROS1_NOETIC if storage == "ros1" else Stores.ROS2_HUMBLE).types[
+        "std_msgs/msg/String"
+    ]
+    bags.write_bag(
+        est,
+        {
+            "/pose": ("geometry_msgs/msg/PoseStamped", good),
+            "/gt": ("geometry_msgs/msg/PoseStamped", good),
+            "/tf": ("tf2_msgs/msg/TFMessage", good),
+            "/empty": ("geometry_msgs/msg/PoseStamped", _traj(good.t[:0], good.p[:0], good.q[:0])),
+        },
+        storage=storage,
+        extra={"/chatter": ("std_msgs/msg/String", [(1, string(data="hello"))])},
+    )
     if setup == "bag-truncated":
         data = est.read_bytes()
         est.write_bytes(data[: len(data) // 2])
@@ -127,8 +143,14 @@ def test_epa_eval(tmp_path, capsys, caplog, monkeypatch, b):
     lines = [line for line in err.splitlines() if line.startswith("epa: error: ")]
     assert rc == 2 and len(lines) == 1, err
     assert b.expect in lines[0]
-    blamed = {"est": est, "ref": ref, "config": tmp_path / "cfg.yaml", "none": "command line",
-              "timing": est.with_name(est.stem + "_timing.txt"), "timing-arg": tmp_path / "nowhere_timing.txt"}
+    blamed = {
+        "est": est,
+        "ref": ref,
+        "config": tmp_path / "cfg.yaml",
+        "none": "command line",
+        "timing": est.with_name(est.stem + "_timing.txt"),
+        "timing-arg": tmp_path / "nowhere_timing.txt",
+    }
     who = "config" if b.where == "config" else b.blame
     assert lines[0].startswith(f"epa: error: {blamed[who]}"), lines[0]
     if out.exists():
@@ -154,7 +176,10 @@ def _grid_folders(tmp: Path, setup: str) -> tuple[Path, Path, str | None]:
         (algs / "bad" / "seq").mkdir(parents=True)
         (algs / "bad" / "seq" / "run1.txt").symlink_to(tmp / "deleted.txt")
     elif setup == "grid-static":
-        _write(algs / "bad" / "seq" / "run1.txt", catalogue._rows(catalogue.T, 0 * catalogue.P, catalogue.Q))
+        _write(
+            algs / "bad" / "seq" / "run1.txt",
+            catalogue._rows(catalogue.T, 0 * catalogue.P, catalogue.Q),
+        )
     elif setup == "grid-names":
         for name in ("run 1", "rün_ü", "50%", "a&b", "x..y", "x..", "{r}", "r$HOME"):
             _write(algs / "we ird&%" / "seq" / f"{name}.txt", good)
@@ -166,11 +191,18 @@ def _grid_folders(tmp: Path, setup: str) -> tuple[Path, Path, str | None]:
         if setup == "grid-bag-ref":
             for ds in ("seq", "other"):
                 (truth / f"{ds}.txt").unlink()
-                bags.write_bag(truth / ds, {"/gt": ("geometry_msgs/msg/PoseStamped", good_traj)}, storage="sqlite3")
+                bags.write_bag(
+                    truth / ds,
+                    {"/gt": ("geometry_msgs/msg/PoseStamped", good_traj)},
+                    storage="sqlite3",
+                )
             bad = None
         else:
             (algs / "bad" / "seq").mkdir(parents=True)
-            bags.write_bag(algs / "bad" / "seq" / "run1.bag", {"/pose": ("geometry_msgs/msg/PoseStamped", good_traj)})
+            bags.write_bag(
+                algs / "bad" / "seq" / "run1.bag",
+                {"/pose": ("geometry_msgs/msg/PoseStamped", good_traj)},
+            )
             data = (algs / "bad" / "seq" / "run1.bag").read_bytes()
             (algs / "bad" / "seq" / "run1.bag").write_bytes(data[: len(data) // 2])
     elif setup == "grid-two-runs":
@@ -194,7 +226,9 @@ def _grid_folders(tmp: Path, setup: str) -> tuple[Path, Path, str | None]:
 
 def run_grid(truth: Path, algs: Path, results: Path) -> dict[str, str]:
     """Every stage as the workflow's jobs run it (one batch), then the tables; key -> status."""
-    cfg = settings.resolve({"truth_dir": str(truth), "algorithms_dir": str(algs), "results_dir": str(results)})
+    cfg = settings.resolve(
+        {"truth_dir": str(truth), "algorithms_dir": str(algs), "results_dir": str(results)}
+    )
     _, found = cases.discover(truth, algs)
     batch = [{"key": c.key, "truth": str(c.truth), "estimate": str(c.estimate)} for c in found]
     upstream = None
@@ -204,7 +238,9 @@ def run_grid(truth: Path, algs: Path, results: Path) -> dict[str, str]:
         upstream = manifest
     tables.make([c.key for c in found], results, cfg)
     with open(results / "summary.csv", encoding="utf-8") as fh:
-        return {f"{r['algorithm']}/{r['dataset']}/{r['run']}": r["status"] for r in csv.DictReader(fh)}
+        return {
+            f"{r['algorithm']}/{r['dataset']}/{r['run']}": r["status"] for r in csv.DictReader(fh)
+        }
 
 
 GRID_ROWS = [b for b in catalogue.CATALOGUE if b.where == "grid"]
@@ -224,7 +260,10 @@ def test_grid(tmp_path, caplog, b):
         assert all(s == "ok" for s in status.values()), status
         if b.setup == "grid-names":
             assert len(status) == 10
-            assert all((tmp_path / "results" / "cases" / k).resolve().is_relative_to(tmp_path / "results") for k in status)
+            assert all(
+                (tmp_path / "results" / "cases" / k).resolve().is_relative_to(tmp_path / "results")
+                for k in status
+            )
         return
     assert b.expect in status.pop(bad) and "\n" not in b.expect
     assert status and all(s == "ok" for s in status.values()), status  # every other case finished
@@ -238,9 +277,24 @@ WORKFLOW_ROWS = [b for b in catalogue.CATALOGUE if b.where == "workflow"]
 @pytest.mark.parametrize("b", WORKFLOW_ROWS, ids=[b.id for b in WORKFLOW_ROWS])
 def test_snakemake(tmp_path, b):
     _write(tmp_path / "cfg.yaml", b.config)
-    run = subprocess.run([sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "-n", "--configfile",
-                          str(tmp_path / "cfg.yaml"), "-d", str(tmp_path)], capture_output=True, text=True, cwd=tmp_path,
-                         env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            "-s",
+            str(ROOT / "Snakefile"),
+            "-n",
+            "--configfile",
+            str(tmp_path / "cfg.yaml"),
+            "-d",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONWARNINGS": "ignore"},
+    )
     text = run.stdout + run.stderr
     assert run.returncode != 0 and "Traceback" not in text and not (tmp_path / "HACKED").exists()
     line = next(line for line in text.splitlines() if b.expect in line)
@@ -257,4 +311,6 @@ def test_case_names_cannot_leave_the_results_folder(tmp_path):
 
 def test_the_catalogue_page_is_current():
     assert (ROOT / "docs" / "bad-inputs.md").read_text(encoding="utf-8") == catalogue.markdown()
-    assert len(catalogue.CATALOGUE) >= 60 and len({b.id for b in catalogue.CATALOGUE}) == len(catalogue.CATALOGUE)
+    assert len(catalogue.CATALOGUE) >= 60 and len({b.id for b in catalogue.CATALOGUE}) == len(
+        catalogue.CATALOGUE
+    )

@@ -1,15 +1,16 @@
 """The stage chain and the grid runner: the fallback decision, batching, per-case failure isolation."""
+
 import json
 from concurrent.futures.process import BrokenProcessPool
 
 import numpy as np
 import pytest
-
-from epa import chain, grid, io, settings
-from epa.outputs import tables
-from epa.errors import EpaError
 from conftest import run_stages
 from test_steps_sim import case as sim_case
+
+from epa import chain, grid, io, settings
+from epa.errors import EpaError
+from epa.outputs import tables
 
 
 @pytest.fixture
@@ -36,10 +37,16 @@ def test_untrusted_step2_drops_the_step1_offset_and_reassociates(offset_case, tm
     # which means no offset either (the configured sync.offset, 0), not the Step 1 one
     cfg = resolved(calibrate={"max_trans_residual_m": 1e-6})
     m = chain.run_case(*offset_case, tmp_path / "out", cfg, write_tables=True)["metrics"]
-    assert m["eval_source"] == "ov_eval" and m["calibrate"]["reason"].startswith("Step 2 not trusted")
+    assert m["eval_source"] == "ov_eval" and m["calibrate"]["reason"].startswith(
+        "Step 2 not trusted"
+    )
     assert abs(m["sync"]["offset_s"] - 0.25) < 0.002  # what Step 1 found stays on record
     assert m["time_offset_s"] == 0.0 and m["calibrate"]["reassociated"]["offset_s"] == 0.0
-    assert m["extrinsic_rot_deg"] is None and m["alignment"]["method"] == "se3" and m["alignment"]["fallback_se3"]
+    assert (
+        m["extrinsic_rot_deg"] is None
+        and m["alignment"]["method"] == "se3"
+        and m["alignment"]["fallback_se3"]
+    )
     pairs = io.read_csv(tmp_path / "out/04_calibrate/pairs.csv")
     assert np.abs(pairs["t_ref"] - pairs["t_est"]).max() <= 0.02  # matched on raw stamps
     assert not (tmp_path / "out/04_calibrate/est.tum").exists()
@@ -47,7 +54,12 @@ def test_untrusted_step2_drops_the_step1_offset_and_reassociates(offset_case, tm
 
 def test_ov_eval_mode_sets_the_stage_settings_and_warns(caplog):
     cfg = resolved(mode="ov_eval", sync={"policy": "evo"})
-    assert cfg["sync"] == {**cfg["sync"], "estimate_offset": False, "policy": "ov_eval", "max_diff": 0.02}
+    assert cfg["sync"] == {
+        **cfg["sync"],
+        "estimate_offset": False,
+        "policy": "ov_eval",
+        "max_diff": 0.02,
+    }
     assert not cfg["calibrate"]["enabled"]
     assert "mode ov_eval overrides sync.policy: 'evo' -> 'ov_eval'" in caplog.text
 
@@ -74,8 +86,11 @@ def write_case(root, name, ref, est_text):
 def three_cases(tmp_path, offset_case):
     ref, est = offset_case
     good = est.read_text()
-    return [write_case(tmp_path, "good", ref, good), write_case(tmp_path, "bug", ref, good),
-            write_case(tmp_path, "bad", ref, "1 0 0 0 0 0 0 1\n2 0 0 x 0 0 0 1\n")]
+    return [
+        write_case(tmp_path, "good", ref, good),
+        write_case(tmp_path, "bug", ref, good),
+        write_case(tmp_path, "bad", ref, "1 0 0 0 0 0 0 1\n2 0 0 x 0 0 0 1\n"),
+    ]
 
 
 def run_grid(tmp_path, cases, cfg):
@@ -91,17 +106,27 @@ def test_a_bug_in_one_case_is_recorded_and_the_others_finish(tmp_path, three_cas
             raise KeyError("injected")
         return real(case, *args)
 
-    monkeypatch.setitem(chain.BY_NAME, "align", chain.Stage(**{**chain.BY_NAME["align"].__dict__, "run": buggy}))
+    monkeypatch.setitem(
+        chain.BY_NAME, "align", chain.Stage(**{**chain.BY_NAME["align"].__dict__, "run": buggy})
+    )
     out, manifests = run_grid(tmp_path, three_cases, resolved())
     status = grid.read_manifest(manifests["drift"])
     assert status["good/seq/run1"] == {"status": "ok"}
     assert status["bug/seq/run1"]["reason"] == "internal error: KeyError: 'injected'"
-    assert status["bad/seq/run1"]["reason"].startswith("load: ") and "run1.txt:2: not a number: 'x'" in status["bad/seq/run1"]["reason"]
+    assert (
+        status["bad/seq/run1"]["reason"].startswith("load: ")
+        and "run1.txt:2: not a number: 'x'" in status["bad/seq/run1"]["reason"]
+    )
     assert "Traceback" in (out / "cases/bug/seq/run1/logs/align.log").read_text()
-    assert json.loads((out / "cases/bug/seq/run1/07_drift/drift.json").read_text())["status"] == "failed"
+    assert (
+        json.loads((out / "cases/bug/seq/run1/07_drift/drift.json").read_text())["status"]
+        == "failed"
+    )
     failed = tables.make([c["key"] for c in three_cases], out, resolved())
-    assert dict(failed) == {"bad/seq/run1": "failed: " + status["bad/seq/run1"]["reason"],
-                            "bug/seq/run1": "internal error: KeyError: 'injected'"}
+    assert dict(failed) == {
+        "bad/seq/run1": "failed: " + status["bad/seq/run1"]["reason"],
+        "bug/seq/run1": "internal error: KeyError: 'injected'",
+    }
     assert "(see" in tables.failure_report(out / "summary.csv")
 
 
@@ -115,7 +140,9 @@ def test_a_dead_worker_costs_only_its_case(tmp_path, three_cases, monkeypatch):
         return fn(*args)
 
     monkeypatch.setattr(grid, "call", flaky)
-    status = grid.run_job("load", three_cases, tmp_path / "r", resolved(), tmp_path / "m.json", workers=2)
+    status = grid.run_job(
+        "load", three_cases, tmp_path / "r", resolved(), tmp_path / "m.json", workers=2
+    )
     assert calls == [3, 1, 1, 1]
     assert status["good/seq/run1"] == {"status": "ok"}
     assert "worker process died" in status["bug/seq/run1"]["reason"]
@@ -134,9 +161,11 @@ def test_the_library_imports_no_workflow_glue():
     import subprocess
     import sys
 
-    code = ("import pkgutil, importlib, sys, epa\n"
-            "for m in pkgutil.iter_modules(epa.__path__): importlib.import_module('epa.' + m.name)\n"
-            "print(sorted(n for n in sys.modules if n.split('.')[0] in ('snakemake', 'matplotlib', 'scipy', 'pandas')))")
+    code = (
+        "import pkgutil, importlib, sys, epa\n"
+        "for m in pkgutil.iter_modules(epa.__path__): importlib.import_module('epa.' + m.name)\n"
+        "print(sorted(n for n in sys.modules if n.split('.')[0] in ('snakemake', 'matplotlib', 'scipy', 'pandas')))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 
@@ -150,4 +179,7 @@ def test_every_rule_declares_log_benchmark_threads_and_resources():
         if "rule " not in text:
             continue
         for directive in ("log:", "benchmark:", "threads:", "resources:", "params:"):
-            assert text.count(directive) == text.count("\nrule ") + text.startswith("rule "), (smk.name, directive)
+            assert text.count(directive) == text.count("\nrule ") + text.startswith("rule "), (
+                smk.name,
+                directive,
+            )

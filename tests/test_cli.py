@@ -10,10 +10,27 @@ def test_eval_writes_metrics_json(tmp_path):
 
     simulate.simulate(tmp_path / "sim")
     out = tmp_path / "out"
-    assert cli.main(["eval", str(tmp_path / "sim/truth/drone_figure8.txt"),
-                     str(tmp_path / "sim/algorithms/vio_camera/drone_figure8/run1.csv"), "--out", str(out)]) == 0
+    assert (
+        cli.main(
+            [
+                "eval",
+                str(tmp_path / "sim/truth/drone_figure8.txt"),
+                str(tmp_path / "sim/algorithms/vio_camera/drone_figure8/run1.csv"),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     m = json.load(open(out / "06_metrics/metrics.json"))
-    assert {"n_matched", "alignment", "ate", "rpe_distance", "rpe_time_1s", "drift_rate_pct"} <= set(m)
+    assert {
+        "n_matched",
+        "alignment",
+        "ate",
+        "rpe_distance",
+        "rpe_time_1s",
+        "drift_rate_pct",
+    } <= set(m)
     assert set(m["rpe_distance"]) == {"8", "16", "24", "32", "40", "48"}
     assert abs(m["time_offset_s"] - 0.05) < 0.005 and m["eval_source"] == "epa"
 
@@ -21,9 +38,17 @@ def test_eval_writes_metrics_json(tmp_path):
 def test_bad_input_exits_nonzero_with_one_line(tmp_path):
     bad = tmp_path / "bad.txt"
     bad.write_text("1 2 3\n")
-    r = subprocess.run([sys.executable, "-m", "epa.cli", "eval", str(bad), str(bad), "--out", str(tmp_path / "o")],
-                       capture_output=True, text=True)
-    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "bad.txt" in r.stderr and "Traceback" not in r.stderr
+    r = subprocess.run(
+        [sys.executable, "-m", "epa.cli", "eval", str(bad), str(bad), "--out", str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+    )
+    assert (
+        r.returncode == 2
+        and r.stderr.count("\n") == 1
+        and "bad.txt" in r.stderr
+        and "Traceback" not in r.stderr
+    )
     assert not (tmp_path / "o" / "06_metrics").exists()
 
 
@@ -34,15 +59,37 @@ def test_traj_lists_a_bags_topics_and_exports_one(tmp_path, capsys):
     from epa.trajectory import Trajectory
 
     t = 1_700_000_000 + np.arange(50) * 0.1
-    traj = Trajectory(t, np.column_stack([t - t[0], np.zeros(50), np.zeros(50)]), np.tile([0, 0, 0, 1.0], (50, 1)))
-    bags.write_bag(tmp_path / "b.bag", {"/odom": ("nav_msgs/msg/Odometry", traj), "/tf": ("tf2_msgs/msg/TFMessage", traj)},
-                   frames=("map", "base"))
+    traj = Trajectory(
+        t, np.column_stack([t - t[0], np.zeros(50), np.zeros(50)]), np.tile([0, 0, 0, 1.0], (50, 1))
+    )
+    bags.write_bag(
+        tmp_path / "b.bag",
+        {"/odom": ("nav_msgs/msg/Odometry", traj), "/tf": ("tf2_msgs/msg/TFMessage", traj)},
+        frames=("map", "base"),
+    )
     assert cli.main(["traj", str(tmp_path / "b.bag")]) == 0
     listing = capsys.readouterr().out
     assert "2 topics" in listing
-    assert "/odom  nav_msgs/msg/Odometry" in listing and "50 msgs      4.900 s  1700000000.000000" in listing
-    assert cli.main(["traj", str(tmp_path / "b.bag"), "--topic", "/tf", "--frames", "map", "base",
-                     "--export", str(tmp_path / "tf.tum")]) == 0
+    assert (
+        "/odom  nav_msgs/msg/Odometry" in listing
+        and "50 msgs      4.900 s  1700000000.000000" in listing
+    )
+    assert (
+        cli.main(
+            [
+                "traj",
+                str(tmp_path / "b.bag"),
+                "--topic",
+                "/tf",
+                "--frames",
+                "map",
+                "base",
+                "--export",
+                str(tmp_path / "tf.tum"),
+            ]
+        )
+        == 0
+    )
     shown = capsys.readouterr().out
     assert "bag TF map -> base (50 poses of /tf, header stamps)" in shown
     assert "50 poses, 4.900 s" in shown and "10.00 Hz, path length 4.900 m" in shown
@@ -51,7 +98,19 @@ def test_traj_lists_a_bags_topics_and_exports_one(tmp_path, capsys):
     # a text file: what it was read as, and its numbers
     assert cli.main(["traj", str(tmp_path / "tf.tum")]) == 0
     assert "format csv (8 columns, header names them)" in capsys.readouterr().out
-    assert cli.main(["traj", str(tmp_path / "b.bag"), "--topic", "/odom", "--export", str(tmp_path / "x.kitti")]) == 2
+    assert (
+        cli.main(
+            [
+                "traj",
+                str(tmp_path / "b.bag"),
+                "--topic",
+                "/odom",
+                "--export",
+                str(tmp_path / "x.kitti"),
+            ]
+        )
+        == 2
+    )
     assert "x.kitti: export to .txt or .tum (TUM) or .csv" in capsys.readouterr().err
 
 
@@ -67,7 +126,11 @@ def test_a_ros2_bag_folder_is_a_run(tmp_path):
     (tmp_path / "truth").mkdir()
     (tmp_path / "truth/seq.txt").write_text("1 0 0 0 0 0 0 1\n")
     (tmp_path / "algs/a/seq").mkdir(parents=True)
-    bags.write_bag(tmp_path / "algs/a/seq/run1", {"/p": ("geometry_msgs/msg/PoseStamped", traj)}, storage="mcap")
+    bags.write_bag(
+        tmp_path / "algs/a/seq/run1",
+        {"/p": ("geometry_msgs/msg/PoseStamped", traj)},
+        storage="mcap",
+    )
     (tmp_path / "algs/a/seq/run1_timing.txt").write_text("0 12\n")
     _, found = cases.discover(tmp_path / "truth", tmp_path / "algs")
     assert [(c.key, c.estimate.name) for c in found] == [("a/seq/run1", "run1")]
@@ -79,13 +142,17 @@ def test_config_lists_defaults_and_marks_what_a_config_sets(tmp_path, capsys, ca
     assert cli.main(["config"]) == 0
     defaults = capsys.readouterr().out.splitlines()
     assert "sync.max_diff: null" in defaults and "metrics.kitti: false" in defaults
-    (tmp_path / "c.yaml").write_text("truth_dir: t\nalgorithms_dir: a\nmetrics: {kitti: true}\nmode: ov_eval\n"
-                                     "sync: {max_diff: 0.05}\n")
+    (tmp_path / "c.yaml").write_text(
+        "truth_dir: t\nalgorithms_dir: a\nmetrics: {kitti: true}\nmode: ov_eval\n"
+        "sync: {max_diff: 0.05}\n"
+    )
     assert cli.main(["config", str(tmp_path / "c.yaml")]) == 0
     captured = capsys.readouterr()
     lines = captured.out.splitlines()
     assert "metrics.kitti: true  # set (default false)" in lines
-    assert "sync.max_diff: 0.02  # set (default null)" in lines  # ov_eval's value: the mode overrides the file
+    assert (
+        "sync.max_diff: 0.02  # set (default null)" in lines
+    )  # ov_eval's value: the mode overrides the file
     assert "mode ov_eval overrides sync.max_diff: 0.05 -> 0.02" in caplog.text
     assert cli.main(["config", str(tmp_path / "missing.yaml")]) == 2
 

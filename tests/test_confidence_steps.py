@@ -1,5 +1,6 @@
 """How sure Steps 1 and 2 are: honest standard deviations (simulated with known truth), unobservable
 directions flagged and not applied, ambiguous or out-of-window offsets refused, noisy gentle motion."""
+
 import numpy as np
 import pytest
 
@@ -12,21 +13,40 @@ def simulated_trials(n: int):
     white noise and random walks; Steps 1 and 2 as the pipeline runs them (Step 1's deviation
     carried into Step 2's). Yields the truth and the results."""
     t = np.arange(0, 90, 1 / 200)
-    refs = [Trajectory.from_rp(t, *simulate.truth_pose(s, t)) for s in ("handheld_office", "drone_figure8")]
+    refs = [
+        Trajectory.from_rp(t, *simulate.truth_pose(s, t))
+        for s in ("handheld_office", "drone_figure8")
+    ]
     for seed in range(n):
         rng = np.random.default_rng(seed)
         ref = refs[seed % 2]
-        truth = {"offset": rng.uniform(-0.5, 0.5), "rotation": geometry.so3_exp(rng.normal(0, 1.0, 3)),
-                 "translation": rng.normal(0, 0.1, 3), "scale": rng.uniform(0.5, 4) if seed % 3 == 0 else 1.0}
-        est = simulate.observe(ref, rng, **truth, rate=20, noise_rot_deg=rng.uniform(0, 0.5),
-                               noise_pos_m=rng.uniform(0, 0.01), walk_rot_deg=rng.uniform(0, 0.05),
-                               walk_pos_m=rng.uniform(0, 0.01), margin=1.0)
+        truth = {
+            "offset": rng.uniform(-0.5, 0.5),
+            "rotation": geometry.so3_exp(rng.normal(0, 1.0, 3)),
+            "translation": rng.normal(0, 0.1, 3),
+            "scale": rng.uniform(0.5, 4) if seed % 3 == 0 else 1.0,
+        }
+        est = simulate.observe(
+            ref,
+            rng,
+            **truth,
+            rate=20,
+            noise_rot_deg=rng.uniform(0, 0.5),
+            noise_pos_m=rng.uniform(0, 0.01),
+            walk_rot_deg=rng.uniform(0, 0.05),
+            walk_pos_m=rng.uniform(0, 0.01),
+            margin=1.0,
+        )
         step1 = sync.estimate_offset(ref, est)
         offset = step1.offset if step1.used else truth["offset"]
         _, i_est = sync.associate(ref, est, offset=offset)
         matched = est.select(i_est)
-        step2 = calibration.solve(ref.at(matched.t + offset), matched,
-                                  scale=truth["scale"] != 1.0, offset_std=step1.std if step1.used else 0.0)
+        step2 = calibration.solve(
+            ref.at(matched.t + offset),
+            matched,
+            scale=truth["scale"] != 1.0,
+            offset_std=step1.std if step1.used else 0.0,
+        )
         yield truth, step1, step2
 
 
@@ -54,7 +74,9 @@ def _rig(t, r, p, rx, tx, offset=0.0):
     """The reference body poses and a sensor estimate of them (sensor = body * X, in another world)."""
     ref = Trajectory.from_rp(t, r, p)
     world = geometry.so3_exp(np.array([0.1, -0.2, 0.9]))
-    est = Trajectory.from_rp(t - offset, world @ r @ rx, (p + np.einsum("nab,b->na", r, tx)) @ world.T + [4, 1, -2])
+    est = Trajectory.from_rp(
+        t - offset, world @ r @ rx, (p + np.einsum("nab,b->na", r, tx)) @ world.T + [4, 1, -2]
+    )
     return ref, est
 
 
@@ -62,7 +84,9 @@ def _run(tmp_path, ref, est):
     io.write_tum(tmp_path / "ref.txt", ref.shifted(1e9))
     io.write_tum(tmp_path / "est.txt", est.shifted(1e9))
     cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": "."})
-    return chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "out", cfg)["metrics"]
+    return chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "out", cfg)[
+        "metrics"
+    ]
 
 
 @pytest.mark.parametrize("motion", ["planar", "single axis"])
@@ -84,22 +108,36 @@ def test_unobservable_extrinsic_is_flagged_and_not_applied(tmp_path, motion):
     assert np.allclose(np.abs(ext["rotation_unobservable_axes"]), [np.abs(axis)], atol=1e-3)
     assert ext["reason"].startswith("unobservable: rotation about")
     # not evaluated with it: no extrinsic applied, the ov_eval way (configured offset 0, SE3)
-    assert m["eval_source"] == "ov_eval" and m["extrinsic_rot_deg"] is None and m["extrinsic_trans_m"] is None
+    assert (
+        m["eval_source"] == "ov_eval"
+        and m["extrinsic_rot_deg"] is None
+        and m["extrinsic_trans_m"] is None
+    )
 
 
 def _signal_case(yaw, t, offset, rate=20.0):
-    ref = Trajectory.from_rp(t, geometry.so3_exp(yaw[:, None] * [0.0, 0.0, 1.0]), np.zeros((len(t), 3)))
-    return ref, simulate.observe(ref, np.random.default_rng(0), offset=offset, rate=rate, margin=0.5)
+    ref = Trajectory.from_rp(
+        t, geometry.so3_exp(yaw[:, None] * [0.0, 0.0, 1.0]), np.zeros((len(t), 3))
+    )
+    return ref, simulate.observe(
+        ref, np.random.default_rng(0), offset=offset, rate=rate, margin=0.5
+    )
 
 
 def test_an_offset_outside_the_search_window_is_flagged_not_clamped():
     t = np.arange(0, 90, 0.005)
     yaw = 0.6 * np.sin(t / 1.7) + 0.4 * np.sin(t / 0.9 + 1) + 0.2 * np.sin(t / 0.43)
-    for true, status in ((2.1, "at window edge"), (3.2, "outside window"), (12.0, "outside window")):
+    for true, status in (
+        (2.1, "at window edge"),
+        (3.2, "outside window"),
+        (12.0, "outside window"),
+    ):
         ref, est = _signal_case(yaw, t, offset=true)
         out = sync.estimate_offset(ref, est, window=2.0, fallback=0.0)
         assert not out.used and out.offset == 0.0 and out.status == status, (true, out.reason)
-        if status == "at window edge":  # what was found is on record, at the edge, never used as the offset
+        if (
+            status == "at window edge"
+        ):  # what was found is on record, at the edge, never used as the offset
             assert abs(out.estimated) >= 1.99
         else:  # and where the better match is
             assert f"at +{true:.3f} s" in out.reason
@@ -120,11 +158,22 @@ def test_gentle_motion_with_orientation_noise_finds_zero_or_says_so(rate, noise_
     """White orientation noise at the sensor rate and no clock offset: before speed_interval, Step 1
     trusted offsets of 10-30 ms here (at 30 Hz, 0.1 deg: -16 ms with a 4 ms deviation)."""
     t = np.arange(0, 120, 1 / 200)
-    w = np.stack([0.1 * np.sin(1.3 * t), 0.08 * np.sin(0.9 * t + 1), 0.3 * np.sin(0.5 * t) + 0.1 * np.sin(1.7 * t)], -1)
-    ref = Trajectory.from_rp(t, geometry.so3_exp(w), np.c_[np.sin(0.05 * t), np.cos(0.04 * t), 0 * t])
+    w = np.stack(
+        [
+            0.1 * np.sin(1.3 * t),
+            0.08 * np.sin(0.9 * t + 1),
+            0.3 * np.sin(0.5 * t) + 0.1 * np.sin(1.7 * t),
+        ],
+        -1,
+    )
+    ref = Trajectory.from_rp(
+        t, geometry.so3_exp(w), np.c_[np.sin(0.05 * t), np.cos(0.04 * t), 0 * t]
+    )
     found, z = [], []
     for seed in range(16):
-        est = simulate.observe(ref, np.random.default_rng(seed), rate=rate, noise_rot_deg=noise_deg, margin=1)
+        est = simulate.observe(
+            ref, np.random.default_rng(seed), rate=rate, noise_rot_deg=noise_deg, margin=1
+        )
         out = sync.estimate_offset(ref, est)
         if out.used:
             found.append(out.offset)

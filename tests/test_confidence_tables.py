@@ -1,14 +1,15 @@
 """Run-to-run spread in the tables, the algorithm comparison and the threshold-free success rate, on
 the example grid and on rpg's 10-run EuRoC data; the statistics against hand values and scipy."""
+
 import csv
 import json
 import re
 
 import numpy as np
 import pytest
+from conftest import DATA, run_stages
 from scipy import stats
 
-from conftest import DATA, run_stages
 from epa import cli, settings, simulate
 from epa.metrics import drift, statistics
 from epa.outputs import tables
@@ -17,14 +18,18 @@ from epa.outputs import tables
 def test_spread_by_hand():
     v = [1.0, 2.0, 3.0, 4.0]
     assert statistics.spread(v, "std") == pytest.approx(np.sqrt(5 / 3), abs=1e-12)
-    assert statistics.spread(v, "ci") == pytest.approx(3.182446305284263 * np.sqrt(5 / 3) / 2, abs=1e-9)
+    assert statistics.spread(v, "ci") == pytest.approx(
+        3.182446305284263 * np.sqrt(5 / 3) / 2, abs=1e-9
+    )
     assert np.isnan(statistics.spread([2.0], "ci")) and np.isnan(statistics.spread(v, "none"))
 
 
 def test_exact_wilcoxon_matches_scipy(rng):
     for n in range(1, 12):
         d = rng.normal(0.3, 1.0, n)
-        assert statistics.wilcoxon_exact(d) == pytest.approx(stats.wilcoxon(d, method="exact").pvalue, abs=1e-12)
+        assert statistics.wilcoxon_exact(d) == pytest.approx(
+            stats.wilcoxon(d, method="exact").pvalue, abs=1e-12
+        )
     assert statistics.min_datasets_for(0.05) == 6  # 2 / 2^6 = 0.031 is the first below 0.05
 
 
@@ -42,7 +47,9 @@ def cell(tex_path, row, column):
 
 
 def runs_of(rows, alg, ds, key):
-    return np.array([float(r[key]) for r in rows if r["algorithm"] == alg and r["dataset"] == ds and r[key]])
+    return np.array(
+        [float(r[key]) for r in rows if r["algorithm"] == alg and r["dataset"] == ds and r[key]]
+    )
 
 
 # ----------------------------------------------------------------------------- the example grid
@@ -50,13 +57,39 @@ def runs_of(rows, alg, ds, key):
 def example(tmp_path_factory):
     root = tmp_path_factory.mktemp("example")
     manifest = simulate.simulate(root / "data")
-    cfg = settings.resolve({"truth_dir": str(root / "data/truth"), "algorithms_dir": str(root / "data/algorithms"),
-                            "report": {"per_case": False}, "tables": {"spread": "std"}})
-    cases = [{"key": key, "truth": str(root / "data/truth" / f"{key.split('/')[1]}.txt"),
-              "estimate": str(next((root / "data/algorithms").glob(key + ".*")))} for key in manifest["cases"]]
+    cfg = settings.resolve(
+        {
+            "truth_dir": str(root / "data/truth"),
+            "algorithms_dir": str(root / "data/algorithms"),
+            "report": {"per_case": False},
+            "tables": {"spread": "std"},
+        }
+    )
+    cases = [
+        {
+            "key": key,
+            "truth": str(root / "data/truth" / f"{key.split('/')[1]}.txt"),
+            "estimate": str(next((root / "data/algorithms").glob(key + ".*"))),
+        }
+        for key in manifest["cases"]
+    ]
     out = root / "results"
-    run_stages(cases, out, cfg, stages=["load", "crop", "sync", "calibrate", "align", "metrics", "drift", "consistency",
-                                        "efficiency"])
+    run_stages(
+        cases,
+        out,
+        cfg,
+        stages=[
+            "load",
+            "crop",
+            "sync",
+            "calibrate",
+            "align",
+            "metrics",
+            "drift",
+            "consistency",
+            "efficiency",
+        ],
+    )
     assert tables.make(sorted(manifest["cases"]), out, cfg) == []
     return out, manifest
 
@@ -67,10 +100,18 @@ def test_summary_has_the_step_confidences(example):
     for r in rows:
         truth = manifest["cases"][f"{r['algorithm']}/{r['dataset']}/{r['run']}"]
         if r["step1_status"] == "trusted":  # the true offset lies within 3 std of what was used
-            assert abs(float(r["time_offset_s"]) - truth["time_offset_s"]) <= 3 * float(r["time_offset_std_s"])
+            assert abs(float(r["time_offset_s"]) - truth["time_offset_s"]) <= 3 * float(
+                r["time_offset_std_s"]
+            )
         if r["step2_status"] == "trusted":
-            assert 0 < float(r["extrinsic_rot_std_deg"]) < 0.1 and 0 < float(r["extrinsic_trans_std_m"]) < 0.05
-    status = {(r["algorithm"], r["dataset"], r["run"]): (r["step1_status"], r["step2_status"]) for r in rows}
+            assert (
+                0 < float(r["extrinsic_rot_std_deg"]) < 0.1
+                and 0 < float(r["extrinsic_trans_std_m"]) < 0.05
+            )
+    status = {
+        (r["algorithm"], r["dataset"], r["run"]): (r["step1_status"], r["step2_status"])
+        for r in rows
+    }
     assert status["vio_camera", "drone_figure8", "run1"] == ("trusted", "trusted")
     # the diverging run: its Step 1 peak is weak, so Step 2 is not run
     assert status["vo_drifty", "urban_drive", "run2"] == ("weak peak", "not run")
@@ -82,29 +123,42 @@ def test_cells_show_their_spread_over_runs_and_how_many(example):
     out, _ = example
     rows = read_summary(out / "summary.csv")
     for alg, ds, col in (("vio_body", "drone_figure8", 0), ("vio_camera", "urban_drive", 2)):
-        rot, trans = runs_of(rows, alg, ds, "ate_rot_rmse_deg"), runs_of(rows, alg, ds, "ate_trans_rmse_m")
-        expected = (f"{rot.mean():.3f} $\\pm$ {rot.std(ddof=1):.3f} / {trans.mean():.3f} $\\pm$ "
-                    f"{trans.std(ddof=1):.3f} (n=2)")
+        rot, trans = (
+            runs_of(rows, alg, ds, "ate_rot_rmse_deg"),
+            runs_of(rows, alg, ds, "ate_trans_rmse_m"),
+        )
+        expected = (
+            f"{rot.mean():.3f} $\\pm$ {rot.std(ddof=1):.3f} / {trans.mean():.3f} $\\pm$ "
+            f"{trans.std(ddof=1):.3f} (n=2)"
+        )
         assert cell(out / "tables/ate.tex", alg, col) == expected
-    assert cell(out / "tables/ate.tex", "vio_body", 3).count("$\\pm$") == 0  # the Average column: no runs of its own
+    assert (
+        cell(out / "tables/ate.tex", "vio_body", 3).count("$\\pm$") == 0
+    )  # the Average column: no runs of its own
     assert "± SAMPLE STD OVER RUNS, n = RUNS" in (out / "tables/ate.tex").read_text()
     # and in the text report, with a plain ±
-    assert re.search(r"vio\\_body & \d\.\d{3} ± \d\.\d{3} / \d\.\d{3} ± \d\.\d{3} \(n=2\)",
-                     (out / "error_comparison.txt").read_text())
+    assert re.search(
+        r"vio\\_body & \d\.\d{3} ± \d\.\d{3} / \d\.\d{3} ± \d\.\d{3} \(n=2\)",
+        (out / "error_comparison.txt").read_text(),
+    )
 
 
 def test_comparison_on_the_example(example):
     out, _ = example
     text = (out / "comparison.txt").read_text()
     rows = read_summary(out / "summary.csv")
-    block = text[text.index("vio_body vs vo_drifty"):].split("=" * 44)[0]
+    block = text[text.index("vio_body vs vo_drifty") :].split("=" * 44)[0]
     assert "3 shared datasets" in block and "ATE better on: vio_body 3, vo_drifty 0" in block
     # three datasets can never give p < 0.05 (the exact p of 3 wins is 0.25): said, not hidden
     assert "p = 0.250 (only 3 datasets: at least 6 are needed to reach p < 0.05)" in block
     assert "verdict: the data cannot tell vio_body and vo_drifty apart" in block
-    ratio = np.median([runs_of(rows, "vio_body", d, "ate_trans_rmse_m").mean()
-                       / runs_of(rows, "vo_drifty", d, "ate_trans_rmse_m").mean()
-                       for d in ("drone_figure8", "handheld_office", "urban_drive")])
+    ratio = np.median(
+        [
+            runs_of(rows, "vio_body", d, "ate_trans_rmse_m").mean()
+            / runs_of(rows, "vo_drifty", d, "ate_trans_rmse_m").mean()
+            for d in ("drone_figure8", "handheld_office", "urban_drive")
+        ]
+    )
     assert f"median ratio vio_body / vo_drifty: ATE {ratio:.3f}," in block
     assert "Mann-Whitney p = 0.333" in block  # 2 runs against 2, all of one below all of the other
     tex = (out / "comparison.tex").read_text()
@@ -118,12 +172,18 @@ def test_success_rate_curve_and_area(example):
     assert np.allclose(curve["factor"], drift.CURVE_FACTORS)
     rates = np.array(curve["success_rate_distance_pct"])
     assert np.all(np.diff(rates) >= -1e-9)  # looser thresholds never lose path
-    assert rates[10] == pytest.approx(d["success_rate_distance_pct"])  # factor 1 is the configured threshold
+    assert rates[10] == pytest.approx(
+        d["success_rate_distance_pct"]
+    )  # factor 1 is the configured threshold
     assert d["success_auc_pct"] == pytest.approx(rates.mean())
     assert 0 < d["success_auc_pct"] < 100
     assert cell(out / "tables/success_auc.tex", "vio_body", 0).startswith("100.00")
     with open(out / "success_curves.csv", newline="") as fh:
-        rows = [r for r in csv.DictReader(fh) if r["algorithm"] == "vo_drifty" and r["dataset"] == "urban_drive"]
+        rows = [
+            r
+            for r in csv.DictReader(fh)
+            if r["algorithm"] == "vo_drifty" and r["dataset"] == "urban_drive"
+        ]
     assert len(rows) == len(drift.CURVE_FACTORS) and rows[0]["runs"] == "2"
 
 
@@ -134,19 +194,45 @@ def rpg(tmp_path_factory):
         pytest.skip(f"real data not found at {DATA} (CI keeps ../shared/data beside the checkout)")
     gt = DATA / "rpng_open_vins/ov_data/euroc_mav"
     root = DATA / "uzh-rpg_rpg_trajectory_evaluation/results/euroc_vislam_mono/laptop"
-    truth = {"MH_01": "MH_01_easy.txt", "MH_03": "MH_03_medium.txt", "MH_04": "MH_04_difficult.txt",
-             "MH_05": "MH_05_difficult.txt"}
+    truth = {
+        "MH_01": "MH_01_easy.txt",
+        "MH_03": "MH_03_medium.txt",
+        "MH_04": "MH_04_difficult.txt",
+        "MH_05": "MH_05_difficult.txt",
+    }
     cases = []
     for s in truth:
         for k in range(10):
-            cases.append({"key": f"vislam_ba/{s}/run{k}", "truth": str(gt / truth[s]),
-                          "estimate": str(root / f"vislam_ba/laptop_vislam_ba_{s}/stamped_ba_estimate{k}.txt")})
-        cases.append({"key": f"vislam_rp/{s}/run0", "truth": str(gt / truth[s]),
-                      "estimate": str(root / f"vislam_rp/laptop_vislam_rp_{s}/stamped_traj_estimate0.txt")})
+            cases.append(
+                {
+                    "key": f"vislam_ba/{s}/run{k}",
+                    "truth": str(gt / truth[s]),
+                    "estimate": str(
+                        root / f"vislam_ba/laptop_vislam_ba_{s}/stamped_ba_estimate{k}.txt"
+                    ),
+                }
+            )
+        cases.append(
+            {
+                "key": f"vislam_rp/{s}/run0",
+                "truth": str(gt / truth[s]),
+                "estimate": str(
+                    root / f"vislam_rp/laptop_vislam_rp_{s}/stamped_traj_estimate0.txt"
+                ),
+            }
+        )
     out = tmp_path_factory.mktemp("rpg") / "results"
-    cfg = settings.resolve({"truth_dir": str(gt), "algorithms_dir": str(root), "report": {"per_case": False},
-                            "tables": {"spread": "ci"}})
-    run_stages(cases, out, cfg, stages=["load", "crop", "sync", "calibrate", "align", "metrics", "drift"])
+    cfg = settings.resolve(
+        {
+            "truth_dir": str(gt),
+            "algorithms_dir": str(root),
+            "report": {"per_case": False},
+            "tables": {"spread": "ci"},
+        }
+    )
+    run_stages(
+        cases, out, cfg, stages=["load", "crop", "sync", "calibrate", "align", "metrics", "drift"]
+    )
     assert tables.make([c["key"] for c in cases], out, cfg) == []
     return out
 
@@ -157,13 +243,18 @@ def test_ten_run_cells_carry_their_confidence_interval(rpg):
         trans = runs_of(rows, "vislam_ba", ds, "ate_trans_rmse_m")
         assert len(trans) == 10
         half = stats.t.ppf(0.975, 9) * trans.std(ddof=1) / np.sqrt(10)
-        assert cell(rpg / "tables/ate.tex", "vislam_ba", col).endswith(f" / {trans.mean():.3f} $\\pm$ {half:.3f} (n=10)")
+        assert cell(rpg / "tables/ate.tex", "vislam_ba", col).endswith(
+            f" / {trans.mean():.3f} $\\pm$ {half:.3f} (n=10)"
+        )
         # one run: the mean, no ±, and n=1 says why
         assert cell(rpg / "tables/ate.tex", "vislam_rp", col).endswith(" (n=1)")
         assert "$\\pm$" not in cell(rpg / "tables/ate.tex", "vislam_rp", col)
     # pinned: MH_01's ten runs spread widely (SOURCES.md: 0.047-0.323 m with SE3; Step 1 is uncertain
     # on these keyframes, so each is evaluated the ov_eval way, SE3 on all poses)
-    assert cell(rpg / "tables/ate.tex", "vislam_ba", 0) == "1.945 $\\pm$ 0.810 / 0.163 $\\pm$ 0.066 (n=10)"
+    assert (
+        cell(rpg / "tables/ate.tex", "vislam_ba", 0)
+        == "1.945 $\\pm$ 0.810 / 0.163 $\\pm$ 0.066 (n=10)"
+    )
 
 
 def test_ten_run_comparison(rpg):
@@ -178,7 +269,17 @@ def test_ten_run_comparison(rpg):
 
 
 def test_selftest_command(capsys, data):
-    assert cli.main(["selftest", str(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt"), "--trials", "2"]) == 0
+    assert (
+        cli.main(
+            [
+                "selftest",
+                str(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt"),
+                "--trials",
+                "2",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     low = next(line for line in out.splitlines() if line.startswith("low"))
     assert low.split()[1:4] == ["2", "of", "2"]  # Step 1 trusted in both low-noise trials
@@ -191,10 +292,15 @@ def test_selftest_on_planar_motion_says_what_is_unobservable(tmp_path, capsys):
 
     t = np.arange(0, 120, 0.01)
     yaw = 0.8 * np.sin(t / 2) + 0.3 * np.sin(1.3 * t)
-    ref = Trajectory.from_rp(t, geometry.so3_exp(yaw[:, None] * [0.0, 0.0, 1.0]),
-                             np.c_[20 * np.cos(t / 10), 15 * np.sin(t / 7), 0 * t])
+    ref = Trajectory.from_rp(
+        t,
+        geometry.so3_exp(yaw[:, None] * [0.0, 0.0, 1.0]),
+        np.c_[20 * np.cos(t / 10), 15 * np.sin(t / 7), 0 * t],
+    )
     io.write_tum(tmp_path / "planar.txt", ref)
     assert cli.main(["selftest", str(tmp_path / "planar.txt"), "--trials", "1"]) == 0
     out = capsys.readouterr().out
-    assert "this motion leaves part of the extrinsic unobservable: unobservable: rotation about" in out
+    assert (
+        "this motion leaves part of the extrinsic unobservable: unobservable: rotation about" in out
+    )
     assert "Steps 1-2 are trusted in 0 of 3 trials" in out

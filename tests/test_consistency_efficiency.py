@@ -1,5 +1,6 @@
 """Consistency (NEES, 3σ) and efficiency (EA-Drift): simulated estimators with known covariance
 through Steps 1-3, the real OpenVINS runs, and a hand-computed EA-Drift."""
+
 import numpy as np
 import pytest
 
@@ -14,7 +15,7 @@ WORLD = geometry.so3_exp(np.array([0.0, 0.0, 2.1]))  # the estimator's own gravi
 
 def random_spd(rng, n, scale):
     a = rng.normal(size=(n, 3, 3)) * np.array([1.0, 0.6, 0.4])  # anisotropic, non-diagonal
-    return scale ** 2 * (a @ a.transpose(0, 2, 1) + 0.2 * np.eye(3))
+    return scale**2 * (a @ a.transpose(0, 2, 1) + 0.2 * np.eye(3))
 
 
 def estimator(rng, seq="handheld_office", confidence=1.0):
@@ -27,8 +28,13 @@ def estimator(rng, seq="handheld_office", confidence=1.0):
     cov_rot, cov_pos = random_spd(rng, len(t), np.radians(0.5)), random_spd(rng, len(t), 0.03)
     e_rot = np.einsum("nab,nb->na", np.linalg.cholesky(cov_rot), rng.normal(size=(len(t), 3)))
     e_pos = np.einsum("nab,nb->na", np.linalg.cholesky(cov_pos), rng.normal(size=(len(t), 3)))
-    est = Trajectory.from_rp(1000 + t, r_c @ geometry.so3_exp(-e_rot), p_c - e_pos, cov_rot=confidence * cov_rot,
-                             cov_pos=confidence * cov_pos)
+    est = Trajectory.from_rp(
+        1000 + t,
+        r_c @ geometry.so3_exp(-e_rot),
+        p_c - e_pos,
+        cov_rot=confidence * cov_rot,
+        cov_pos=confidence * cov_pos,
+    )
     tr = np.arange(0, 60, 1 / 200)
     r_r, p_r = simulate.truth_pose(seq, tr)
     return Trajectory.from_rp(1000 + tr, r_r, p_r), est
@@ -38,8 +44,16 @@ def run(tmp_path, ref, est, name):
     io.write_tum(tmp_path / f"{name}_ref.txt", ref)
     io.write_trajectory(tmp_path / f"{name}_est.txt", est, "openvins")
     # the clocks agree (Step 1 is tested elsewhere; its ms-level error would blur NEES on fast motion)
-    cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}})
-    chain.run_case(tmp_path / f"{name}_ref.txt", tmp_path / f"{name}_est.txt", tmp_path / name, cfg, write_tables=True)
+    cfg = settings.resolve(
+        {"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}}
+    )
+    chain.run_case(
+        tmp_path / f"{name}_ref.txt",
+        tmp_path / f"{name}_est.txt",
+        tmp_path / name,
+        cfg,
+        write_tables=True,
+    )
     calib = io.read_json(tmp_path / name / "04_calibrate/calibrate.json")
     assert calib["plan"]["apply_extrinsic"], "Step 2 must have found and applied the extrinsic"
     return io.read_json(tmp_path / name / "08_consistency/consistency.json")
@@ -48,8 +62,12 @@ def run(tmp_path, ref, est, name):
 @pytest.mark.parametrize("confidence,expected", [(1.0, 3.0), (0.1, 30.0)])
 def test_nees_of_a_simulated_estimator_through_steps_2_and_3(tmp_path, confidence, expected):
     rng = np.random.default_rng(11)
-    results = [run(tmp_path, *estimator(rng, seq, confidence), f"{seq}{k}")
-               for k, seq in enumerate(["handheld_office", "drone_figure8", "handheld_office", "drone_figure8"])]
+    results = [
+        run(tmp_path, *estimator(rng, seq, confidence), f"{seq}{k}")
+        for k, seq in enumerate(
+            ["handheld_office", "drone_figure8", "handheld_office", "drone_figure8"]
+        )
+    ]
     nees_pos = np.mean([r["nees_pos_mean"] for r in results])
     nees_rot = np.mean([r["nees_rot_mean"] for r in results])
     assert abs(nees_pos - expected) < 0.1 * expected, nees_pos
@@ -65,7 +83,9 @@ def test_covariance_travels_through_the_stage_artifacts_transformed(tmp_path):
     run(tmp_path, ref, est, "c")
     aligned = io.read_tum_file(tmp_path / "c/05_align/aligned.tum")
     assert aligned.cov_pos is not None and aligned.cov_rot is not None
-    i_ref, i_est = io.read_pair_indices(tmp_path / "c/04_calibrate/pairs.csv")  # crop keeps every pose here
+    i_ref, i_est = io.read_pair_indices(
+        tmp_path / "c/04_calibrate/pairs.csv"
+    )  # crop keeps every pose here
     ref_m = ref.select(i_ref)
     nees = np.loadtxt(tmp_path / "c/08_consistency/nees.csv", delimiter=",", skiprows=1)[:, 1]
     e = ref_m.p - aligned.p
@@ -73,7 +93,9 @@ def test_covariance_travels_through_the_stage_artifacts_transformed(tmp_path):
     # equal up to the lever-arm cross-covariance the blocks cannot carry
     assert abs(np.mean(carried) / np.mean(nees) - 1) < 0.1
     unrotated = np.einsum("na,nab,nb->n", e, np.linalg.inv(est.select(i_est).cov_pos), e)
-    assert abs(np.mean(unrotated) / np.mean(nees) - 1) > 0.3  # copying the covariance would be wrong
+    assert (
+        abs(np.mean(unrotated) / np.mean(nees) - 1) > 0.3
+    )  # copying the covariance would be wrong
 
 
 def test_without_covariance_nothing_is_faked(tmp_path):
@@ -83,7 +105,9 @@ def test_without_covariance_nothing_is_faked(tmp_path):
     cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": "."})
     chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "o", cfg)
     assert io.read_json(tmp_path / "o/08_consistency/consistency.json") == {
-        "available": False, "reason": "the estimate has no covariance"}
+        "available": False,
+        "reason": "the estimate has no covariance",
+    }
     assert io.read_json(tmp_path / "o/09_efficiency/efficiency.json")["available"] is False
 
 
@@ -99,28 +123,39 @@ def test_ea_drift_by_hand_on_three_poses():
     np.testing.assert_allclose(efficiency.weights(ms, 20.0), w, rtol=1e-15)
     # the M2UD patch multiplies the error by the weight before squaring
     assert efficiency.ea_drift_m2ud(err, ms, 20.0, 10.0) == pytest.approx(
-        100 * np.sqrt(np.sum((w * err) ** 2)) / 10, rel=1e-15)
+        100 * np.sqrt(np.sum((w * err) ** 2)) / 10, rel=1e-15
+    )
     # every frame on time: the normalised variant is ATE rmse / L
     on_time = efficiency.ea_drift(err, np.full(3, 50.0), 20.0, 10.0)["ea_drift"]
-    assert on_time == pytest.approx(100 * np.sqrt(np.mean(err ** 2)) / 10)
+    assert on_time == pytest.approx(100 * np.sqrt(np.mean(err**2)) / 10)
 
 
 def test_timing_files_and_matching(tmp_path):
     (tmp_path / "a_timing.txt").write_text("10.00 12.5\n10.05 13\n10.10 70\n")
     t, ms, what = efficiency.read_timing(tmp_path / "a_timing.txt")
     assert what == "<timestamp> <ms>" and ms.tolist() == [12.5, 13, 70]
-    (tmp_path / "ov.csv").write_text("timestamp (sec),tracking,propagation,msckf update,slam update,slam delayed,"
-                                     "re-tri & marg,total\n10.0,0.001,0.001,0.002,0,0,0.001,0.0052\n")
+    (tmp_path / "ov.csv").write_text(
+        "timestamp (sec),tracking,propagation,msckf update,slam update,slam delayed,"
+        "re-tri & marg,total\n10.0,0.001,0.001,0.002,0,0,0.001,0.0052\n"
+    )
     t, ms, what = efficiency.read_timing(tmp_path / "ov.csv")
     assert ms.tolist() == [pytest.approx(5.2)] and "total" in what
-    idx = efficiency.match_nearest(np.array([10.001, 10.07, 11.0]), np.array([10.0, 10.05, 10.1]), 0.01)
+    idx = efficiency.match_nearest(
+        np.array([10.001, 10.07, 11.0]), np.array([10.0, 10.05, 10.1]), 0.01
+    )
     assert idx.tolist() == [0, -1, -1]
 
 
 def test_poses_without_timing_are_counted_not_dropped_silently():
     t = np.arange(10.0)
-    summary, table = efficiency.evaluate(t, t, np.full(10, 0.1), 5.0, (t[:7], np.full(7, 20.0)), 20.0, 0.01)
-    assert summary["n_without_timing"] == 3 and summary["n_poses"] == 10 and np.isnan(table["frame_ms"][7:]).all()
+    summary, table = efficiency.evaluate(
+        t, t, np.full(10, 0.1), 5.0, (t[:7], np.full(7, 20.0)), 20.0, 0.01
+    )
+    assert (
+        summary["n_without_timing"] == 3
+        and summary["n_poses"] == 10
+        and np.isnan(table["frame_ms"][7:]).all()
+    )
     assert summary["ea_drift_m2ud"] is None  # the patch itself would stop here
 
 
@@ -150,35 +185,62 @@ def test_openvins_mh04_diverging_run_with_timing(data, tmp_path):
     run_dir.mkdir()
     (run_dir / "run1.txt").symlink_to(folder / "traj_estimate.txt")
     (run_dir / "run1_timing.csv").symlink_to(folder / "traj_timing.txt")
-    cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": ".", "mode": "ov_eval",
-                            "efficiency": {"sensor_rate_hz": 20.0}})
+    cfg = settings.resolve(
+        {
+            "truth_dir": ".",
+            "algorithms_dir": ".",
+            "mode": "ov_eval",
+            "efficiency": {"sensor_rate_hz": 20.0},
+        }
+    )
     chain.run_case(ref, run_dir / "run1.txt", tmp_path / "o", cfg)
     e = io.read_json(tmp_path / "o/09_efficiency/efficiency.json")
     c = io.read_json(tmp_path / "o/08_consistency/consistency.json")
     # SOURCES.md: mean total 8.2 ms, max 49 ms
-    assert e["available"] and abs(e["frame_time_mean_ms"] - 8.2) < 0.1 and abs(e["frame_time_max_ms"] - 49) < 1
+    assert (
+        e["available"]
+        and abs(e["frame_time_mean_ms"] - 8.2) < 0.1
+        and abs(e["frame_time_max_ms"] - 49) < 1
+    )
     assert e["frames_over_period"] == 0 and e["n_without_timing"] <= 5
-    pinned = {k: e[k] for k in ("ea_drift", "ea_drift_seed")} | {k: c[k] for k in ("nees_pos_mean", "nees_rot_mean")}
+    pinned = {k: e[k] for k in ("ea_drift", "ea_drift_seed")} | {
+        k: c[k] for k in ("nees_pos_mean", "nees_rot_mean")
+    }
     assert pinned == pytest.approx(PINNED_MH04, rel=1e-6)
 
 
 # pinned: the run diverges to km-scale errors its covariance does not admit (NEES ~1e9)
-PINNED_MH04 = {"ea_drift": 18.858148432833904, "ea_drift_seed": 821.1419057318004,
-               "nees_pos_mean": 1349299313.9413412, "nees_rot_mean": 80449.04007774167}
+PINNED_MH04 = {
+    "ea_drift": 18.858148432833904,
+    "ea_drift_seed": 821.1419057318004,
+    "nees_pos_mean": 1349299313.9413412,
+    "nees_rot_mean": 80449.04007774167,
+}
 
 
 def test_rmse_across_runs_pairs_stamps_within_half_a_pose_spacing():
-    from epa.metrics import consistency
 
-    a = {"t": np.array([0.0, 0.1, 0.2, 0.3]), "trans_m": np.array([1.0, 2, 3, 4]), "rot_deg": np.zeros(4),
-         "nees_pos": None, "nees_rot": None}
+    a = {
+        "t": np.array([0.0, 0.1, 0.2, 0.3]),
+        "trans_m": np.array([1.0, 2, 3, 4]),
+        "rot_deg": np.zeros(4),
+        "nees_pos": None,
+        "nees_rot": None,
+    }
     # B's stamps jitter by up to 10 ms; its 0.5 s is nobody's neighbour and A's 0.3 s has no partner
-    b = {"t": np.array([0.004, 0.1, 0.21, 0.5]), "trans_m": np.array([3.0, 2, 1, 9]), "rot_deg": np.zeros(4),
-         "nees_pos": None, "nees_rot": None}
+    b = {
+        "t": np.array([0.004, 0.1, 0.21, 0.5]),
+        "trans_m": np.array([3.0, 2, 1, 9]),
+        "rot_deg": np.zeros(4),
+        "nees_pos": None,
+        "nees_rot": None,
+    }
     summary, table = consistency.across_runs({"run1": a, "run2": b})
     np.testing.assert_allclose(table["t"], [0.0, 0.1, 0.2])
     np.testing.assert_allclose(table["rmse_pos_m"], [np.sqrt(5), 2.0, np.sqrt(5)])
     assert summary["n_common"] == 3 and summary["runs"] == 2 and summary["nees_pos_mean"] is None
     # runs that share their stamps exactly (a simulator's) use exactly those
-    summary, table = consistency.across_runs({"run1": a, "run2": {**a, "trans_m": np.array([3.0, 2, 1, 0])}})
+    summary, table = consistency.across_runs(
+        {"run1": a, "run2": {**a, "trans_m": np.array([3.0, 2, 1, 0])}}
+    )
     np.testing.assert_allclose(table["rmse_pos_m"], [np.sqrt(5), 2.0, np.sqrt(5), np.sqrt(8)])

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from epa import chain, io, pipeline, settings
+from epa import chain, pipeline, settings
 from epa.metrics import drift
 
 CFG = settings.defaults()
@@ -14,9 +14,17 @@ def run(t, ape, dist=None, cfg=CFG):
     dist = 2.0 * (t - t[0]) if dist is None else dist
     i, j = time_pairs(t)
     # a 1 s pair's translation error is the change of the APE vector; along one axis it is the difference
-    tables = {"ape": {"t": t, "dist_m": dist, "trans_m": ape, "rot_deg": 0 * ape},
-              "rpe_segments": {k: np.zeros(0) for k in ("length_m", "i", "j", "rot_deg", "trans_m")},
-              "rpe_time": {"i": i, "j": j, "t": t[i], "rot_deg": 0 * i, "trans_m": np.abs(ape[j] - ape[i])}}
+    tables = {
+        "ape": {"t": t, "dist_m": dist, "trans_m": ape, "rot_deg": 0 * ape},
+        "rpe_segments": {k: np.zeros(0) for k in ("length_m", "i", "j", "rot_deg", "trans_m")},
+        "rpe_time": {
+            "i": i,
+            "j": j,
+            "t": t[i],
+            "rot_deg": 0 * i,
+            "trans_m": np.abs(ape[j] - ape[i]),
+        },
+    }
     return pipeline.drift_stage(tables, cfg)
 
 
@@ -25,7 +33,11 @@ T = np.arange(0, 100, 0.05)
 
 def test_constant_bias_is_not_drift():
     s, art = run(T, np.full(len(T), 6.0))
-    assert s["success_rate_distance_pct"] == 100 and s["n_fail_segments"] == 0 and not s["global_failed"]
+    assert (
+        s["success_rate_distance_pct"] == 100
+        and s["n_fail_segments"] == 0
+        and not s["global_failed"]
+    )
     assert s["diverged_at_s"] is None
 
 
@@ -57,7 +69,9 @@ def test_knee_threshold_cases():
     assert drift.knee_threshold(rng.uniform(100, 200, 500))["threshold_m"] == 30.0
     tail = np.concatenate([rng.uniform(0, 1, 900), np.linspace(8, 20, 90), [1e4] * 10])
     k = drift.knee_threshold(tail)
-    assert k["mode"] == "knee" and 5 <= k["threshold_m"] < 30 and k["raw_m"] < 1e4  # outlier trimmed
+    assert (
+        k["mode"] == "knee" and 5 <= k["threshold_m"] < 30 and k["raw_m"] < 1e4
+    )  # outlier trimmed
 
 
 def _case(gt, est, tmp_path, **kw):
@@ -67,21 +81,42 @@ def _case(gt, est, tmp_path, **kw):
 
 
 def test_real_openvins_mh04_divergence_is_flagged(data, tmp_path):
-    s = _case(data / "rpng_open_vins/ov_data/euroc_mav/MH_04_difficult.txt", data / "qmy0519_open_vins-master/traj_estimate.txt",
-              tmp_path)
+    s = _case(
+        data / "rpng_open_vins/ov_data/euroc_mav/MH_04_difficult.txt",
+        data / "qmy0519_open_vins-master/traj_estimate.txt",
+        tmp_path,
+    )
     assert s["global_failed"] and s["n_fail_segments"] >= 1
     assert s["success_rate_distance_pct"] < 30
     # 1 s RPE passes 2 m at ~3.4 s and keeps growing; the run leaves a 50 m radius at 9.6 s (SOURCES.md)
     assert 2.0 <= s["diverged_at_s"] <= 9.6
 
 
-@pytest.mark.parametrize("gt,est", [
-    ("rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt", "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv"),
-    ("rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt", "Gaiyh14_ORBSLAM3-EVO/f_dataset-MH01_monoi.txt"),
-    ("rpng_open_vins/ov_data/euroc_mav/MH_03_medium.txt", "uzh-rpg_rpg_trajectory_evaluation/results/euroc_mono_stereo/laptop/vio_stereo/laptop_vio_stereo_MH_03/stamped_traj_estimate.txt"),
-    ("MichaelGrupp_evo/test/data/KITTI_00_gt.txt", "MichaelGrupp_evo/test/data/KITTI_00_ORB.txt"),
-    ("MichaelGrupp_evo/test/data/KITTI_00_gt.txt", "MichaelGrupp_evo/test/data/KITTI_00_SPTAM.txt"),
-])
+@pytest.mark.parametrize(
+    "gt,est",
+    [
+        (
+            "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt",
+            "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv",
+        ),
+        (
+            "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt",
+            "Gaiyh14_ORBSLAM3-EVO/f_dataset-MH01_monoi.txt",
+        ),
+        (
+            "rpng_open_vins/ov_data/euroc_mav/MH_03_medium.txt",
+            "uzh-rpg_rpg_trajectory_evaluation/results/euroc_mono_stereo/laptop/vio_stereo/laptop_vio_stereo_MH_03/stamped_traj_estimate.txt",
+        ),
+        (
+            "MichaelGrupp_evo/test/data/KITTI_00_gt.txt",
+            "MichaelGrupp_evo/test/data/KITTI_00_ORB.txt",
+        ),
+        (
+            "MichaelGrupp_evo/test/data/KITTI_00_gt.txt",
+            "MichaelGrupp_evo/test/data/KITTI_00_SPTAM.txt",
+        ),
+    ],
+)
 def test_healthy_real_estimates_keep_95_percent(data, gt, est, tmp_path):
     s = _case(data / gt, data / est, tmp_path)
     assert s["success_rate_distance_pct"] >= 95 and not s["global_failed"]
@@ -94,6 +129,11 @@ def test_scale_aware_mode_fires_where_metre_thresholds_cannot():
     ape = 0.05 + np.where(t > 50, 1.0 * (t - 50), 0.0)
     fixed, _ = run(t, ape, dist=0.5 * t)
     assert fixed["success_rate_time_pct"] == 100
-    aware, _ = run(t, ape, dist=0.5 * t, cfg={**CFG, "drift": {**CFG["drift"], "mode": "scale_aware"}})
+    aware, _ = run(
+        t, ape, dist=0.5 * t, cfg={**CFG, "drift": {**CFG["drift"], "mode": "scale_aware"}}
+    )
     assert aware["thresholds"]["rpe_trans_max_m"] == pytest.approx(0.5, abs=0.01)
-    assert aware["success_rate_time_pct"] == pytest.approx(50, abs=1.5) and abs(aware["diverged_at_s"] - 50) <= 1
+    assert (
+        aware["success_rate_time_pct"] == pytest.approx(50, abs=1.5)
+        and abs(aware["diverged_at_s"] - 50) <= 1
+    )

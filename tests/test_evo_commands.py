@@ -1,5 +1,6 @@
 """`epa ape` / `epa rpe` give evo 1.38.1's numbers (test oracle only) on every trajectory file of evo's
 sample data, option by option: the statistics to 1e-6 relative and the title line for line."""
+
 import copy
 import sys
 
@@ -33,17 +34,26 @@ except ImportError:
     HAVE_TF2 = False
 
 REL = 1e-6
-RELATION = {"full": em.PoseRelation.full_transformation, "trans_part": em.PoseRelation.translation_part,
-            "rot_part": em.PoseRelation.rotation_part, "angle_deg": em.PoseRelation.rotation_angle_deg,
-            "angle_rad": em.PoseRelation.rotation_angle_rad, "point_distance": em.PoseRelation.point_distance,
-            "point_distance_error_ratio": em.PoseRelation.point_distance_error_ratio}
+RELATION = {
+    "full": em.PoseRelation.full_transformation,
+    "trans_part": em.PoseRelation.translation_part,
+    "rot_part": em.PoseRelation.rotation_part,
+    "angle_deg": em.PoseRelation.rotation_angle_deg,
+    "angle_rad": em.PoseRelation.rotation_angle_rad,
+    "point_distance": em.PoseRelation.point_distance,
+    "point_distance_error_ratio": em.PoseRelation.point_distance_error_ratio,
+}
 UNIT = {"f": em.Unit.frames, "m": em.Unit.meters, "d": em.Unit.degrees, "r": em.Unit.radians}
 
 # form, reference, estimate (evo's sample data, under MichaelGrupp_evo/test/data)
 FILES = {
     "fr1_rgbdslam": ("tum", "freiburg1_xyz-groundtruth.txt", "freiburg1_xyz-rgbdslam.txt"),
     "fr1_orb_mono": ("tum", "freiburg1_xyz-groundtruth.txt", "freiburg1_xyz-ORB_kf_mono.txt"),
-    "v102": ("euroc", "V102_groundtruth.csv", "V102.txt"),  # 4 repeated stamps, kept as evo keeps them
+    "v102": (
+        "euroc",
+        "V102_groundtruth.csv",
+        "V102.txt",
+    ),  # 4 repeated stamps, kept as evo keeps them
     "kitti_orb": ("kitti", "KITTI_00_gt.txt", "KITTI_00_ORB.txt"),
     "kitti_sptam": ("kitti", "KITTI_00_gt.txt", "KITTI_00_SPTAM.txt"),
     "nav2_mcap": ("mcap", "nav2_turtlebot.mcap", "/amcl_pose", "/odom"),
@@ -53,35 +63,59 @@ FILES = {
 TF = {name for name, (form, *topics) in FILES.items() if any(":" in t for t in topics[1:])}
 
 APE_OPTIONS = [
-    {}, {"align": True}, {"align": True, "correct_scale": True}, {"correct_scale": True},
-    {"align": True, "n_to_align": 50}, {"align_origin": True},
-    {"align": True, "relation": "full"}, {"align": True, "relation": "rot_part"},
-    {"align": True, "relation": "angle_deg"}, {"align": True, "relation": "angle_rad"},
+    {},
+    {"align": True},
+    {"align": True, "correct_scale": True},
+    {"correct_scale": True},
+    {"align": True, "n_to_align": 50},
+    {"align_origin": True},
+    {"align": True, "relation": "full"},
+    {"align": True, "relation": "rot_part"},
+    {"align": True, "relation": "angle_deg"},
+    {"align": True, "relation": "angle_rad"},
     {"align": True, "relation": "point_distance"},
-    {"align": True, "project_to_plane": "xy"}, {"align": True, "project_to_plane": "xz", "relation": "full"},
+    {"align": True, "project_to_plane": "xy"},
+    {"align": True, "project_to_plane": "xz", "relation": "full"},
     {"align": True, "sync_method": "interpolation"},
     {"align": True, "t_max_diff": 0.02, "t_offset": 0.004},
     {"align": True, "t_start": 3.0, "t_end": 12.0},
 ]
 RPE_OPTIONS = [
-    {}, {"align": True, "relation": "angle_deg"}, {"delta": 10, "all_pairs": True},
-    {"delta": 1, "delta_unit": "m"}, {"delta": 2, "delta_unit": "m", "all_pairs": True},
-    {"delta": 1, "delta_unit": "m", "pairs_from_reference": True, "align": True, "correct_scale": True},
-    {"delta": 10, "delta_unit": "d"}, {"delta": 0.3, "delta_unit": "r"},
+    {},
+    {"align": True, "relation": "angle_deg"},
+    {"delta": 10, "all_pairs": True},
+    {"delta": 1, "delta_unit": "m"},
+    {"delta": 2, "delta_unit": "m", "all_pairs": True},
+    {
+        "delta": 1,
+        "delta_unit": "m",
+        "pairs_from_reference": True,
+        "align": True,
+        "correct_scale": True,
+    },
+    {"delta": 10, "delta_unit": "d"},
+    {"delta": 0.3, "delta_unit": "r"},
     {"delta": 20, "delta_unit": "d", "all_pairs": True},
-    {"relation": "full", "delta": 5}, {"relation": "rot_part", "delta": 5}, {"relation": "angle_rad"},
-    {"relation": "point_distance", "delta": 5}, {"relation": "point_distance_error_ratio", "delta": 5},
+    {"relation": "full", "delta": 5},
+    {"relation": "rot_part", "delta": 5},
+    {"relation": "angle_rad"},
+    {"relation": "point_distance", "delta": 5},
+    {"relation": "point_distance_error_ratio", "delta": 5},
     {"align_origin": True, "project_to_plane": "xy", "delta": 5},
     {"align": True, "sync_method": "interpolation", "delta": 2, "delta_unit": "m"},
     {"correct_scale": True, "t_offset": -0.003, "t_start": 2.0},
 ]
-SCALE_ONLY_MEANINGFUL = {"fr1_orb_mono"}  # monocular: without -s its numbers are in another scale (still compared)
+SCALE_ONLY_MEANINGFUL = {
+    "fr1_orb_mono"
+}  # monocular: without -s its numbers are in another scale (still compared)
 
 
 def _paths(data, name):
     d = data / "MichaelGrupp_evo/test/data"
     form, *files = FILES[name]
-    return form, [d / files[0]] + (files[1:] if form in ("bag", "bag2", "mcap") else [d / f for f in files[1:]])
+    return form, [d / files[0]] + (
+        files[1:] if form in ("bag", "bag2", "mcap") else [d / f for f in files[1:]]
+    )
 
 
 _EVO_CACHE: dict = {}
@@ -94,7 +128,10 @@ def evo_load(form, paths):
         if form == "tum":
             pair = [file_interface.read_tum_trajectory_file(p) for p in paths]
         elif form == "euroc":
-            pair = [file_interface.read_euroc_csv_trajectory(paths[0]), file_interface.read_tum_trajectory_file(paths[1])]
+            pair = [
+                file_interface.read_euroc_csv_trajectory(paths[0]),
+                file_interface.read_tum_trajectory_file(paths[1]),
+            ]
         elif form == "kitti":
             pair = [file_interface.read_kitti_poses_file(p) for p in paths]
         else:
@@ -116,7 +153,10 @@ def epa_load(form, paths):
         if form in ("bag", "bag2", "mcap"):
             pair = [cli_evo.read_source(form, paths[0], t, unsorted="keep") for t in paths[1:]]
         else:
-            pair = [cli_evo.read_source(form, p, reference=k == 0, unsorted="keep") for k, p in enumerate(paths)]
+            pair = [
+                cli_evo.read_source(form, p, reference=k == 0, unsorted="keep")
+                for k, p in enumerate(paths)
+            ]
         _EPA_CACHE[key] = pair
     return _EPA_CACHE[key]
 
@@ -126,16 +166,30 @@ def evo_run(kind, form, paths, o: evo_protocol.EvoOptions):
     if form != "kitti":
         if o.t_start or o.t_end:
             ref.reduce_to_time_range(o.t_start, o.t_end)
-        ref, est = ref.sync_with(est, sync_method=SyncMethod(o.sync_method), max_diff=o.t_max_diff,
-                                 offset_2=o.t_offset)
-    common = dict(align=o.align, correct_scale=o.correct_scale, n_to_align=o.n_to_align, align_origin=o.align_origin,
-                  project_to_plane=Plane(o.project_to_plane) if o.project_to_plane else None)
+        ref, est = ref.sync_with(
+            est, sync_method=SyncMethod(o.sync_method), max_diff=o.t_max_diff, offset_2=o.t_offset
+        )
+    common = dict(
+        align=o.align,
+        correct_scale=o.correct_scale,
+        n_to_align=o.n_to_align,
+        align_origin=o.align_origin,
+        project_to_plane=Plane(o.project_to_plane) if o.project_to_plane else None,
+    )
     if kind == "ape":
         result = main_ape.ape(ref, est, RELATION[o.relation], **common)
     else:
-        result = main_rpe.rpe(ref, est, RELATION[o.relation], delta=o.delta, delta_unit=UNIT[o.delta_unit],
-                              rel_delta_tol=o.delta_tol,
-                              all_pairs=o.all_pairs, pairs_from_reference=o.pairs_from_reference, **common)
+        result = main_rpe.rpe(
+            ref,
+            est,
+            RELATION[o.relation],
+            delta=o.delta,
+            delta_unit=UNIT[o.delta_unit],
+            rel_delta_tol=o.delta_tol,
+            all_pairs=o.all_pairs,
+            pairs_from_reference=o.pairs_from_reference,
+            **common,
+        )
     return result.stats, result.info["title"]
 
 
@@ -152,21 +206,31 @@ def options_for(form, paths, opts):
 
 def compare(kind, name, opts, data, rel=REL):
     if name in TF and not HAVE_TF2:
-        pytest.skip("evo needs tf2_py for a TF chain: apt install python3-tf2 python3-geometry-msgs")
+        pytest.skip(
+            "evo needs tf2_py for a TF chain: apt install python3-tf2 python3-geometry-msgs"
+        )
     form, paths = _paths(data, name)
     o = options_for(form, paths, opts)
     ref, est = epa_load(form, paths)
     try:
         want, title = evo_run(kind, form, paths, o)
     except Exception as exc:  # noqa: BLE001 - evo refuses it too (e.g. no pairs): then so must we
-        with pytest.raises(Exception):
-            (evo_protocol.ape if kind == "ape" else evo_protocol.rpe)(ref, est, o, timed=form != "kitti")
+        with pytest.raises(Exception):  # noqa: B017 - whatever evo raised, we must refuse too
+            (evo_protocol.ape if kind == "ape" else evo_protocol.rpe)(
+                ref, est, o, timed=form != "kitti"
+            )
         return f"both refuse: {exc}"
-    got = (evo_protocol.ape if kind == "ape" else evo_protocol.rpe)(ref, est, o, timed=form != "kitti")
+    got = (evo_protocol.ape if kind == "ape" else evo_protocol.rpe)(
+        ref, est, o, timed=form != "kitti"
+    )
     assert got.title == title
     assert set(got.stats) == set(want)
     for stat, value in want.items():
-        assert got.stats[stat] == pytest.approx(value, rel=rel, abs=1e-12), (stat, got.stats[stat], value)
+        assert got.stats[stat] == pytest.approx(value, rel=rel, abs=1e-12), (
+            stat,
+            got.stats[stat],
+            value,
+        )
     return None
 
 
@@ -174,43 +238,59 @@ def compare(kind, name, opts, data, rel=REL):
 # printed (Trajectory.r_printed) and computes on them as evo does. With the nearest rotations instead,
 # the smallest RPE statistics differed from evo's by up to 5e-5 relative; now all agree to 1e-9.
 @pytest.mark.parametrize("name", list(FILES))
-@pytest.mark.parametrize("opts", APE_OPTIONS, ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()) or "defaults")
+@pytest.mark.parametrize(
+    "opts", APE_OPTIONS, ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()) or "defaults"
+)
 def test_ape_matches_evo(data, name, opts):
     compare("ape", name, opts, data)
 
 
 @pytest.mark.parametrize("name", list(FILES))
-@pytest.mark.parametrize("opts", RPE_OPTIONS, ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()) or "defaults")
+@pytest.mark.parametrize(
+    "opts", RPE_OPTIONS, ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()) or "defaults"
+)
 def test_rpe_matches_evo(data, name, opts):
     if name.startswith("kitti") and opts.get("delta_unit") == "d" and opts.get("all_pairs"):
         pytest.skip("evo's angle all-pairs search on 4,541 poses takes minutes (a Python loop)")
     compare("rpe", name, opts, data)
 
 
-@pytest.mark.parametrize("form, bag, tf_id", [
-    ("bag", "tf_example.bag", "/tf:odom.base_footprint"),  # ROS 1, one link
-    ("bag", "tf_example.bag", "/tf:odom.base_link"),  # with the static link from /tf_static
-    ("bag2", "tf_example", "/tf:odom.base_link:/tf_static"),  # ROS 2, static topic named
-    ("mcap", "nav2_turtlebot.mcap", "/tf:map.base_link"),  # two dynamic links
-    ("mcap", "nav2_turtlebot.mcap", "/tf:base_link.map"),  # the inverse chain
-])
+@pytest.mark.parametrize(
+    "form, bag, tf_id",
+    [
+        ("bag", "tf_example.bag", "/tf:odom.base_footprint"),  # ROS 1, one link
+        ("bag", "tf_example.bag", "/tf:odom.base_link"),  # with the static link from /tf_static
+        ("bag2", "tf_example", "/tf:odom.base_link:/tf_static"),  # ROS 2, static topic named
+        ("mcap", "nav2_turtlebot.mcap", "/tf:map.base_link"),  # two dynamic links
+        ("mcap", "nav2_turtlebot.mcap", "/tf:base_link.map"),  # the inverse chain
+    ],
+)
 def test_tf_chains_are_read_as_evo_reads_them(data, form, bag, tf_id):
     """The tf_example bag's links carry epoch stamps about 0.1 s apart; evo looks them up every 0.1 s,
     so nearly every pose is interpolated, through ROS 1 tf2_py's double-seconds stamps."""
     if not HAVE_TF2:
-        pytest.skip("evo needs tf2_py for a TF chain: apt install python3-tf2 python3-geometry-msgs")
+        pytest.skip(
+            "evo needs tf2_py for a TF chain: apt install python3-tf2 python3-geometry-msgs"
+        )
     path = data / "MichaelGrupp_evo/test/data" / bag
     (want,) = evo_load(form, [path, tf_id])
     got = cli_evo.read_source(form, path, tf_id)
     assert len(got) == len(want.timestamps) > 500
     assert np.array_equal(got.t, want.timestamps)
     assert np.abs(got.p - want.positions_xyz).max() < 1e-10
-    assert np.abs(np.abs(np.sum(got.q * want.orientations_quat_wxyz[:, [1, 2, 3, 0]], axis=1)) - 1).max() < 1e-12
+    assert (
+        np.abs(
+            np.abs(np.sum(got.q * want.orientations_quat_wxyz[:, [1, 2, 3, 0]], axis=1)) - 1
+        ).max()
+        < 1e-12
+    )
 
 
 def test_the_lookup_frequency_is_evos_setting(data, capsys, monkeypatch):
     if not HAVE_TF2:
-        pytest.skip("evo needs tf2_py for a TF chain: apt install python3-tf2 python3-geometry-msgs")
+        pytest.skip(
+            "evo needs tf2_py for a TF chain: apt install python3-tf2 python3-geometry-msgs"
+        )
     from evo.tools.settings import SETTINGS
     from rosbags.rosbag2 import Reader
 
@@ -221,24 +301,73 @@ def test_the_lookup_frequency_is_evos_setting(data, capsys, monkeypatch):
         est = file_interface.read_bag_trajectory(reader, "/odom")
     ref, est = ref.sync_with(est, max_diff=0.01)
     want = main_ape.ape(ref, est, em.PoseRelation.translation_part, align=True)
-    assert cli.main(["ape", "mcap", str(bag), "/tf:map.base_link", "/odom", "-a",
-                     "--tf_cache_lookup_frequency", "4"]) == 0
+    assert (
+        cli.main(
+            [
+                "ape",
+                "mcap",
+                str(bag),
+                "/tf:map.base_link",
+                "/odom",
+                "-a",
+                "--tf_cache_lookup_frequency",
+                "4",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
-    assert out.startswith(want.info["title"] + "\n\n" + "".join(f"{k:>10}\t{v:.6f}\n" for k, v in sorted(want.stats.items())))
-    assert cli.main(["ape", "mcap", str(bag), "/tf:map.base_link", "/odom", "--tf_cache_lookup_frequency", "0"]) == 2
+    assert out.startswith(
+        want.info["title"]
+        + "\n\n"
+        + "".join(f"{k:>10}\t{v:.6f}\n" for k, v in sorted(want.stats.items()))
+    )
+    assert (
+        cli.main(
+            [
+                "ape",
+                "mcap",
+                str(bag),
+                "/tf:map.base_link",
+                "/odom",
+                "--tf_cache_lookup_frequency",
+                "0",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert "--tf_cache_lookup_frequency must be positive" in err and "\n" not in err
 
 
 def test_the_command_line_prints_evos_block(data, capsys, tmp_path):
     d = data / "MichaelGrupp_evo/test/data"
-    args = ["euroc", str(d / "V102_groundtruth.csv"), str(d / "V102.txt"), "-as", "-r", "angle_deg", "-d", "10",
-            "-u", "d", "--unsorted", "keep", "--save_results", str(tmp_path / "v102.zip")]
+    args = [
+        "euroc",
+        str(d / "V102_groundtruth.csv"),
+        str(d / "V102.txt"),
+        "-as",
+        "-r",
+        "angle_deg",
+        "-d",
+        "10",
+        "-u",
+        "d",
+        "--unsorted",
+        "keep",
+        "--save_results",
+        str(tmp_path / "v102.zip"),
+    ]
     assert cli.main(["rpe", *args]) == 0
     out = capsys.readouterr().out
-    want, title = evo_run("rpe", "euroc", [d / "V102_groundtruth.csv", d / "V102.txt"],
-                          evo_protocol.EvoOptions(align=True, correct_scale=True, relation="angle_deg", delta=10.0,
-                                                  delta_unit="d"))
+    want, title = evo_run(
+        "rpe",
+        "euroc",
+        [d / "V102_groundtruth.csv", d / "V102.txt"],
+        evo_protocol.EvoOptions(
+            align=True, correct_scale=True, relation="angle_deg", delta=10.0, delta_unit="d"
+        ),
+    )
     block = title + "\n\n" + "".join(f"{k:>10}\t{v:.6f}\n" for k, v in sorted(want.items()))
     assert out.startswith(block)
     assert cli.main(["res", str(tmp_path / "v102.zip")]) == 0
@@ -257,10 +386,25 @@ def test_res_tabulates_case_metrics(tmp_path, capsys):
 
     simulate.simulate(tmp_path / "sim")
     out = tmp_path / "case"
-    assert cli.main(["eval", str(tmp_path / "sim/truth/drone_figure8.txt"),
-                     str(tmp_path / "sim/algorithms/vio_body/drone_figure8/run1.txt"), "--out", str(out)]) == 0
+    assert (
+        cli.main(
+            [
+                "eval",
+                str(tmp_path / "sim/truth/drone_figure8.txt"),
+                str(tmp_path / "sim/algorithms/vio_body/drone_figure8/run1.txt"),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
-    assert cli.main(["res", str(out / "06_metrics/metrics.json"), "--save_table", str(tmp_path / "t.csv")]) == 0
+    assert (
+        cli.main(
+            ["res", str(out / "06_metrics/metrics.json"), "--save_table", str(tmp_path / "t.csv")]
+        )
+        == 0
+    )
     import json
 
     ate = json.loads((out / "06_metrics/metrics.json").read_text())["ate"]["trans_m"]
@@ -283,6 +427,8 @@ def test_projection_keeps_only_the_rotation_about_the_normal():
     r = geometry.so3_exp(np.array([[0.1, -0.2, 0.7]]))
     # static xyz Euler angles of r: yaw about z is atan2(r10, r00)
     yaw = np.arctan2(r[0, 1, 0], r[0, 0, 0])
-    flat = evo_protocol.project(Trajectory.from_rp(np.zeros(1), r, np.array([[1.0, 2.0, 3.0]])), "xy")
+    flat = evo_protocol.project(
+        Trajectory.from_rp(np.zeros(1), r, np.array([[1.0, 2.0, 3.0]])), "xy"
+    )
     assert flat.p.tolist() == [[1.0, 2.0, 0.0]]
     assert np.allclose(flat.r[0], geometry.rot_z(yaw))

@@ -1,5 +1,6 @@
 """Reports and figures: every per-case figure of a simulated case renders headlessly, a bundle
 re-renders to the same image without recomputation, and bad bundles are one-line errors."""
+
 import json
 import struct
 
@@ -19,14 +20,33 @@ def case(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("fig")
     simulate.simulate(tmp / "sim")
     out = tmp / "out"
-    assert cli.main(["eval", str(tmp / "sim/truth/drone_figure8.txt"),
-                     str(tmp / "sim/algorithms/vio_body/drone_figure8/run1.txt"), "--out", str(out), "--report",
-                     "--rate", "20"]) == 0
+    assert (
+        cli.main(
+            [
+                "eval",
+                str(tmp / "sim/truth/drone_figure8.txt"),
+                str(tmp / "sim/algorithms/vio_body/drone_figure8/run1.txt"),
+                "--out",
+                str(out),
+                "--report",
+                "--rate",
+                "20",
+            ]
+        )
+        == 0
+    )
     return out / "10_report"
 
 
 def test_every_case_figure_and_document_is_written(case):
-    names = {"trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3"}  # sigma3: vio_body has covariance
+    names = {
+        "trajectory",
+        "ape_time",
+        "rpe_box",
+        "xcorr",
+        "steps",
+        "sigma3",
+    }  # sigma3: vio_body has covariance
     assert {p.stem for p in (case / "figures").glob("*.png")} == names
     assert {p.stem for p in (case / "bundles").glob("*.json")} == names
     for p in (case / "figures").glob("*.png"):
@@ -37,7 +57,9 @@ def test_every_case_figure_and_document_is_written(case):
     assert "| metrics.ate.trans_m.rmse |" in (case / "report_en.md").read_text()
     assert "## 步骤 1-3" in (case / "report_zh.md").read_text()
     rows = (case / "metrics_summary.csv").read_text().splitlines()
-    assert rows[0] == "section,metric,value" and any(r.startswith("consistency,nees_pos_mean,") for r in rows)
+    assert rows[0] == "section,metric,value" and any(
+        r.startswith("consistency,nees_pos_mean,") for r in rows
+    )
     size = sum(p.stat().st_size for p in case.rglob("*") if p.is_file())
     assert size < 2_000_000, size  # the report of a case stays under 2 MB
 
@@ -48,7 +70,12 @@ def test_a_bundle_re_renders_to_the_same_image_without_recomputing(case, tmp_pat
     assert cli.main(["fig", str(bundle), "--out", str(tmp_path / "again")]) == 0
     assert png_size(tmp_path / "again.png") == png_size(case / "figures" / "ape_time.png")
     assert bundle.read_bytes() == before
-    assert cli.main(["fig", str(bundle), "--out", str(tmp_path / "slide"), "--style", "slide", "--pdf"]) == 0
+    assert (
+        cli.main(
+            ["fig", str(bundle), "--out", str(tmp_path / "slide"), "--style", "slide", "--pdf"]
+        )
+        == 0
+    )
     assert png_size(tmp_path / "slide.png")[0] > png_size(tmp_path / "again.png")[0]
     assert (tmp_path / "slide.pdf").read_bytes()[:5] == b"%PDF-"
 
@@ -66,6 +93,7 @@ def test_a_reused_figure_gives_the_same_bytes_as_a_new_one(case, tmp_path):
     """A worker reuses each layout's figure for the next case (figures._KEPT); what it writes must
     not depend on what it drew before."""
     import matplotlib.pyplot as plt
+
     from epa.outputs import figures
 
     def fresh():
@@ -81,7 +109,9 @@ def test_a_reused_figure_gives_the_same_bytes_as_a_new_one(case, tmp_path):
             other["data"]["lengths"] = other["data"]["lengths"][:2]
             other["data"]["trans"] = other["data"]["trans"][:2]
         figures.render(other, tmp_path / "other" / name)
-    no_peak = dict(bundles["xcorr"], data=dict(bundles["xcorr"]["data"], peak=None, reason="Step 1 not used"))
+    no_peak = dict(
+        bundles["xcorr"], data=dict(bundles["xcorr"]["data"], peak=None, reason="Step 1 not used")
+    )
     figures.render(no_peak, tmp_path / "other" / "no_peak")  # its title on the single-axes layout
     assert len(figures._KEPT) >= 3  # single-axes, trajectory, ±3σ layouts
     reused = {name: figures.render(b, tmp_path / "reused" / name) for name, b in bundles.items()}
@@ -91,10 +121,13 @@ def test_a_reused_figure_gives_the_same_bytes_as_a_new_one(case, tmp_path):
             assert new.read_bytes() == old.read_bytes(), old.name
 
 
-@pytest.mark.parametrize("content,message", [
-    ("{", "not a plot bundle"),
-    ('{"format": "epica-plot-bundle/1", "kind": "pie"}', "not an epica plot bundle"),
-])
+@pytest.mark.parametrize(
+    "content,message",
+    [
+        ("{", "not a plot bundle"),
+        ('{"format": "epica-plot-bundle/1", "kind": "pie"}', "not an epica plot bundle"),
+    ],
+)
 def test_a_bad_bundle_is_one_line(tmp_path, capsys, content, message):
     (tmp_path / "b.json").write_text(content)
     assert cli.main(["fig", str(tmp_path / "b.json"), "--out", str(tmp_path / "x")]) == 2
@@ -112,22 +145,34 @@ def euroc_grid(tmp_path_factory):
     if not DATA.is_dir():
         pytest.skip(f"real data not found at {DATA} (CI keeps ../shared/data beside the checkout)")
     from conftest import run_stages
+
     from epa import settings
     from epa.outputs import report, tables
 
     gt = DATA / "rpng_open_vins/ov_data/euroc_mav"
     rpg = DATA / "uzh-rpg_rpg_trajectory_evaluation/results"
-    sources = {("openvins", "MH_01", "run0"): DATA / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv",
-               ("openvins", "MH_04", "run0"): DATA / "qmy0519_open_vins-master/traj_estimate.txt",
-               ("vio_mono", "MH_01", "run0"): rpg / "euroc_mono_stereo/laptop/vio_mono/laptop_vio_mono_MH_01/stamped_traj_estimate.txt"}
+    sources = {
+        ("openvins", "MH_01", "run0"): DATA
+        / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv",
+        ("openvins", "MH_04", "run0"): DATA / "qmy0519_open_vins-master/traj_estimate.txt",
+        ("vio_mono", "MH_01", "run0"): rpg
+        / "euroc_mono_stereo/laptop/vio_mono/laptop_vio_mono_MH_01/stamped_traj_estimate.txt",
+    }
     for s in ("MH_01", "MH_04"):
         for k in range(3):
-            sources["vislam_ba", s, f"run{k}"] = (rpg / f"euroc_vislam_mono/laptop/vislam_ba/laptop_vislam_ba_{s}/"
-                                                  f"stamped_ba_estimate{k}.txt")
+            sources["vislam_ba", s, f"run{k}"] = (
+                rpg / f"euroc_vislam_mono/laptop/vislam_ba/laptop_vislam_ba_{s}/"
+                f"stamped_ba_estimate{k}.txt"
+            )
     truth = {"MH_01": gt / "MH_01_easy.txt", "MH_04": gt / "MH_04_difficult.txt"}
     out = tmp_path_factory.mktemp("euroc") / "results"
-    cfg = settings.resolve({"truth_dir": str(gt), "algorithms_dir": str(rpg), "report": {"pdf": True}})
-    cases = [{"key": "/".join(k), "truth": str(truth[k[1]]), "estimate": str(v)} for k, v in sources.items()]
+    cfg = settings.resolve(
+        {"truth_dir": str(gt), "algorithms_dir": str(rpg), "report": {"pdf": True}}
+    )
+    cases = [
+        {"key": "/".join(k), "truth": str(truth[k[1]]), "estimate": str(v)}
+        for k, v in sources.items()
+    ]
     run_stages(cases, out, cfg)
     keys = [c["key"] for c in cases]
     assert tables.make(keys, out, cfg) == []
@@ -166,8 +211,11 @@ def test_one_colour_per_algorithm_across_the_grid_figures(euroc_grid):
         if "algorithms" in d:
             pairs = [(alg, colours[k]) for k, alg in enumerate(d["algorithms"])]
         else:
-            pairs = [(line["label"], colours[line.get("color", k)]) for panel in d["panels"]
-                     for k, line in enumerate(panel["lines"])]
+            pairs = [
+                (line["label"], colours[line.get("color", k)])
+                for panel in d["panels"]
+                for k, line in enumerate(panel["lines"])
+            ]
         for alg, colour in pairs:
             assert colour_of.setdefault(alg, colour) == colour, (name, alg)
     assert set(colour_of) >= {"openvins", "vislam_ba", "vio_mono"}
@@ -179,8 +227,17 @@ def test_bundle_arrays_are_written_at_seven_digits_with_nan_as_null(tmp_path):
 
     from epa.outputs import figures
 
-    b = figures.bundle("ape_time", "t", {"t": np.array([0.0, 1.0, 2.0]), "ape": np.array([0.123456789, np.nan, 1e-9]),
-                                         "fail_start": [], "fail_end": [], "threshold": None})
+    b = figures.bundle(
+        "ape_time",
+        "t",
+        {
+            "t": np.array([0.0, 1.0, 2.0]),
+            "ape": np.array([0.123456789, np.nan, 1e-9]),
+            "fail_start": [],
+            "fail_end": [],
+            "threshold": None,
+        },
+    )
     figures.write_bundle(tmp_path / "b.json", b)
     back = figures.read_bundle(tmp_path / "b.json")
     assert back["data"]["ape"] == [0.1234568, None, 1e-9] and back["data"]["threshold"] is None
@@ -190,13 +247,33 @@ def test_bundle_arrays_are_written_at_seven_digits_with_nan_as_null(tmp_path):
 def test_epa_eval_prints_its_stages_on_a_large_input(case, capsys, monkeypatch, tmp_path):
     sim = case.parents[1] / "sim"
     monkeypatch.setattr(cli, "LARGE_INPUT_MB", 0)  # every input counts as large
-    assert cli.main(["eval", str(sim / "truth/drone_figure8.txt"), str(sim / "algorithms/vio_body/drone_figure8/run1.txt"),
-                     "--out", str(tmp_path / "out")]) == 0
+    assert (
+        cli.main(
+            [
+                "eval",
+                str(sim / "truth/drone_figure8.txt"),
+                str(sim / "algorithms/vio_body/drone_figure8/run1.txt"),
+                "--out",
+                str(tmp_path / "out"),
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err.splitlines()
     assert err[0].startswith("epa: ") and "MB of input" in err[0]
     done = [line.split()[1] for line in err if line.endswith(" s")]
-    assert done == ["load", "crop", "sync", "calibrate", "align", "metrics", "drift", "consistency", "efficiency",
-                    "report"]
+    assert done == [
+        "load",
+        "crop",
+        "sync",
+        "calibrate",
+        "align",
+        "metrics",
+        "drift",
+        "consistency",
+        "efficiency",
+        "report",
+    ]
 
 
 def test_a_rerun_recording_holds_the_case(case, tmp_path):
@@ -208,11 +285,30 @@ def test_a_rerun_recording_holds_the_case(case, tmp_path):
 
     sim = case.parents[1] / "sim"
     out = tmp_path / "out"
-    assert cli.main(["eval", str(sim / "truth/drone_figure8.txt"), str(sim / "algorithms/vio_body/drone_figure8/run1.txt"),
-                     "--out", str(out), "--rerun", "--rate", "20"]) == 0
+    assert (
+        cli.main(
+            [
+                "eval",
+                str(sim / "truth/drone_figure8.txt"),
+                str(sim / "algorithms/vio_body/drone_figure8/run1.txt"),
+                "--out",
+                str(out),
+                "--rerun",
+                "--rate",
+                "20",
+            ]
+        )
+        == 0
+    )
     rrd = next((out / "10_report").glob("*.rrd"))
     chunks = {str(c.entity_path): c for c in RrdReader(rrd).stream().to_chunks()}
-    assert {"/world/reference", "/world/estimate", "/world/estimate/now", "/errors/ape_m", "/consistency/nees_pos"} <= set(chunks)
+    assert {
+        "/world/reference",
+        "/world/estimate",
+        "/world/estimate/now",
+        "/errors/ape_m",
+        "/consistency/nees_pos",
+    } <= set(chunks)
     ape = io.read_csv(out / "06_metrics/ape.csv")["trans_m"]
     batch = chunks["/errors/ape_m"].to_record_batch()
     column = next(name for name in batch.schema.names if name.endswith("scalars"))
@@ -222,10 +318,9 @@ def test_a_rerun_recording_holds_the_case(case, tmp_path):
 
 
 def test_report_rerun_without_the_extra_is_refused_at_config_time(monkeypatch):
+    from epa import settings
     from epa.errors import EpaError
     from epa.outputs import recording
-
-    from epa import settings
 
     monkeypatch.setattr(recording, "available", lambda: False)
     with pytest.raises(EpaError, match=r'pip install "epica\[rerun\]"'):

@@ -1,7 +1,6 @@
 import numpy as np
 import pytest
 
-from epa import io
 from epa.errors import EpaError
 from epa.readers import text
 
@@ -20,16 +19,19 @@ def test_tum_any_whitespace_comments_and_normalised(tmp_path):
     assert len(t) == 3 and np.allclose(t.q[0], [0, 0, 0, 1]) and t.p[2, 0] == 2
 
 
-@pytest.mark.parametrize("content,msg,line", [
-    ("", "no data rows", None),
-    ("# only\n", "no data rows", None),
-    ("1 0 0 0 0 0 0 1\n2 0 0 0 0 0 1\n", "expected 8 columns", 2),
-    ("1 0 0 0 0 0 0 1\n2 0 0 x 0 0 0 1\n", "not a number: 'x'", 2),
-    ("1 0 0 0 0 0 0 1\n2 0 nan 0 0 0 0 1\n", "non-finite", 2),
-    ("1 0 0 0 0 0 0 1\n2 0 0 0 0 0 0 0\n", "zero quaternion", 2),
-    ("1 0 0 0 0 0 0 1\n# c\n0.5 0 0 0 0 0 0 1\n", "goes backwards", 3),
-    ("1 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n", "repeats", 2),
-])
+@pytest.mark.parametrize(
+    "content,msg,line",
+    [
+        ("", "no data rows", None),
+        ("# only\n", "no data rows", None),
+        ("1 0 0 0 0 0 0 1\n2 0 0 0 0 0 1\n", "expected 8 columns", 2),
+        ("1 0 0 0 0 0 0 1\n2 0 0 x 0 0 0 1\n", "not a number: 'x'", 2),
+        ("1 0 0 0 0 0 0 1\n2 0 nan 0 0 0 0 1\n", "non-finite", 2),
+        ("1 0 0 0 0 0 0 1\n2 0 0 0 0 0 0 0\n", "zero quaternion", 2),
+        ("1 0 0 0 0 0 0 1\n# c\n0.5 0 0 0 0 0 0 1\n", "goes backwards", 3),
+        ("1 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n", "repeats", 2),
+    ],
+)
 def test_bad_input_is_one_line_with_file_and_line(tmp_path, content, msg, line):
     p = write(tmp_path, "bad.txt", content)
     with pytest.raises(EpaError) as exc:
@@ -39,7 +41,9 @@ def test_bad_input_is_one_line_with_file_and_line(tmp_path, content, msg, line):
 
 
 def test_sort_mode_drops_duplicates(tmp_path):
-    p = write(tmp_path, "u.txt", "1 0 0 0 0 0 0 1\n3 0 0 0 0 0 0 1\n2 0 0 0 0 0 0 1\n3 5 0 0 0 0 0 1\n")
+    p = write(
+        tmp_path, "u.txt", "1 0 0 0 0 0 0 1\n3 0 0 0 0 0 0 1\n2 0 0 0 0 0 0 1\n3 5 0 0 0 0 0 1\n"
+    )
     t = text.read_trajectory(p, on_unsorted="sort")
     assert list(t.t) == [1, 2, 3] and t.p[2, 0] == 0
 
@@ -47,22 +51,33 @@ def test_sort_mode_drops_duplicates(tmp_path):
 def test_euroc_csv_ns_qw_first_extra_columns(data):
     t = text.read_trajectory(data / "MichaelGrupp_evo/test/data/V102_groundtruth.csv")
     assert len(t) == 16702 and 1.4e9 < t.t[0] < 1.5e9
-    assert np.allclose(t.q[0], np.array([0.789985, -0.205376, 0.554528, 0.161996]) / np.linalg.norm([0.789985, -0.205376, 0.554528, 0.161996]))
+    assert np.allclose(
+        t.q[0],
+        np.array([0.789985, -0.205376, 0.554528, 0.161996])
+        / np.linalg.norm([0.789985, -0.205376, 0.554528, 0.161996]),
+    )
 
 
 def test_openvins_covariance_and_cnspy_header(data):
     a = text.read_trajectory(data / "qmy0519_open_vins-master/traj_estimate.txt")
     assert a.cov_pos.shape == (1922, 3, 3) and np.isclose(a.cov_pos[0, 0, 2], 0.0008880070)
     assert np.allclose(a.cov_pos, np.swapaxes(a.cov_pos, 1, 2))
-    b = text.read_trajectory(data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv")
+    b = text.read_trajectory(
+        data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv"
+    )
     assert len(b) == 3369 and b.cov_rot is not None
 
 
 def test_orbslam3_float_ns_and_kimera(data):
     t = text.read_trajectory(data / "spsingh37_ORB_SLAM3_ubuntu22/f_dataset-MH01_stereo.txt")
     assert 1.4e9 < t.t[0] < 1.5e9 and abs(np.median(np.diff(t.t)) - 0.05) < 1e-3
-    k = text.read_trajectory(data / "MIT-SPARK_Kimera-VIO-Evaluation/evaluation/tests/test_results/V1_01_easy/Euroc/traj_vio.csv")
-    assert len(k) == 52  # ns stamps, qw first: (w, x, y, z) = (-0.0605, 0.828, 0.0575, 0.554) on row 1
+    k = text.read_trajectory(
+        data
+        / "MIT-SPARK_Kimera-VIO-Evaluation/evaluation/tests/test_results/V1_01_easy/Euroc/traj_vio.csv"
+    )
+    assert (
+        len(k) == 52
+    )  # ns stamps, qw first: (w, x, y, z) = (-0.0605, 0.828, 0.0575, 0.554) on row 1
     assert np.allclose(k.q[0], [0.82800183, 0.05748841, 0.55447594, -0.06053841], atol=2e-5)
     assert abs(k.t[0] - 1403715274.012143) < 1e-5
 
@@ -70,7 +85,9 @@ def test_orbslam3_float_ns_and_kimera(data):
 def test_kitti_with_times_file_and_rate(data, tmp_path):
     t = text.read_trajectory(data / "MichaelGrupp_evo/test/data/KITTI_00_gt.txt")
     assert len(t) == 4541 and np.isclose(t.t[-1], 470.58, atol=0.01)
-    (tmp_path / "k.txt").write_text((data / "MichaelGrupp_evo/test/data/KITTI_00_ORB.txt").read_text())
+    (tmp_path / "k.txt").write_text(
+        (data / "MichaelGrupp_evo/test/data/KITTI_00_ORB.txt").read_text()
+    )
     r = text.read_trajectory(tmp_path / "k.txt", kitti_rate=5.0)
     assert np.isclose(r.t[10], 2.0)
 

@@ -1,18 +1,20 @@
 """The KITTI odometry devkit metric on KITTI 00 (ORB-SLAM and S-PTAM from evo's test data), against
 a straight transcription of the devkit's evaluate_odometry.cpp, pose matrix by pose matrix."""
+
 import json
 import math
 
 import numpy as np
 import pytest
-
 from conftest import run_stages
+
 from epa import chain, cli, settings
 from epa.outputs import tables
 
 
 def devkit(gt_file, result_file):
     """evaluate_odometry.cpp, line by line: loadPoses, trajectoryDistances, calcSequenceErrors, means."""
+
     def load(path):
         poses = []
         for line in open(path):
@@ -45,7 +47,9 @@ def devkit(gt_file, result_file):
 @pytest.fixture(scope="module")
 def kitti00(data):
     root = data / "MichaelGrupp_evo/test/data"
-    return root / "KITTI_00_gt.txt", {name: root / f"KITTI_00_{name}.txt" for name in ("ORB", "SPTAM")}
+    return root / "KITTI_00_gt.txt", {
+        name: root / f"KITTI_00_{name}.txt" for name in ("ORB", "SPTAM")
+    }
 
 
 CONFIG = "metrics: {kitti: true}\nsync: {estimate_offset: false}\ncalibrate: {enabled: false}\n"
@@ -55,8 +59,21 @@ CONFIG = "metrics: {kitti: true}\nsync: {estimate_offset: false}\ncalibrate: {en
 def test_kitti_metric_equals_the_devkit_on_kitti_00(kitti00, tmp_path, name):
     gt, estimates = kitti00
     (tmp_path / "cfg.yaml").write_text(CONFIG)
-    assert cli.main(["eval", str(gt), str(estimates[name]), "--out", str(tmp_path / "out"), "--config",
-                     str(tmp_path / "cfg.yaml"), "--artifacts"]) == 0
+    assert (
+        cli.main(
+            [
+                "eval",
+                str(gt),
+                str(estimates[name]),
+                "--out",
+                str(tmp_path / "out"),
+                "--config",
+                str(tmp_path / "cfg.yaml"),
+                "--artifacts",
+            ]
+        )
+        == 0
+    )
     record = json.loads((tmp_path / "out/06_metrics/metrics.json").read_text())
     assert record["n_matched"] == 4541  # every frame: the devkit's frame k is pair k
     n, trans_pct, rot = devkit(gt, estimates[name])
@@ -68,16 +85,34 @@ def test_kitti_metric_equals_the_devkit_on_kitti_00(kitti00, tmp_path, name):
     assert k["trans_pct"] == pytest.approx(trans_pct, rel=1e-6)
     assert k["rot_deg_per_100m"] == pytest.approx(rot, rel=1e-4)
     assert sum(v["n"] for v in k["per_length"].values()) == n and set(k["per_length"]) == {
-        "100", "200", "300", "400", "500", "600", "700", "800"}
+        "100",
+        "200",
+        "300",
+        "400",
+        "500",
+        "600",
+        "700",
+        "800",
+    }
     rows = (tmp_path / "out/06_metrics/kitti_segments.csv").read_text().splitlines()
     assert rows[0] == "first,last,length_m,trans_pct,rot_deg_per_100m" and len(rows) == n + 1
 
 
 def test_kitti_metric_reaches_summary_and_its_table(kitti00, tmp_path):
     gt, estimates = kitti00
-    cfg = settings.resolve({"truth_dir": str(gt.parent), "algorithms_dir": str(gt.parent), "metrics": {"kitti": True},
-                            "sync": {"estimate_offset": False}, "calibrate": {"enabled": False}})
-    cases = [{"key": f"{name}/KITTI_00/run1", "truth": str(gt), "estimate": str(est)} for name, est in estimates.items()]
+    cfg = settings.resolve(
+        {
+            "truth_dir": str(gt.parent),
+            "algorithms_dir": str(gt.parent),
+            "metrics": {"kitti": True},
+            "sync": {"estimate_offset": False},
+            "calibrate": {"enabled": False},
+        }
+    )
+    cases = [
+        {"key": f"{name}/KITTI_00/run1", "truth": str(gt), "estimate": str(est)}
+        for name, est in estimates.items()
+    ]
     out = tmp_path / "results"
     run_stages(cases, out, cfg, chain.NAMES[:-1])  # every stage but the report
     assert tables.make([c["key"] for c in cases], out, cfg) == []
@@ -88,9 +123,13 @@ def test_kitti_metric_reaches_summary_and_its_table(kitti00, tmp_path):
     assert float(orb["kitti_trans_pct"]) == pytest.approx(trans_pct, rel=1e-6)
     assert float(orb["kitti_rot_deg_per_100m"]) == pytest.approx(rot, rel=1e-4)
     tex = (out / "tables/kitti.tex").read_text()
-    assert "KITTI ODOMETRY" in tex and f"{float(orb['kitti_rot_deg_per_100m']):.3f} / {trans_pct:.3f}" in tex
-    assert "kitti" in tables.table_names(cfg) and "kitti" not in tables.table_names(settings.resolve(
-        {"truth_dir": "t", "algorithms_dir": "a"}))
+    assert (
+        "KITTI ODOMETRY" in tex
+        and f"{float(orb['kitti_rot_deg_per_100m']):.3f} / {trans_pct:.3f}" in tex
+    )
+    assert "kitti" in tables.table_names(cfg) and "kitti" not in tables.table_names(
+        settings.resolve({"truth_dir": "t", "algorithms_dir": "a"})
+    )
 
 
 def test_kitti_metric_equals_the_devkit_exactly_on_orthonormal_poses(tmp_path, rng):
@@ -113,7 +152,9 @@ def test_kitti_metric_equals_the_devkit_exactly_on_orthonormal_poses(tmp_path, r
     io.write_trajectory(tmp_path / "gt.txt", Trajectory.from_rp(t, r, p), "kitti")
     io.write_trajectory(tmp_path / "est.txt", Trajectory.from_rp(t, r_est, p_est), "kitti")
     count, trans_pct, rot = devkit(tmp_path / "gt.txt", tmp_path / "est.txt")
-    summary, _ = kitti.odometry(text.read_trajectory(tmp_path / "gt.txt"), text.read_trajectory(tmp_path / "est.txt"))
+    summary, _ = kitti.odometry(
+        text.read_trajectory(tmp_path / "gt.txt"), text.read_trajectory(tmp_path / "est.txt")
+    )
     assert summary["n_segments"] == count > 500
     assert summary["trans_pct"] == pytest.approx(trans_pct, rel=1e-9)
     assert summary["rot_deg_per_100m"] == pytest.approx(rot, rel=1e-9)

@@ -1,10 +1,10 @@
 import glob
 
 import numpy as np
-import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from epa import geometry, io, sync
+from epa import geometry, sync
 from epa.metrics import accuracy
 from epa.readers import text
 
@@ -42,7 +42,11 @@ def brute_ov_eval_assoc(t_ref, t_est, max_diff):
 
 def test_segment_pairs_match_brute_force_on_euroc_grid(data):
     gt = text.read_trajectory(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt")
-    files = sorted(glob.glob(str(data / "uzh-rpg_rpg_trajectory_evaluation/results/**/*MH_01*/*.txt"), recursive=True))
+    files = sorted(
+        glob.glob(
+            str(data / "uzh-rpg_rpg_trajectory_evaluation/results/**/*MH_01*/*.txt"), recursive=True
+        )
+    )
     assert len(files) >= 12
     for f in files[:12]:
         est = text.read_trajectory(f)
@@ -63,8 +67,11 @@ def test_segment_pairs_random_with_plateaus(steps, length):
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.lists(st.floats(0.001, 0.08), min_size=1, max_size=80), st.lists(st.floats(0.001, 0.08), min_size=1, max_size=80),
-       st.floats(0.005, 0.05))
+@given(
+    st.lists(st.floats(0.001, 0.08), min_size=1, max_size=80),
+    st.lists(st.floats(0.001, 0.08), min_size=1, max_size=80),
+    st.floats(0.005, 0.05),
+)
 def test_ov_eval_association_matches_greedy(dr, de, max_diff):
     t_ref, t_est = np.cumsum(dr), np.cumsum(de)
     i_ref, i_est = sync.associate_ov_eval(t_ref, t_est, max_diff)
@@ -73,15 +80,35 @@ def test_ov_eval_association_matches_greedy(dr, de, max_diff):
 
 
 def test_step1_recovers_injected_shifts_on_real_euroc_estimates(data):
-    gts = {s: text.read_trajectory(data / f"rpng_open_vins/ov_data/euroc_mav/{f}") for s, f in
-           [("MH_01", "MH_01_easy.txt"), ("MH_03", "MH_03_medium.txt"), ("MH_04", "MH_04_difficult.txt"),
-            ("MH_05", "MH_05_difficult.txt")]}
-    files = [(next(s for s in gts if s in f), f, {}) for f in
-             glob.glob(str(data / "uzh-rpg_rpg_trajectory_evaluation/results/**/*.txt"), recursive=True)]
-    files += [("MH_01", data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv", {}),
-              ("MH_01", data / "Gaiyh14_ORBSLAM3-EVO/f_dataset-MH01_monoi.txt", {}),
-              ("MH_01", data / "SidSong01_modifiedOKVIS-for-benchmarking/trajectory_01.txt", {"time_unit": "sec_nsec"}),
-              ("MH_04", data / "qmy0519_open_vins-master/traj_estimate.txt", {})]
+    gts = {
+        s: text.read_trajectory(data / f"rpng_open_vins/ov_data/euroc_mav/{f}")
+        for s, f in [
+            ("MH_01", "MH_01_easy.txt"),
+            ("MH_03", "MH_03_medium.txt"),
+            ("MH_04", "MH_04_difficult.txt"),
+            ("MH_05", "MH_05_difficult.txt"),
+        ]
+    }
+    files = [
+        (next(s for s in gts if s in f), f, {})
+        for f in glob.glob(
+            str(data / "uzh-rpg_rpg_trajectory_evaluation/results/**/*.txt"), recursive=True
+        )
+    ]
+    files += [
+        (
+            "MH_01",
+            data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv",
+            {},
+        ),
+        ("MH_01", data / "Gaiyh14_ORBSLAM3-EVO/f_dataset-MH01_monoi.txt", {}),
+        (
+            "MH_01",
+            data / "SidSong01_modifiedOKVIS-for-benchmarking/trajectory_01.txt",
+            {"time_unit": "sec_nsec"},
+        ),
+        ("MH_04", data / "qmy0519_open_vins-master/traj_estimate.txt", {}),
+    ]
     assert len(files) == 54
     rng = np.random.default_rng(3)
     errors, z, uncertain = [], [], []
@@ -92,7 +119,11 @@ def test_step1_recovers_injected_shifts_on_real_euroc_estimates(data):
         moved = sync.estimate_offset(gts[seq], est.shifted(-shift))
         if not (base.used and moved.used):
             # rpg's bundle-adjusted keyframes (a few Hz) pin the offset only to 5-70 ms: said, not used
-            assert "vislam_ba" in str(f) and "uncertain" in (base.status, moved.status), (f, base.reason, moved.reason)
+            assert "vislam_ba" in str(f) and "uncertain" in (base.status, moved.status), (
+                f,
+                base.reason,
+                moved.reason,
+            )
             uncertain.append(f)
             continue
         errors.append(abs(moved.offset - base.offset - shift))

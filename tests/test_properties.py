@@ -1,26 +1,64 @@
 """Property tests: readers never raise anything but the documented error, and write -> read round trips."""
+
 import numpy as np
-from hypothesis import HealthCheck, given, settings as hsettings, strategies as st
+from hypothesis import HealthCheck, given
+from hypothesis import settings as hsettings
+from hypothesis import strategies as st
 
 from epa import alignment, geometry, io, sync
-from epa.metrics import accuracy
 from epa.errors import EpaError
-from epa.trajectory import Trajectory
+from epa.metrics import accuracy
 from epa.readers import text
+from epa.trajectory import Trajectory
 
-FUZZ = hsettings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+FUZZ = hsettings(
+    max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 ROW = "1.5 0 0 0 0 0 0 1\n"
 
 # bytes that look like trajectory files more often than random ones do
-numberish = st.lists(st.sampled_from(["1", "2.5", "-3", "1e9", "1e300", "nan", "inf", "0", ",", " ", "\t", "\n",
-                                      "#", "%", "t", "x", "qw", ";", "\ufeff", "\x00", ".", "e", "1403636592.96214"]),
-                     max_size=80).map(lambda toks: "".join(toks).encode())
+numberish = st.lists(
+    st.sampled_from(
+        [
+            "1",
+            "2.5",
+            "-3",
+            "1e9",
+            "1e300",
+            "nan",
+            "inf",
+            "0",
+            ",",
+            " ",
+            "\t",
+            "\n",
+            "#",
+            "%",
+            "t",
+            "x",
+            "qw",
+            ";",
+            "\ufeff",
+            "\x00",
+            ".",
+            "e",
+            "1403636592.96214",
+        ]
+    ),
+    max_size=80,
+).map(lambda toks: "".join(toks).encode())
 
 
 @FUZZ
-@given(content=st.one_of(st.binary(max_size=400), numberish), suffix=st.sampled_from([".txt", ".csv", ".tum"]),
-       fmt=st.sampled_from(text.FORMATS), time_unit=st.sampled_from(text.TIME_UNITS))
-def test_no_byte_string_makes_a_reader_raise_anything_but_epa_error(tmp_path, content, suffix, fmt, time_unit):
+@given(
+    content=st.one_of(st.binary(max_size=400), numberish),
+    suffix=st.sampled_from([".txt", ".csv", ".tum"]),
+    fmt=st.sampled_from(text.FORMATS),
+    time_unit=st.sampled_from(text.TIME_UNITS),
+)
+def test_no_byte_string_makes_a_reader_raise_anything_but_epa_error(
+    tmp_path, content, suffix, fmt, time_unit
+):
     path = tmp_path / f"f{suffix}"
     path.write_bytes(content)
     try:
@@ -36,13 +74,17 @@ def test_no_byte_string_makes_a_reader_raise_anything_but_epa_error(tmp_path, co
 finite = st.floats(-1e4, 1e4, allow_nan=False)
 
 
-@hsettings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@hsettings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(n=st.integers(2, 40), seed=st.integers(0, 2**32 - 1))
 def test_tum_write_read_round_trip_is_exact(tmp_path, n, seed):
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.uniform(1e-3, 1.0, n)) + rng.uniform(0, 2e9)
     q = rng.normal(size=(n, 4))
-    traj = Trajectory(t, rng.uniform(-1e4, 1e4, (n, 3)), q / np.linalg.norm(q, axis=1, keepdims=True))
+    traj = Trajectory(
+        t, rng.uniform(-1e4, 1e4, (n, 3)), q / np.linalg.norm(q, axis=1, keepdims=True)
+    )
     io.write_tum(tmp_path / "a.tum", traj)
     back = text.read_trajectory(tmp_path / "a.tum")
     np.testing.assert_array_equal(back.t, traj.t if t.max() < text.NS_THRESHOLD else back.t)
@@ -50,16 +92,26 @@ def test_tum_write_read_round_trip_is_exact(tmp_path, n, seed):
     np.testing.assert_allclose(back.q, traj.q, rtol=0, atol=1e-15)
 
 
-token = st.sampled_from(["1", "2.5", "-3", "1e9", "1e13", "1e300", "nan", "inf", "0", "", "x", "1.2.3", "1403636592.5"])
+token = st.sampled_from(
+    ["1", "2.5", "-3", "1e9", "1e13", "1e300", "nan", "inf", "0", "", "x", "1.2.3", "1403636592.5"]
+)
 
 
 @FUZZ
-@given(rows=st.lists(st.lists(token, min_size=1, max_size=21), min_size=0, max_size=12),
-       sep=st.sampled_from([" ", ",", "\t", ";"]), header=st.sampled_from(["", "# t x y z qx qy qz qw\n",
-                                                                         "t,x,y,z,qw,qx,qy,qz\n", "#timestamp [ns],a\n"]),
-       suffix=st.sampled_from([".txt", ".csv"]), fmt=st.sampled_from(text.FORMATS),
-       time_unit=st.sampled_from(text.TIME_UNITS), unsorted=st.sampled_from(["error", "sort"]))
-def test_table_shaped_garbage_is_read_or_refused_cleanly(tmp_path, rows, sep, header, suffix, fmt, time_unit, unsorted):
+@given(
+    rows=st.lists(st.lists(token, min_size=1, max_size=21), min_size=0, max_size=12),
+    sep=st.sampled_from([" ", ",", "\t", ";"]),
+    header=st.sampled_from(
+        ["", "# t x y z qx qy qz qw\n", "t,x,y,z,qw,qx,qy,qz\n", "#timestamp [ns],a\n"]
+    ),
+    suffix=st.sampled_from([".txt", ".csv"]),
+    fmt=st.sampled_from(text.FORMATS),
+    time_unit=st.sampled_from(text.TIME_UNITS),
+    unsorted=st.sampled_from(["error", "sort"]),
+)
+def test_table_shaped_garbage_is_read_or_refused_cleanly(
+    tmp_path, rows, sep, header, suffix, fmt, time_unit, unsorted
+):
     path = tmp_path / f"f{suffix}"
     path.write_text(header + "".join(sep.join(r) + "\n" for r in rows))
     try:
@@ -79,20 +131,37 @@ def random_trajectory(rng, n, with_cov=False, ns_exact=False):
     cov = {}
     if with_cov:
         a, b = rng.normal(size=(n, 3, 3)), rng.normal(size=(n, 3, 3))
-        cov = {"cov_rot": a @ a.transpose(0, 2, 1) * 1e-4, "cov_pos": b @ b.transpose(0, 2, 1) * 1e-2}
-    return Trajectory(t, rng.uniform(-1e4, 1e4, (n, 3)), q / np.linalg.norm(q, axis=1, keepdims=True), **cov)
+        cov = {
+            "cov_rot": a @ a.transpose(0, 2, 1) * 1e-4,
+            "cov_pos": b @ b.transpose(0, 2, 1) * 1e-2,
+        }
+    return Trajectory(
+        t, rng.uniform(-1e4, 1e4, (n, 3)), q / np.linalg.norm(q, axis=1, keepdims=True), **cov
+    )
 
 
-@hsettings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(n=st.integers(2, 30), seed=st.integers(0, 2**32 - 1),
-       fmt=st.sampled_from(["tum", "kitti", "euroc", "openvins", "csv"]), with_cov=st.booleans())
+@hsettings(
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    n=st.integers(2, 30),
+    seed=st.integers(0, 2**32 - 1),
+    fmt=st.sampled_from(["tum", "kitti", "euroc", "openvins", "csv"]),
+    with_cov=st.booleans(),
+)
 def test_every_format_round_trips(tmp_path, n, seed, fmt, with_cov):
-    traj = random_trajectory(np.random.default_rng(seed), n, with_cov=with_cov or fmt == "openvins",
-                             ns_exact=fmt == "euroc")
+    traj = random_trajectory(
+        np.random.default_rng(seed),
+        n,
+        with_cov=with_cov or fmt == "openvins",
+        ns_exact=fmt == "euroc",
+    )
     path = tmp_path / ("a.csv" if fmt in ("euroc", "csv") else "a.txt")
     io.write_trajectory(path, traj, fmt)
     back = text.read_trajectory(path)
-    np.testing.assert_allclose(back.t, traj.t, rtol=0, atol=3e-7 if fmt == "euroc" else 0)  # ns in float64
+    np.testing.assert_allclose(
+        back.t, traj.t, rtol=0, atol=3e-7 if fmt == "euroc" else 0
+    )  # ns in float64
     np.testing.assert_array_equal(back.p, traj.p)
     # same rotation (q and -q are one rotation; KITTI stores the matrix)
     np.testing.assert_allclose(np.abs(np.sum(back.q * traj.q, axis=1)), 1.0, rtol=0, atol=1e-12)
@@ -104,17 +173,24 @@ def test_every_format_round_trips(tmp_path, n, seed, fmt, with_cov):
 # ----------------------------------------------------------------------------- invariances and recoveries
 def smooth_motion(rng, t):
     """Random smooth 3-D motion: a few sinusoids per axis, for position and rotation vector."""
+
     def signal(scale):
         f = rng.uniform(0.05, 0.6, (3, 4))
         a = rng.normal(0, scale, (3, 4))
         ph = rng.uniform(0, 2 * np.pi, (3, 4))
-        return np.einsum("ck,ckn->nc", a, np.sin(2 * np.pi * f[:, :, None] * t[None, None, :] + ph[:, :, None]))
+        return np.einsum(
+            "ck,ckn->nc", a, np.sin(2 * np.pi * f[:, :, None] * t[None, None, :] + ph[:, :, None])
+        )
+
     return geometry.so3_exp(signal(0.6)), signal(4.0) + np.outer(t, rng.normal(0, 0.3, 3))
 
 
 def random_rigid(rng, scale=False):
-    return alignment.Similarity(geometry.so3_exp(rng.normal(0, 1.5, 3)), rng.normal(0, 50, 3),
-                                float(rng.uniform(0.2, 5)) if scale else 1.0)
+    return alignment.Similarity(
+        geometry.so3_exp(rng.normal(0, 1.5, 3)),
+        rng.normal(0, 50, 3),
+        float(rng.uniform(0.2, 5)) if scale else 1.0,
+    )
 
 
 PROPS = hsettings(max_examples=25, deadline=None)
@@ -127,7 +203,9 @@ def test_metrics_are_invariant_under_a_common_rigid_transform(seed):
     t = np.arange(0, 60, 0.1)
     r, p = smooth_motion(rng, t)
     ref = Trajectory.from_rp(t, r, p)
-    noisy = Trajectory.from_rp(t, r @ geometry.so3_exp(rng.normal(0, 0.02, (len(t), 3))), p + rng.normal(0, 0.1, p.shape))
+    noisy = Trajectory.from_rp(
+        t, r @ geometry.so3_exp(rng.normal(0, 0.02, (len(t), 3))), p + rng.normal(0, 0.1, p.shape)
+    )
     est = random_rigid(rng).apply(noisy)  # the estimate in its own world frame
     g = random_rigid(rng)  # moved together: nothing the metrics report may change
 
@@ -141,8 +219,13 @@ def test_metrics_are_invariant_under_a_common_rigid_transform(seed):
             assert np.isclose(a[key][part]["rmse"], b[key][part]["rmse"], rtol=1e-7, atol=1e-9)
     for seg in ("8", "16"):
         assert a["rpe_distance"][seg]["trans_m"]["n"] == b["rpe_distance"][seg]["trans_m"]["n"]
-        assert np.isclose(a["rpe_distance"][seg]["trans_m"]["mean"], b["rpe_distance"][seg]["trans_m"]["mean"],
-                          rtol=1e-7, atol=1e-9, equal_nan=True)
+        assert np.isclose(
+            a["rpe_distance"][seg]["trans_m"]["mean"],
+            b["rpe_distance"][seg]["trans_m"]["mean"],
+            rtol=1e-7,
+            atol=1e-9,
+            equal_nan=True,
+        )
 
 
 @PROPS
@@ -168,7 +251,9 @@ def test_step1_recovers_a_random_offset_on_random_smooth_motion(seed, offset):
     r, p = smooth_motion(rng, t)
     ref = Trajectory.from_rp(t, r, p)
     te = np.arange(2, 58, 1 / 20)
-    re, pe = smooth_motion(np.random.default_rng(seed), te + offset)  # same motion, read offset later
+    re, pe = smooth_motion(
+        np.random.default_rng(seed), te + offset
+    )  # same motion, read offset later
     est = Trajectory.from_rp(te, re, pe)
     out = sync.estimate_offset(ref, est, window=2.0)
     if not out.used:  # a few sinusoids can repeat within the window (seed 576: two peaks 3 % apart)

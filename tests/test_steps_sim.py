@@ -1,4 +1,5 @@
 """Steps 1-3 on simulated motion with known offset, extrinsic and scale, including degenerate motion."""
+
 import numpy as np
 import pytest
 
@@ -6,8 +7,16 @@ from epa import alignment, calibration, geometry, simulate, sync
 from epa.trajectory import Trajectory
 
 
-def case(seq="handheld_office", offset=0.037, rot=(0.3, -1.1, 0.7), trans=(0.1, -0.05, 0.03), scale=1.0, rate=20.0,
-         noise=0.0, seed=0):
+def case(
+    seq="handheld_office",
+    offset=0.037,
+    rot=(0.3, -1.1, 0.7),
+    trans=(0.1, -0.05, 0.03),
+    scale=1.0,
+    rate=20.0,
+    noise=0.0,
+    seed=0,
+):
     rng = np.random.default_rng(seed)
     t = np.arange(0, 100, 1 / 200)
     r, p = simulate.truth_pose(seq, t)
@@ -75,7 +84,11 @@ def test_umeyama_recovers_random_sim3(rng):
     r = geometry.so3_exp(rng.normal(size=3))
     dst = 2.5 * src @ r.T + [1, 2, 3]
     fit = alignment.umeyama(src, dst, with_scale=True)
-    assert np.allclose(fit.R, r, atol=1e-12) and abs(fit.s - 2.5) < 1e-12 and np.allclose(fit.t, [1, 2, 3], atol=1e-10)
+    assert (
+        np.allclose(fit.R, r, atol=1e-12)
+        and abs(fit.s - 2.5) < 1e-12
+        and np.allclose(fit.t, [1, 2, 3], atol=1e-10)
+    )
 
 
 def test_posyaw_leaves_roll_and_pitch_alone():
@@ -83,13 +96,18 @@ def test_posyaw_leaves_roll_and_pitch_alone():
     ir, ie = sync.associate(ref, est)
     r, e = ref.select(ir), est.select(ie)
     fit = alignment.fit(r, e, method="posyaw")
-    assert np.allclose(fit.R[2], [0, 0, 1]) and np.degrees(np.arctan2(fit.R[1, 0], fit.R[0, 0])) == pytest.approx(-np.degrees(0.8), abs=1e-6)
+    assert np.allclose(fit.R[2], [0, 0, 1]) and np.degrees(
+        np.arctan2(fit.R[1, 0], fit.R[0, 0])
+    ) == pytest.approx(-np.degrees(0.8), abs=1e-6)
     a = fit.apply(e)
     assert np.allclose(a.p, r.p, atol=1e-6)
 
 
 def test_quaternion_helpers_match_matrix_algebra(rng):
-    a, b = geometry.normalize_quat(rng.normal(size=(200, 4))), geometry.normalize_quat(rng.normal(size=(200, 4)))
+    a, b = (
+        geometry.normalize_quat(rng.normal(size=(200, 4))),
+        geometry.normalize_quat(rng.normal(size=(200, 4))),
+    )
     v = rng.normal(size=(200, 3))
     ra, rb = geometry.quat_to_rot(a), geometry.quat_to_rot(b)
     assert np.allclose(geometry.quat_to_rot(geometry.quat_mul(a, b)), ra @ rb, atol=1e-12)

@@ -1,4 +1,5 @@
 """The real snakemake on a tiny grid in a temporary folder."""
+
 import csv
 import json
 import re
@@ -20,22 +21,36 @@ CMD = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--core
 
 def smk(cwd, *args, config="cfg.yaml", snakefile=None):
     cmd = CMD if snakefile is None else [*CMD[:3], "-s", str(snakefile), *CMD[5:]]
-    out = subprocess.run(cmd + ["--directory", str(cwd), "--configfile", str(cwd / config), *args],
-                         capture_output=True, text=True, cwd=cwd)
+    out = subprocess.run(
+        cmd + ["--directory", str(cwd), "--configfile", str(cwd / config), *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+    )
     assert out.returncode == 0, out.stdout + out.stderr
     return out.stdout + out.stderr
 
 
 def artifacts(results: Path) -> dict[str, bytes]:
     """Every per-case artifact and table (not logs or Snakemake's bookkeeping), by relative path."""
-    files = [p for p in results.rglob("*") if p.is_file() and "logs" not in p.parts and "batches" not in p.parts
-             and "benchmarks" not in p.parts]
+    files = [
+        p
+        for p in results.rglob("*")
+        if p.is_file()
+        and "logs" not in p.parts
+        and "batches" not in p.parts
+        and "benchmarks" not in p.parts
+    ]
     return {str(p.relative_to(results)): p.read_bytes() for p in files}
 
 
 def planned_jobs(cwd):
     text = smk(cwd, "-n", "--quiet", "rules")
-    return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", text, re.M) if m.group(1) not in ("total", "all")}
+    return {
+        m.group(1): int(m.group(2))
+        for m in re.finditer(r"^(\w+)\s+(\d+)$", text, re.M)
+        if m.group(1) not in ("total", "all")
+    }
 
 
 @pytest.fixture(scope="module")
@@ -45,10 +60,14 @@ def grid(tmp_path_factory):
     (cwd / "truth").mkdir()
     shutil.copy(cwd / "sim/truth/handheld_office.txt", cwd / "truth")
     for alg in ("vio_body", "vio_camera"):
-        shutil.copytree(cwd / f"sim/algorithms/{alg}/handheld_office", cwd / f"algs/{alg}/handheld_office")
+        shutil.copytree(
+            cwd / f"sim/algorithms/{alg}/handheld_office", cwd / f"algs/{alg}/handheld_office"
+        )
     (cwd / "algs/broken/handheld_office").mkdir(parents=True)
     (cwd / "algs/broken/handheld_office/run1.txt").write_text("1 0 0 0 0 0 0 1\n2 0 0 x 0 0 0 1\n")
-    (cwd / "algs/broken/handheld_office/run2.txt").write_text("5 0 0 0 0 0 0 1\n6 1 0 0 0 0 0 1\n7 2 0 0 0 0 0 1\n")
+    (cwd / "algs/broken/handheld_office/run2.txt").write_text(
+        "5 0 0 0 0 0 0 1\n6 1 0 0 0 0 0 1\n7 2 0 0 0 0 0 1\n"
+    )
     (cwd / "cfg.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\n")
     smk(cwd)
     return cwd
@@ -58,10 +77,28 @@ def test_outputs_exist_and_parse(grid):
     res = grid / "results"
     rows = list(csv.DictReader(open(res / "summary.csv")))
     assert len(rows) == 6
-    required = {"algorithm", "dataset", "run", "status", "n_matched", "ate_trans_rmse_m", "ate_rot_rmse_deg",
-                "rpe_8m_trans_mean_m", "rpe_8m_rot_mean_deg", "time_rpe_1s_trans_mean_m", "drift_rate_8m_pct",
-                "eval_source", "time_offset_s", "extrinsic_rot_deg", "extrinsic_trans_m", "success_rate_distance_pct",
-                "success_rate_time_pct", "global_failed", "knee_threshold_m", "fail_segments"}
+    required = {
+        "algorithm",
+        "dataset",
+        "run",
+        "status",
+        "n_matched",
+        "ate_trans_rmse_m",
+        "ate_rot_rmse_deg",
+        "rpe_8m_trans_mean_m",
+        "rpe_8m_rot_mean_deg",
+        "time_rpe_1s_trans_mean_m",
+        "drift_rate_8m_pct",
+        "eval_source",
+        "time_offset_s",
+        "extrinsic_rot_deg",
+        "extrinsic_trans_m",
+        "success_rate_distance_pct",
+        "success_rate_time_pct",
+        "global_failed",
+        "knee_threshold_m",
+        "fail_segments",
+    }
     assert required <= set(rows[0])
     ok = [r for r in rows if r["status"] == "ok"]
     assert len(ok) == 4 and all(float(r["ate_trans_rmse_m"]) < 0.2 for r in ok)
@@ -76,7 +113,14 @@ def test_outputs_exist_and_parse(grid):
     log = (res / "cases/broken/handheld_office/run1/logs/load.log").read_text().strip().splitlines()
     assert log[-1].startswith("ERROR case failed: load: ") and "not a number" in log[-1]
     m = json.load(open(res / "cases/vio_body/handheld_office/run1/06_metrics/metrics.json"))
-    assert {"n_matched", "alignment", "ate", "rpe_distance", "rpe_time_1s", "drift_rate_pct"} <= set(m)
+    assert {
+        "n_matched",
+        "alignment",
+        "ate",
+        "rpe_distance",
+        "rpe_time_1s",
+        "drift_rate_pct",
+    } <= set(m)
 
 
 def strict_parse_tex(text):
@@ -90,10 +134,19 @@ def strict_parse_tex(text):
         assert row.endswith("\\\\") or row.endswith(r"\\ \hline")
         cells = body.split(" & ")
         assert len(cells) == len(spec), row
-        residue = re.sub(r"\\textbf\{[^{}\\]*(?:\\[_&%$#{}][^{}\\]*)*\}|\\[_&%$#{}]|\\textbackslash\{\}|"
-                         r"\\textasciitilde\{\}|\\textasciicircum\{\}", "", body)
+        residue = re.sub(
+            r"\\textbf\{[^{}\\]*(?:\\[_&%$#{}][^{}\\]*)*\}|\\[_&%$#{}]|\\textbackslash\{\}|"
+            r"\\textasciitilde\{\}|\\textasciicircum\{\}",
+            "",
+            body,
+        )
         assert "\\" not in residue and "{" not in residue and "}" not in residue, row
-        assert "&" not in residue.replace(" & ", "") and "%" not in residue and "_" not in residue and "$" not in residue
+        assert (
+            "&" not in residue.replace(" & ", "")
+            and "%" not in residue
+            and "_" not in residue
+            and "$" not in residue
+        )
 
 
 def test_grid_figures_and_case_reports_are_written(grid):
@@ -119,9 +172,17 @@ def test_every_tex_table_parses_strictly(grid):
 def test_latex_escaping_of_names():
     from epa.outputs.tables import latex_escape
 
-    assert latex_escape("a_b&c%d$e#f{g}h~i^j\\") == r"a\_b\&c\%d\$e\#f\{g\}h\textasciitilde{}i\textasciicircum{}j\textbackslash{}"
-    strict_parse_tex("% t\n\\begin{tabular}{lc}\n & \\textbf{" + latex_escape("x_1 & {y}") + "} \\\\ \\hline\n"
-                     + latex_escape("a%b") + " & 1.000 / 2.000 \\\\\n\\end{tabular}\n")
+    assert (
+        latex_escape("a_b&c%d$e#f{g}h~i^j\\")
+        == r"a\_b\&c\%d\$e\#f\{g\}h\textasciitilde{}i\textasciicircum{}j\textbackslash{}"
+    )
+    strict_parse_tex(
+        "% t\n\\begin{tabular}{lc}\n & \\textbf{"
+        + latex_escape("x_1 & {y}")
+        + "} \\\\ \\hline\n"
+        + latex_escape("a%b")
+        + " & 1.000 / 2.000 \\\\\n\\end{tabular}\n"
+    )
 
 
 def test_rerun_behaviour(grid):
@@ -131,20 +192,43 @@ def test_rerun_behaviour(grid):
     with open(grid / "algs/vio_body/handheld_office/run2.txt", "a") as fh:
         fh.write("# edited\n")
     jobs = planned_jobs(grid)
-    assert jobs == {"load": 1, "crop": 1, "sync": 1, "calibrate": 1, "align": 1, "metrics": 1, "drift": 1,
-                    "consistency": 1, "efficiency": 1, "report": 1, "tables": 1, "figures": 1}
+    assert jobs == {
+        "load": 1,
+        "crop": 1,
+        "sync": 1,
+        "calibrate": 1,
+        "align": 1,
+        "metrics": 1,
+        "drift": 1,
+        "consistency": 1,
+        "efficiency": 1,
+        "report": 1,
+        "tables": 1,
+        "figures": 1,
+    }
     smk(grid)
     # a changed stage setting re-runs that stage onward, for every case
-    (grid / "cfg.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\nalign: {method: posyaw}\n")
+    (grid / "cfg.yaml").write_text(
+        "truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\nalign: {method: posyaw}\n"
+    )
     jobs = planned_jobs(grid)
-    assert jobs == {"align": 6, "metrics": 6, "drift": 6, "consistency": 6, "efficiency": 6, "report": 6, "tables": 1,
-                    "figures": 1}
+    assert jobs == {
+        "align": 6,
+        "metrics": 6,
+        "drift": 6,
+        "consistency": 6,
+        "efficiency": 6,
+        "report": 6,
+        "tables": 1,
+        "figures": 1,
+    }
 
 
 def test_batched_execution_writes_the_same_artifacts_and_tables(grid):
     # 6 cases in 2 batches per stage instead of one case per job
-    (grid / "batched.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: batched\n"
-                                       "grid: {max_batches: 2}\n")
+    (grid / "batched.yaml").write_text(
+        "truth_dir: truth\nalgorithms_dir: algs\nresults_dir: batched\ngrid: {max_batches: 2}\n"
+    )
     smk(grid, config="batched.yaml")
     assert len(list((grid / "batched/batches").iterdir())) <= 2  # 6 cases, at most 2 jobs per stage
     per_case, batched = artifacts(grid / "results"), artifacts(grid / "batched")
@@ -156,16 +240,34 @@ def test_epa_eval_writes_the_workflow_metrics_json(grid, tmp_path):
     from epa import cli
 
     case = "vio_camera/handheld_office/run1"
-    assert cli.main(["eval", str(grid / "truth/handheld_office.txt"), str(grid / f"algs/{case}.csv"),
-                     "--out", str(tmp_path / "eval")]) == 0
-    for stage_file in ("06_metrics/metrics.json", "07_drift/drift.json", "04_calibrate/calibrate.json"):
-        assert (tmp_path / "eval" / stage_file).read_bytes() == (grid / "results/cases" / case / stage_file).read_bytes()
+    assert (
+        cli.main(
+            [
+                "eval",
+                str(grid / "truth/handheld_office.txt"),
+                str(grid / f"algs/{case}.csv"),
+                "--out",
+                str(tmp_path / "eval"),
+            ]
+        )
+        == 0
+    )
+    for stage_file in (
+        "06_metrics/metrics.json",
+        "07_drift/drift.json",
+        "04_calibrate/calibrate.json",
+    ):
+        assert (tmp_path / "eval" / stage_file).read_bytes() == (
+            grid / "results/cases" / case / stage_file
+        ).read_bytes()
 
 
 def test_a_bug_in_one_case_is_only_that_cases_failure(grid):
     # a Snakefile that includes the real one and breaks the sync stage of one case (in-thread: --cores 1)
     wrapper = grid / "Snakefile.bug"
-    wrapper.write_text(f"include: {str(ROOT / 'Snakefile')!r}\n" + """
+    wrapper.write_text(
+        f"include: {str(ROOT / 'Snakefile')!r}\n"
+        + """
 import epa.chain as _chain
 _sync = _chain.BY_NAME["sync"].run
 def _buggy(case, *args):
@@ -173,12 +275,25 @@ def _buggy(case, *args):
         raise ZeroDivisionError("injected bug")
     return _sync(case, *args)
 _chain.BY_NAME["sync"] = _chain.BY_NAME["sync"].__class__(**{**_chain.BY_NAME["sync"].__dict__, "run": _buggy})
-""")
-    (grid / "bug.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: bug\n" + NO_REPORTS)
+"""
+    )
+    (grid / "bug.yaml").write_text(
+        "truth_dir: truth\nalgorithms_dir: algs\nresults_dir: bug\n" + NO_REPORTS
+    )
     # the profile is found next to the Snakefile only: name it, so jobs run in threads as usual
-    out = smk(grid, "--cores", "1", "--profile", str(ROOT / "profiles/default"), "all", config="bug.yaml",
-              snakefile=wrapper)
-    rows = {r["algorithm"] + "/" + r["run"]: r for r in csv.DictReader(open(grid / "bug/summary.csv"))}
+    out = smk(
+        grid,
+        "--cores",
+        "1",
+        "--profile",
+        str(ROOT / "profiles/default"),
+        "all",
+        config="bug.yaml",
+        snakefile=wrapper,
+    )
+    rows = {
+        r["algorithm"] + "/" + r["run"]: r for r in csv.DictReader(open(grid / "bug/summary.csv"))
+    }
     assert rows["vio_body/run2"]["status"] == "internal error: ZeroDivisionError: injected bug"
     assert [r["status"] for k, r in rows.items() if k.startswith("vio_")].count("ok") == 3
     assert "vio_body/handheld_office/run2: internal error: ZeroDivisionError: injected bug" in out
@@ -188,21 +303,38 @@ _chain.BY_NAME["sync"] = _chain.BY_NAME["sync"].__class__(**{**_chain.BY_NAME["s
     assert "failed upstream: internal error: ZeroDivisionError" in downstream
 
 
-@pytest.mark.skipif(shutil.which("sbatch") is not None, reason="runs a stand-in cluster, not a real one")
+@pytest.mark.skipif(
+    shutil.which("sbatch") is not None, reason="runs a stand-in cluster, not a real one"
+)
 def test_cluster_generic_executor_gives_the_local_tables(tmp_path):
     pytest.importorskip("snakemake_executor_plugin_cluster_generic")
     cwd = tmp_path
     simulate.simulate(cwd / "sim")
-    (cwd / "local.yaml").write_text("truth_dir: sim/truth\nalgorithms_dir: sim/algorithms\nresults_dir: local\n"
-                                    "grid: {max_batches: 3}\n" + NO_REPORTS)
-    (cwd / "cluster.yaml").write_text((cwd / "local.yaml").read_text().replace("results_dir: local",
-                                                                               "results_dir: cluster"))
+    (cwd / "local.yaml").write_text(
+        "truth_dir: sim/truth\nalgorithms_dir: sim/algorithms\nresults_dir: local\n"
+        "grid: {max_batches: 3}\n" + NO_REPORTS
+    )
+    (cwd / "cluster.yaml").write_text(
+        (cwd / "local.yaml").read_text().replace("results_dir: local", "results_dir: cluster")
+    )
     # a stand-in for sbatch: run the job script in the background, print a job id
     (cwd / "submit.sh").write_text('#!/bin/bash\nnohup bash "$1" > "$1.out" 2>&1 &\necho $!\n')
     (cwd / "submit.sh").chmod(0o755)
     smk(cwd, config="local.yaml")
-    smk(cwd, "--executor", "cluster-generic", "--cluster-generic-submit-cmd", str(cwd / "submit.sh"),
-        "--jobs", "2", "--seconds-between-status-checks", "1", "--latency-wait", "5", config="cluster.yaml")
+    smk(
+        cwd,
+        "--executor",
+        "cluster-generic",
+        "--cluster-generic-submit-cmd",
+        str(cwd / "submit.sh"),
+        "--jobs",
+        "2",
+        "--seconds-between-status-checks",
+        "1",
+        "--latency-wait",
+        "5",
+        config="cluster.yaml",
+    )
     for name in ("error_comparison.txt", "summary.csv"):
         assert (cwd / "cluster" / name).read_bytes() == (cwd / "local" / name).read_bytes()
 
@@ -211,9 +343,13 @@ def test_a_killed_run_resumes_to_the_same_tables(grid):
     import os
     import signal
 
-    (grid / "kill.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: killed\n" + NO_REPORTS)
+    (grid / "kill.yaml").write_text(
+        "truth_dir: truth\nalgorithms_dir: algs\nresults_dir: killed\n" + NO_REPORTS
+    )
     cmd = CMD + ["--directory", str(grid), "--configfile", str(grid / "kill.yaml"), "--quiet"]
-    proc = subprocess.Popen(cmd, cwd=grid, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    proc = subprocess.Popen(
+        cmd, cwd=grid, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
     deadline = time.time() + 120
     while len(list((grid / "killed").glob("batches/**/sync.json"))) < 2 and time.time() < deadline:
         time.sleep(0.05)
@@ -239,8 +375,13 @@ def test_names_with_spaces_unicode_and_symbols_run(tmp_path):
     simulate.simulate(tmp_path / "sim")
     shutil.copy(tmp_path / "sim/truth/handheld_office.txt", tmp_path / "truth" / f"{ds}.txt")
     (tmp_path / "algs" / alg / ds).mkdir(parents=True)
-    shutil.copy(tmp_path / "sim/algorithms/vio_body/handheld_office/run1.txt", tmp_path / "algs" / alg / ds / f"{run}.txt")
-    (tmp_path / "cfg.yaml").write_text("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\n")
+    shutil.copy(
+        tmp_path / "sim/algorithms/vio_body/handheld_office/run1.txt",
+        tmp_path / "algs" / alg / ds / f"{run}.txt",
+    )
+    (tmp_path / "cfg.yaml").write_text(
+        "truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\n"
+    )
     smk(tmp_path)
     row = next(csv.DictReader(open(tmp_path / "results/summary.csv", encoding="utf-8")))
     assert (row["algorithm"], row["dataset"], row["run"], row["status"]) == (alg, ds, run, "ok")
@@ -253,38 +394,58 @@ def test_bag_grid_with_per_source_settings(tmp_path):
     estimates of another algorithm, settings per source; changing one algorithm's settings re-runs
     only its cases."""
     from epa import io
-    from epa.readers import bags, text as text_reader
+    from epa.readers import bags
+    from epa.readers import text as text_reader
 
     simulate.simulate(tmp_path / "sim")
     sim = tmp_path / "sim"
     ref = text_reader.read_trajectory(sim / "truth/handheld_office.txt")
     est = text_reader.read_trajectory(sim / "algorithms/vio_body/handheld_office/run1.txt")
     (tmp_path / "truth").mkdir()
-    bags.write_bag(tmp_path / "truth/office_ros2", {"/vicon": ("geometry_msgs/msg/PoseStamped", ref)}, storage="sqlite3")
+    bags.write_bag(
+        tmp_path / "truth/office_ros2",
+        {"/vicon": ("geometry_msgs/msg/PoseStamped", ref)},
+        storage="sqlite3",
+    )
     # one ROS 1 bag holding ground truth and an estimate: the reference of one dataset and a run
     (tmp_path / "algs/bagged/office_ros1").mkdir(parents=True)
     both = tmp_path / "algs/bagged/office_ros1/run1.bag"
-    bags.write_bag(both, {"/gt": ("geometry_msgs/msg/PoseStamped", ref), "/odom": ("nav_msgs/msg/Odometry", est)})
+    bags.write_bag(
+        both,
+        {"/gt": ("geometry_msgs/msg/PoseStamped", ref), "/odom": ("nav_msgs/msg/Odometry", est)},
+    )
     (tmp_path / "truth/office_ros1.bag").symlink_to(both)
     for ds in ("office_ros1", "office_ros2"):
         (tmp_path / f"algs/text/{ds}").mkdir(parents=True)
         io.write_trajectory(tmp_path / f"algs/text/{ds}/run1.csv", est, "euroc")
-    base = ("truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\n" + NO_REPORTS + "sources:\n"
-            "  datasets:\n    office_ros2: {topic: /vicon}\n    office_ros1: {topic: /gt}\n"
-            "  algorithms:\n    text: {format: euroc}\n    bagged: {topic: %s}\n")
+    base = (
+        "truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\n" + NO_REPORTS + "sources:\n"
+        "  datasets:\n    office_ros2: {topic: /vicon}\n    office_ros1: {topic: /gt}\n"
+        "  algorithms:\n    text: {format: euroc}\n    bagged: {topic: %s}\n"
+    )
     (tmp_path / "cfg.yaml").write_text(base % "/odom")
     smk(tmp_path)
-    rows = {f"{r['algorithm']}/{r['dataset']}": r for r in csv.DictReader(open(tmp_path / "results/summary.csv"))}
+    rows = {
+        f"{r['algorithm']}/{r['dataset']}": r
+        for r in csv.DictReader(open(tmp_path / "results/summary.csv"))
+    }
     assert set(rows) == {"bagged/office_ros1", "text/office_ros1", "text/office_ros2"}
     assert all(r["status"] == "ok" for r in rows.values()), rows
     # the same estimate through three routes gives the same number
     ates = {k: float(r["ate_trans_rmse_m"]) for k, r in rows.items()}
     assert max(ates.values()) - min(ates.values()) < 1e-6, ates
-    load = json.loads((tmp_path / "results/cases/bagged/office_ros1/run1/01_load/load.json").read_text())
-    assert load["sources"]["estimate"]["topic"] == "/odom" and "bag topic /odom (Odometry, header stamps)" in load["est_notes"]
+    load = json.loads(
+        (tmp_path / "results/cases/bagged/office_ros1/run1/01_load/load.json").read_text()
+    )
+    assert (
+        load["sources"]["estimate"]["topic"] == "/odom"
+        and "bag topic /odom (Odometry, header stamps)" in load["est_notes"]
+    )
     assert "bag topic /gt (PoseStamped, header stamps)" in load["ref_notes"]
     # another topic for one algorithm: only its case re-runs
     (tmp_path / "cfg2.yaml").write_text(base % "/gt")
     plan = smk(tmp_path, "-n", config="cfg2.yaml")
     loads = re.findall(r"rule load:.*?wildcards: batch=(\S+)", plan, re.S)
-    assert loads == ["bagged_office_ros1_run1"] or (loads and all("bagged" in b for b in loads)), loads
+    assert loads == ["bagged_office_ros1_run1"] or (loads and all("bagged" in b for b in loads)), (
+        loads
+    )

@@ -28,24 +28,30 @@ class Similarity:
         r, p = self.apply_rp(traj.r, traj.p)
         extra = {} if traj.r_printed is None else {"r_printed": r}
         if traj.cov_rot is not None and traj.cov_pos is not None:
-            extra.update(cov_rot=traj.cov_rot, cov_pos=self.s ** 2 * self.R @ traj.cov_pos @ self.R.T)
+            extra.update(cov_rot=traj.cov_rot, cov_pos=self.s**2 * self.R @ traj.cov_pos @ self.R.T)
         return Trajectory.from_rp(traj.t, r, p, **extra)
 
     def apply_rp(self, r: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rotations (N, 3, 3) and positions (N, 3) in the target world frame."""
         return self.R @ r, self.s * p @ self.R.T + self.t
 
-    def inverse(self) -> "Similarity":
+    def inverse(self) -> Similarity:
         return Similarity(self.R.T, -self.R.T @ self.t / self.s, 1.0 / self.s)
 
     def to_dict(self) -> dict:
-        return {"rotation": self.R.tolist(), "translation": self.t.tolist(), "scale": float(self.s),
-                "quaternion_xyzw": geometry.rot_to_quat(self.R).tolist(),
-                "yaw_deg": float(np.degrees(np.arctan2(self.R[1, 0], self.R[0, 0])))}
+        return {
+            "rotation": self.R.tolist(),
+            "translation": self.t.tolist(),
+            "scale": float(self.s),
+            "quaternion_xyzw": geometry.rot_to_quat(self.R).tolist(),
+            "yaw_deg": float(np.degrees(np.arctan2(self.R[1, 0], self.R[0, 0]))),
+        }
 
     @staticmethod
-    def from_dict(d: dict) -> "Similarity":
-        return Similarity(np.asarray(d["rotation"], float), np.asarray(d["translation"], float), float(d["scale"]))
+    def from_dict(d: dict) -> Similarity:
+        return Similarity(
+            np.asarray(d["rotation"], float), np.asarray(d["translation"], float), float(d["scale"])
+        )
 
 
 IDENTITY = Similarity(np.eye(3), np.zeros(3), 1.0)
@@ -84,7 +90,11 @@ def fit(ref: Trajectory, est: Trajectory, *, method: str = "se3", first_n: int =
     n = len(ref) if first_n is None or first_n < 0 else min(first_n, len(ref))
     need = 2 if method == "posyaw" else 3
     if n < need:
-        what = f"align.first_n is {first_n} ({len(ref)} poses matched)" if n < len(ref) else f"only {n} poses matched"
+        what = (
+            f"align.first_n is {first_n} ({len(ref)} poses matched)"
+            if n < len(ref)
+            else f"only {n} poses matched"
+        )
         raise EpaError(f"align {method} needs at least {need} poses: {what}")
     src, dst = est.p[:n], ref.p[:n]
     _check_determined(src, dst, method, n)
@@ -104,13 +114,19 @@ def _check_determined(src: np.ndarray, dst: np.ndarray, method: str, n: int) -> 
     error) presented as a result: refuse it, naming what is degenerate."""
     axes = slice(0, 2) if method == "posyaw" else slice(0, 3)  # posyaw rotates about z only
     for name, pts in (("reference", dst), ("estimate", src)):
-        spread = float(np.sqrt(np.mean(np.sum((pts[:, axes] - pts[:, axes].mean(axis=0)) ** 2, axis=1))))
+        spread = float(
+            np.sqrt(np.mean(np.sum((pts[:, axes] - pts[:, axes].mean(axis=0)) ** 2, axis=1)))
+        )
         if spread < STILL_M:
             plane = " horizontally" if method == "posyaw" else ""
-            raise EpaError(f"the {name} does not move{plane} over the {n} poses used by align {method}"
-                           f" (spread {spread:.3g} m): the alignment is undetermined")
+            raise EpaError(
+                f"the {name} does not move{plane} over the {n} poses used by align {method}"
+                f" (spread {spread:.3g} m): the alignment is undetermined"
+            )
     if method in ("se3", "sim3"):
         d = np.linalg.svd((dst - dst.mean(axis=0)).T @ (src - src.mean(axis=0)), compute_uv=False)
         if d[1] <= COLLINEAR * d[0]:
-            raise EpaError(f"the {n} poses used by align {method} lie on one straight line: the rotation about"
-                           " it is undetermined (use align.method: posyaw, or more poses via align.first_n)")
+            raise EpaError(
+                f"the {n} poses used by align {method} lie on one straight line: the rotation about"
+                " it is undetermined (use align.method: posyaw, or more poses via align.first_n)"
+            )

@@ -17,7 +17,15 @@ from epa.metrics.accuracy import closest_pairs
 from epa.trajectory import Trajectory
 
 # What Step 2 concluded; anything but "trusted" means the extrinsic was not applied.
-STEP2_STATUS = ("trusted", "disabled", "not run", "too little motion", "unobservable", "large residual", "uncertain")
+STEP2_STATUS = (
+    "trusted",
+    "disabled",
+    "not run",
+    "too little motion",
+    "unobservable",
+    "large residual",
+    "uncertain",
+)
 
 
 @dataclass
@@ -43,7 +51,7 @@ class Extrinsic:
         if est.cov_rot is not None and est.cov_pos is not None:
             cov_rot = self.R @ est.cov_rot @ self.R.T
             lever = np.einsum("nab,bc->nac", r_b, geometry.skew(self.t))
-            cov_pos = self.scale ** 2 * est.cov_pos + lever @ cov_rot @ lever.transpose(0, 2, 1)
+            cov_pos = self.scale**2 * est.cov_pos + lever @ cov_rot @ lever.transpose(0, 2, 1)
             cov = {"cov_rot": cov_rot, "cov_pos": cov_pos}
         return Trajectory.from_rp(est.t, r_b, p_b, **cov)
 
@@ -52,18 +60,30 @@ class Extrinsic:
         return r_b @ self.R, (p_b + np.einsum("nab,b->na", r_b, self.t)) / self.scale
 
     @staticmethod
-    def from_dict(d: dict) -> "Extrinsic":
+    def from_dict(d: dict) -> Extrinsic:
         """The transform of a ``to_dict`` record (what calibrate.json holds)."""
-        return Extrinsic(R=np.asarray(d["rotation"], float), t=np.asarray(d["translation_m"], float),
-                         scale=float(d["scale"]), trusted=bool(d["trusted"]), reason=d["reason"],
-                         status=d.get("status", "trusted" if d["trusted"] else "untrusted"))
+        return Extrinsic(
+            R=np.asarray(d["rotation"], float),
+            t=np.asarray(d["translation_m"], float),
+            scale=float(d["scale"]),
+            trusted=bool(d["trusted"]),
+            reason=d["reason"],
+            status=d.get("status", "trusted" if d["trusted"] else "untrusted"),
+        )
 
     def to_dict(self) -> dict:
-        return {"trusted": self.trusted, "status": self.status, "reason": self.reason,
-                "rotation": self.R.tolist(), "quaternion_xyzw": geometry.rot_to_quat(self.R).tolist(),
-                "rotation_deg": float(np.degrees(geometry.rotation_angle(self.R))),
-                "translation_m": self.t.tolist(), "translation_norm_m": float(np.linalg.norm(self.t)),
-                "scale": float(self.scale), **self.info}
+        return {
+            "trusted": self.trusted,
+            "status": self.status,
+            "reason": self.reason,
+            "rotation": self.R.tolist(),
+            "quaternion_xyzw": geometry.rot_to_quat(self.R).tolist(),
+            "rotation_deg": float(np.degrees(geometry.rotation_angle(self.R))),
+            "translation_m": self.t.tolist(),
+            "translation_norm_m": float(np.linalg.norm(self.t)),
+            "scale": float(self.scale),
+            **self.info,
+        }
 
 
 def _kabsch(beta: np.ndarray, alpha: np.ndarray):
@@ -74,11 +94,23 @@ def _kabsch(beta: np.ndarray, alpha: np.ndarray):
     return vt.T @ np.diag([1.0, 1.0, d]) @ u.T, s
 
 
-def solve(ref: Trajectory, est: Trajectory, *, pair_step: float = 1.0, min_rotation_deg: float = 2.0,
-          scale: bool = False, max_rot_residual_deg: float = 2.0, max_trans_residual_m: float = 0.2,
-          max_condition: float = 100.0, min_pairs: int = 20, outlier_iterations: int = 3,
-          max_rot_std_deg: float = 1.0, max_trans_std_m: float = 0.05, max_scale_std: float = 0.02,
-          offset_std: float = 0.0) -> Extrinsic:
+def solve(
+    ref: Trajectory,
+    est: Trajectory,
+    *,
+    pair_step: float = 1.0,
+    min_rotation_deg: float = 2.0,
+    scale: bool = False,
+    max_rot_residual_deg: float = 2.0,
+    max_trans_residual_m: float = 0.2,
+    max_condition: float = 100.0,
+    min_pairs: int = 20,
+    outlier_iterations: int = 3,
+    max_rot_std_deg: float = 1.0,
+    max_trans_std_m: float = 0.05,
+    max_scale_std: float = 0.02,
+    offset_std: float = 0.0,
+) -> Extrinsic:
     """Hand-eye calibration over all pose pairs ``pair_step`` seconds apart (on matched poses),
     with the standard deviation of every parameter (:func:`_sandwich`) and the directions the
     motion leaves unobservable. Trusted only when everything is observed, the residuals are small
@@ -87,8 +119,14 @@ def solve(ref: Trajectory, est: Trajectory, *, pair_step: float = 1.0, min_rotat
     ``offset_std`` (s), Step 1's uncertainty, is carried into those deviations: a wrong offset
     pairs each estimate pose with a slightly different reference pose and bends the solution. The
     solve is repeated on the reference moved by +-offset_std and half the difference is added."""
-    fit = dict(pair_step=pair_step, min_rotation_deg=min_rotation_deg, scale=scale, max_condition=max_condition,
-               min_pairs=min_pairs, outlier_iterations=outlier_iterations)
+    fit = dict(
+        pair_step=pair_step,
+        min_rotation_deg=min_rotation_deg,
+        scale=scale,
+        max_condition=max_condition,
+        min_pairs=min_pairs,
+        outlier_iterations=outlier_iterations,
+    )
     ext, cov_rot, null_rot, cov_x, null_x = _fit(ref, est, **fit)
     if cov_rot is None:
         return ext
@@ -97,23 +135,49 @@ def solve(ref: Trajectory, est: Trajectory, *, pair_step: float = 1.0, min_rotat
         for sign in (1.0, -1.0):
             ends.append(_fit(ref.at(ref.t + sign * offset_std), est, **fit)[0])
         d_rot = geometry.so3_log(ends[0].R @ ends[1].R.T) / 2
-        d_x = (np.r_[ends[0].t, ends[0].scale] - np.r_[ends[1].t, ends[1].scale])[:len(cov_x)] / 2
+        d_x = (np.r_[ends[0].t, ends[0].scale] - np.r_[ends[1].t, ends[1].scale])[: len(cov_x)] / 2
         cov_rot, cov_x = cov_rot + np.outer(d_rot, d_rot), cov_x + np.outer(d_x, d_x)
         ext.info["offset_std_s"] = float(offset_std)
     ext.info.update(_uncertainty(cov_rot, null_rot, cov_x, null_x, scale))
-    return _verdict(ext, scale, max_rot_residual_deg, max_trans_residual_m, max_rot_std_deg, max_trans_std_m,
-                    max_scale_std)
+    return _verdict(
+        ext,
+        scale,
+        max_rot_residual_deg,
+        max_trans_residual_m,
+        max_rot_std_deg,
+        max_trans_std_m,
+        max_scale_std,
+    )
 
 
-def _fit(ref: Trajectory, est: Trajectory, *, pair_step, min_rotation_deg, scale, max_condition, min_pairs,
-         outlier_iterations):
+def _fit(
+    ref: Trajectory,
+    est: Trajectory,
+    *,
+    pair_step,
+    min_rotation_deg,
+    scale,
+    max_condition,
+    min_pairs,
+    outlier_iterations,
+):
     """The solve, and the covariances and unobservable directions of rotation and translation (all
     None when too little motion left nothing to solve)."""
     i, j = closest_pairs(ref.t - ref.t[0], pair_step, 0.25 * pair_step, strict=False, skip=1)
     info: dict = {"pairs": int(len(i)), "pair_step_s": pair_step}
     if len(i) < min_pairs:
-        return Extrinsic(trusted=False, reason=f"only {len(i)} motion pairs ({min_pairs} needed)",
-                         status="too little motion", info=info), None, None, None, None
+        return (
+            Extrinsic(
+                trusted=False,
+                reason=f"only {len(i)} motion pairs ({min_pairs} needed)",
+                status="too little motion",
+                info=info,
+            ),
+            None,
+            None,
+            None,
+            None,
+        )
     qa, ta = geometry.relative_motions(ref.q, ref.p, i, j)
     qb, tb = geometry.relative_motions(est.q, est.p, i, j)
     alpha, beta = geometry.quat_log(qa), geometry.quat_log(qb)
@@ -123,9 +187,19 @@ def _fit(ref: Trajectory, est: Trajectory, *, pair_step, min_rotation_deg, scale
     info["rotation_pairs"] = int(use.sum())
     info["excitation_rms_deg"] = float(np.sqrt(np.mean(angle[use] ** 2))) if use.any() else 0.0
     if use.sum() < min_pairs:
-        return Extrinsic(trusted=False, reason=f"too little rotation: {int(use.sum())} pairs rotate more than"
-                         f" {min_rotation_deg} deg ({min_pairs} needed)", status="too little motion",
-                         info=info), None, None, None, None
+        return (
+            Extrinsic(
+                trusted=False,
+                reason=f"too little rotation: {int(use.sum())} pairs rotate more than"
+                f" {min_rotation_deg} deg ({min_pairs} needed)",
+                status="too little motion",
+                info=info,
+            ),
+            None,
+            None,
+            None,
+            None,
+        )
     keep = use.copy()
     for _ in range(outlier_iterations + 1):
         r_x, sv = _kabsch(beta[keep], alpha[keep])
@@ -136,14 +210,19 @@ def _fit(ref: Trajectory, est: Trajectory, *, pair_step, min_rotation_deg, scale
             break
         keep = new_keep
     rot_rms = float(np.sqrt(np.mean(resid[keep] ** 2)))
-    info.update(rotation_inliers=int(keep.sum()), rotation_residual_rms_deg=rot_rms,
-                rotation_singular_values=sv.tolist(),
-                rotation_condition=float(sv[0] / sv[1]) if sv[1] > 0 else float("inf"))
+    info.update(
+        rotation_inliers=int(keep.sum()),
+        rotation_residual_rms_deg=rot_rms,
+        rotation_singular_values=sv.tolist(),
+        rotation_condition=float(sv[0] / sv[1]) if sv[1] > 0 else float("inf"),
+    )
     # Rotation covariance: residual alpha - Exp(d) R beta ~ r + [R beta]x d, perturbing R on the left
     # (body axes). Pairs overlap in time, so the residuals are grouped in blocks (see _sandwich).
     block = np.floor((ref.t[i] - ref.t[0]) / (2.0 * pair_step)).astype(int)
     jac_r = geometry.skew(beta[keep] @ r_x.T)
-    cov_rot, null_rot, _ = _sandwich(jac_r, alpha[keep] - beta[keep] @ r_x.T, block[keep], max_condition)
+    cov_rot, null_rot, _ = _sandwich(
+        jac_r, alpha[keep] - beta[keep] @ r_x.T, block[keep], max_condition
+    )
 
     # Translation (and scale): every pair, rotation now known.
     eye = np.eye(3)
@@ -158,8 +237,9 @@ def _fit(ref: Trajectory, est: Trajectory, *, pair_step, min_rotation_deg, scale
     info.update(tinfo)
     t_x = x[:3]
     s = float(x[3]) if scale else 1.0
-    cov_x, null_x, h_pinv = _sandwich(m[keep_t], np.einsum("kab,b->ka", m[keep_t], x) - b[keep_t], block[keep_t],
-                                      max_condition)
+    cov_x, null_x, h_pinv = _sandwich(
+        m[keep_t], np.einsum("kab,b->ka", m[keep_t], x) - b[keep_t], block[keep_t], max_condition
+    )
     # the rotation's own uncertainty moves R_X t_B: d(residual)/d(rotation) = s [R_X t_B]x
     lever = geometry.skew(s * rtb[keep_t])
     gain = h_pinv @ np.einsum("kai,kaj->ij", m[keep_t], lever)
@@ -167,31 +247,57 @@ def _fit(ref: Trajectory, est: Trajectory, *, pair_step, min_rotation_deg, scale
     return Extrinsic(R=r_x, t=t_x, scale=s, info=info), cov_rot, null_rot, cov_x, null_x
 
 
-def _verdict(ext: Extrinsic, scale: bool, max_rot_residual_deg, max_trans_residual_m, max_rot_std_deg,
-             max_trans_std_m, max_scale_std) -> Extrinsic:
+def _verdict(
+    ext: Extrinsic,
+    scale: bool,
+    max_rot_residual_deg,
+    max_trans_residual_m,
+    max_rot_std_deg,
+    max_trans_std_m,
+    max_scale_std,
+) -> Extrinsic:
     """Status, trust and reason of a solved extrinsic: unobservable, large residual, uncertain or trusted."""
     info, s, rot_rms = ext.info, ext.scale, ext.info["rotation_residual_rms_deg"]
     unobservable, residual, uncertain = [], [], []
-    relative_scale_std = [info["scale_std"] / abs(s)] if scale and s and info["scale_std"] is not None else []
+    relative_scale_std = (
+        [info["scale_std"] / abs(s)] if scale and s and info["scale_std"] is not None else []
+    )
     if info["rotation_unobservable_axes"]:
         unobservable.append("rotation about " + _axes(info["rotation_unobservable_axes"]))
     if info["translation_unobservable_directions"]:
-        unobservable.append("translation along " + _axes(info["translation_unobservable_directions"]))
+        unobservable.append(
+            "translation along " + _axes(info["translation_unobservable_directions"])
+        )
     if scale and (not np.isfinite(s) or s <= 0 or info["scale_unobservable"]):
         unobservable.append("scale")
     if rot_rms > max_rot_residual_deg:
         residual.append(f"rotation residual {rot_rms:.3g} deg > {max_rot_residual_deg}")
     if info["translation_residual_rms_m"] > max_trans_residual_m:
-        residual.append(f"translation residual {info['translation_residual_rms_m']:.3g} m > {max_trans_residual_m}")
-    for name, std, limit, unit in (("rotation", info["rotation_std_deg"], max_rot_std_deg, " deg"),
-                                   ("translation", info["translation_std_m"], max_trans_std_m, " m"),
-                                   ("relative scale", relative_scale_std, max_scale_std, "")):
+        residual.append(
+            f"translation residual {info['translation_residual_rms_m']:.3g} m > {max_trans_residual_m}"
+        )
+    for name, std, limit, unit in (
+        ("rotation", info["rotation_std_deg"], max_rot_std_deg, " deg"),
+        ("translation", info["translation_std_m"], max_trans_std_m, " m"),
+        ("relative scale", relative_scale_std, max_scale_std, ""),
+    ):
         worst = max((v for v in std if v is not None), default=0.0)
         if worst > limit:
             uncertain.append(f"{name} std {worst:.3g}{unit} > {limit}")
-    problems = (["unobservable: " + ", ".join(unobservable)] if unobservable else []) + residual + uncertain
-    ext.status = ("unobservable" if unobservable else "large residual" if residual else "uncertain" if uncertain
-                  else "trusted")
+    problems = (
+        (["unobservable: " + ", ".join(unobservable)] if unobservable else [])
+        + residual
+        + uncertain
+    )
+    ext.status = (
+        "unobservable"
+        if unobservable
+        else "large residual"
+        if residual
+        else "uncertain"
+        if uncertain
+        else "trusted"
+    )
     ext.trusted = not problems
     ext.reason = "; ".join(problems) if problems else "solved"
     return ext
@@ -245,16 +351,21 @@ def _sandwich(jac: np.ndarray, resid: np.ndarray, block: np.ndarray, max_conditi
 
 def _uncertainty(cov_rot, null_rot, cov_x, null_x, scale: bool) -> dict:
     """Per-axis standard deviations (None along an axis an unobservable direction touches)."""
+
     def per_axis(cov, null, factor=1.0):
         touched = (np.abs(null) > 0.1).any(axis=0) if len(null) else np.zeros(len(cov), bool)
         return [None if touched[k] else float(factor * np.sqrt(cov[k, k])) for k in range(len(cov))]
 
     rot = per_axis(cov_rot, null_rot, np.degrees(1.0))
     trans = per_axis(cov_x, null_x)
-    return {"rotation_std_deg": rot, "translation_std_m": trans[:3],
-            "scale_std": trans[3] if scale else None,
-            "rotation_unobservable_axes": [d.tolist() for d in null_rot],
-            "rotation_covariance_rad2": cov_rot.tolist(), "translation_covariance": cov_x.tolist()}
+    return {
+        "rotation_std_deg": rot,
+        "translation_std_m": trans[:3],
+        "scale_std": trans[3] if scale else None,
+        "rotation_unobservable_axes": [d.tolist() for d in null_rot],
+        "rotation_covariance_rad2": cov_rot.tolist(),
+        "translation_covariance": cov_x.tolist(),
+    }
 
 
 def _robust_lstsq(m: np.ndarray, b: np.ndarray, max_condition: float):
@@ -273,8 +384,15 @@ def _robust_lstsq(m: np.ndarray, b: np.ndarray, max_condition: float):
         keep = new_keep
     unobs_t = [d[:3].tolist() for d in null if np.linalg.norm(d[:3]) > 0.5]
     scale_unobs = bool(n == 4 and any(abs(d[3]) > 0.5 for d in null))
-    return x, keep, {"translation_singular_values": sv.tolist(),
-                     "translation_condition": float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"),
-                     "translation_unobservable_directions": unobs_t, "scale_unobservable": scale_unobs,
-                     "translation_inliers": int(keep.sum()),
-                     "translation_residual_rms_m": float(np.sqrt(np.mean(resid[keep] ** 2)))}
+    return (
+        x,
+        keep,
+        {
+            "translation_singular_values": sv.tolist(),
+            "translation_condition": float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"),
+            "translation_unobservable_directions": unobs_t,
+            "scale_unobservable": scale_unobs,
+            "translation_inliers": int(keep.sum()),
+            "translation_residual_rms_m": float(np.sqrt(np.mean(resid[keep] ** 2))),
+        },
+    )

@@ -14,7 +14,16 @@ from pathlib import Path
 from epa.errors import EpaError
 
 log = logging.getLogger("epa")
-SIDE_FILES = ("_times.txt", "times.txt", "_timing.txt", "_timing.csv", ".yaml", ".yml", ".md", ".json")  # not runs
+SIDE_FILES = (
+    "_times.txt",
+    "times.txt",
+    "_timing.txt",
+    "_timing.csv",
+    ".yaml",
+    ".yml",
+    ".md",
+    ".json",
+)  # not runs
 
 
 @dataclass(frozen=True)
@@ -37,7 +46,9 @@ def _trajectory_files(folder: Path, skipped: list[Path]):
         if p.name.startswith("."):
             continue  # hidden (.DS_Store, editor swap files): never data
         if p.is_dir():
-            (files if (p / "metadata.yaml").is_file() else skipped).append(p)  # a ROS 2 bag is a folder
+            (files if (p / "metadata.yaml").is_file() else skipped).append(
+                p
+            )  # a ROS 2 bag is a folder
         elif p.name.endswith(SIDE_FILES):
             continue  # a side file by the documented rule: expected, so not worth a warning
         elif p.is_file() or p.is_symlink():
@@ -58,7 +69,9 @@ def _folders(parent: Path, skipped: list[Path]):
             skipped.append(p)
 
 
-def discover(truth_dir, algorithms_dir, *, source: str | None = None) -> tuple[dict[str, Path], list[Case]]:
+def discover(
+    truth_dir, algorithms_dir, *, source: str | None = None
+) -> tuple[dict[str, Path], list[Case]]:
     """The reference per dataset and the cases. Everything not taken as a run or a reference (side
     files, stray files and folders at the wrong level, datasets without a reference) is named in a
     warning."""
@@ -71,7 +84,10 @@ def discover(truth_dir, algorithms_dir, *, source: str | None = None) -> tuple[d
     truth: dict[str, Path] = {}
     for p in _trajectory_files(truth_dir, skipped):
         if p.stem in truth:
-            raise EpaError(f"two reference files for dataset {p.stem!r} ({truth[p.stem].name}, {p.name})", path=str(p))
+            raise EpaError(
+                f"two reference files for dataset {p.stem!r} ({truth[p.stem].name}, {p.name})",
+                path=str(p),
+            )
         truth[p.stem] = p
     cases = []
     for alg in _folders(algorithms_dir, skipped):
@@ -82,14 +98,24 @@ def discover(truth_dir, algorithms_dir, *, source: str | None = None) -> tuple[d
             runs: dict[str, Path] = {}
             for run in _trajectory_files(ds, skipped):
                 if run.stem in runs:
-                    raise EpaError(f"two runs named {run.stem!r} ({runs[run.stem].name}, {run.name}): rename one",
-                                   path=str(run))
+                    raise EpaError(
+                        f"two runs named {run.stem!r} ({runs[run.stem].name}, {run.name}): rename one",
+                        path=str(run),
+                    )
                 runs[run.stem] = run
                 cases.append(Case(alg.name, ds.name, run.stem, run, truth[ds.name]))
     if skipped:
-        shown = ", ".join(str(p) for p in skipped[:5]) + (f" and {len(skipped) - 5} more" if len(skipped) > 5 else "")
-        log.warning("%d file(s) or folder(s) taken as neither a run nor a reference: %s", len(skipped), shown)
+        shown = ", ".join(str(p) for p in skipped[:5]) + (
+            f" and {len(skipped) - 5} more" if len(skipped) > 5 else ""
+        )
+        log.warning(
+            "%d file(s) or folder(s) taken as neither a run nor a reference: %s",
+            len(skipped),
+            shown,
+        )
     if not cases:
-        raise EpaError("no estimate matches a reference (expected <algorithm>/<dataset>/<run>.<ext>)",
-                       path=str(algorithms_dir))
+        raise EpaError(
+            "no estimate matches a reference (expected <algorithm>/<dataset>/<run>.<ext>)",
+            path=str(algorithms_dir),
+        )
     return truth, cases

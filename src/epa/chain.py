@@ -14,13 +14,13 @@ from __future__ import annotations
 import logging
 import os
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 from epa import alignment, calibration, io, pipeline, readers
-from epa.metrics import consistency
 from epa.errors import EpaError
+from epa.metrics import consistency
 
 log = logging.getLogger("epa")
 
@@ -44,8 +44,14 @@ class Stage:
 class CaseFolder:
     """Paths of one case's artifacts: ``<root>/<NN_stage>/<file>``."""
 
-    def __init__(self, root, truth=None, estimate=None, truth_source: dict | None = None,
-                 estimate_source: dict | None = None):
+    def __init__(
+        self,
+        root,
+        truth=None,
+        estimate=None,
+        truth_source: dict | None = None,
+        estimate_source: dict | None = None,
+    ):
         self.root = Path(root)
         self.truth, self.estimate = truth, estimate
         # each side's source settings (epa.readers.options); None: the load section's
@@ -82,12 +88,12 @@ def failure_of(path) -> str | None:
     with open(path, encoding="utf-8", errors="replace") as fh:
         head = fh.read(4096)
     if head.startswith(FAILED_PREFIX):
-        return head[len(FAILED_PREFIX):].splitlines()[0]
+        return head[len(FAILED_PREFIX) :].splitlines()[0]
     return None
 
 
 def write_failure(case: CaseFolder, stage: Stage, reason: str, *, tables: bool = True) -> None:
-    for name in (stage.artifacts() if tables else stage.records):
+    for name in stage.artifacts() if tables else stage.records:
         path = case.path(stage.name, name)
         if name.endswith(".json"):
             io.write_json(path, {"status": "failed", "reason": reason})
@@ -99,10 +105,14 @@ def write_failure(case: CaseFolder, stage: Stage, reason: str, *, tables: bool =
 # Every case of a dataset holds the same reference. A worker writes it once and hard-links it into
 # the other cases, and parses a file once per inode (an atomic rewrite makes a new inode, so a
 # cached parse is never stale). Measured: this halves the workflow's cost on 200 Hz references.
-_PARSED: OrderedDict = OrderedDict()  # (device, inode, mtime, size) -> Trajectory, least recent first
+_PARSED: OrderedDict = (
+    OrderedDict()
+)  # (device, inode, mtime, size) -> Trajectory, least recent first
 _PARSED_MAX = 64  # a few hundred MB at most for 200 Hz references, far less for most grids
 _WRITTEN: dict = {}  # reference source -> the file this process wrote it to
-_LOADED: OrderedDict = OrderedDict()  # reference source -> (Trajectory, load info) parsed from the user's file
+_LOADED: OrderedDict = (
+    OrderedDict()
+)  # reference source -> (Trajectory, load info) parsed from the user's file
 
 
 def _remember(cache: OrderedDict, key, value):
@@ -150,7 +160,10 @@ def _write_reference(path, ref, source_key) -> None:
 # absent, from the previous stage's artifacts; it leaves its own outputs in ``values``.
 def _trajectories(case, values, stage):
     if stage not in values:
-        values[stage] = (_read_tum(case.path(stage, "ref.tum")), _read_tum(case.path(stage, "est.tum")))
+        values[stage] = (
+            _read_tum(case.path(stage, "ref.tum")),
+            _read_tum(case.path(stage, "est.tum")),
+        )
     return values[stage]
 
 
@@ -189,9 +202,14 @@ def _load(case, values, cfg, write_tables):
     source = st and (os.path.abspath(case.truth), st.st_mtime_ns, st.st_size, repr(ref_opts))
     if source and source not in _LOADED:
         _remember(_LOADED, source, pipeline.load_reference(case.truth, cfg, ref_opts))
-    ref, est, info, timing = pipeline.load(case.truth, case.estimate, cfg,
-                                           reference=_LOADED.get(source) if source else None,
-                                           ref_opts=ref_opts, est_opts=est_opts)
+    ref, est, info, timing = pipeline.load(
+        case.truth,
+        case.estimate,
+        cfg,
+        reference=_LOADED.get(source) if source else None,
+        ref_opts=ref_opts,
+        est_opts=est_opts,
+    )
     values["load"], values["load/load.json"], values["load/timing"] = (ref, est), info, timing
     if write_tables:
         # the efficiency stage reads the run's timing from here, never from the user's folder
@@ -233,14 +251,21 @@ def _sync(case, values, cfg, write_tables):
 
 def _calibrate(case, values, cfg, write_tables):
     ref, est = _matched(case, values, "sync")
-    ref, est, info, pairs = pipeline.calibrate_stage(ref, est, cfg, _record(case, values, "sync", "sync.json"),
-                                                     cropped=lambda: _trajectories(case, values, "crop"))
+    ref, est, info, pairs = pipeline.calibrate_stage(
+        ref,
+        est,
+        cfg,
+        _record(case, values, "sync", "sync.json"),
+        cropped=lambda: _trajectories(case, values, "crop"),
+    )
     values["calibrate"], values["calibrate/calibrate.json"] = (ref, est), info
     values["calibrate/pairs"] = pairs if pairs is not None else _pair_indices(case, values, "sync")
     io.write_json(case.path("calibrate", "calibrate.json"), info)
     if write_tables:
         dst = case.path("calibrate", "pairs.csv")
-        if pairs is not None or not _link(case.path("sync", "pairs.csv"), dst):  # re-associated, or no links
+        if pairs is not None or not _link(
+            case.path("sync", "pairs.csv"), dst
+        ):  # re-associated, or no links
             ref_c, est_c = _trajectories(case, values, "crop")
             i_ref, i_est = pairs if pairs is not None else _pair_indices(case, values, "sync")
             io.write_pair_indices(dst, i_ref, i_est, ref_c.t, est_c.t)
@@ -262,7 +287,9 @@ def _calibrated(case, values):
 
 def _align(case, values, cfg, write_tables):
     ref, est = _calibrated(case, values)
-    aligned, info = pipeline.align_stage(ref, est, cfg, _record(case, values, "calibrate", "calibrate.json"))
+    aligned, info = pipeline.align_stage(
+        ref, est, cfg, _record(case, values, "calibrate", "calibrate.json")
+    )
     values["align"], values["align/transform.json"] = (ref, aligned), info
     io.write_json(case.path("align", "transform.json"), info)
     if write_tables:  # row k is matched with row k of 04_calibrate/pairs.csv
@@ -271,12 +298,19 @@ def _align(case, values, cfg, write_tables):
 
 def _metrics(case, values, cfg, write_tables):
     if "align" not in values:
-        values["align"] = (_matched(case, values, "calibrate")[0], _read_tum(case.path("align", "aligned.tum")))
+        values["align"] = (
+            _matched(case, values, "calibrate")[0],
+            _read_tum(case.path("align", "aligned.tum")),
+        )
     ref, est = values["align"]
     summary, tables = pipeline.metrics_stage(ref, est, cfg)
-    record = pipeline.case_record(_record(case, values, "load", "load.json"), _record(case, values, "sync", "sync.json"),
-                                  _record(case, values, "calibrate", "calibrate.json"),
-                                  _record(case, values, "align", "transform.json"), summary)
+    record = pipeline.case_record(
+        _record(case, values, "load", "load.json"),
+        _record(case, values, "sync", "sync.json"),
+        _record(case, values, "calibrate", "calibrate.json"),
+        _record(case, values, "align", "transform.json"),
+        summary,
+    )
     values["metrics"], values["metrics/metrics.json"] = tables, record
     if write_tables:
         for name in ("ape", "rpe_segments", "rpe_time"):
@@ -291,8 +325,10 @@ def _metrics(case, values, cfg, write_tables):
 
 def _drift(case, values, cfg, write_tables):
     if "metrics" not in values:
-        values["metrics"] = {name: io.read_csv(case.path("metrics", name + ".csv"))
-                             for name in ("ape", "rpe_segments", "rpe_time")}
+        values["metrics"] = {
+            name: io.read_csv(case.path("metrics", name + ".csv"))
+            for name in ("ape", "rpe_segments", "rpe_time")
+        }
     summary, artifacts = pipeline.drift_stage(values["metrics"], cfg)
     values["drift/drift.json"] = summary
     values["drift"] = artifacts
@@ -305,12 +341,18 @@ def _drift(case, values, cfg, write_tables):
 def _calibration_steps(case, values):
     """What Steps 2 and 3 did to the estimate: the applied extrinsic (or None) and the alignment."""
     calib = _record(case, values, "calibrate", "calibrate.json")
-    ext = calibration.Extrinsic.from_dict(calib["extrinsic"]) if calib["plan"]["apply_extrinsic"] else None
+    ext = (
+        calibration.Extrinsic.from_dict(calib["extrinsic"])
+        if calib["plan"]["apply_extrinsic"]
+        else None
+    )
     return ext, alignment.Similarity.from_dict(_record(case, values, "align", "transform.json"))
 
 
 def _consistency(case, values, cfg, write_tables):
-    ref_m, est_m = _matched(case, values, "calibrate")  # the estimate as read: its covariance is in its own frames
+    ref_m, est_m = _matched(
+        case, values, "calibrate"
+    )  # the estimate as read: its covariance is in its own frames
     extrinsic, align = _calibration_steps(case, values)
     summary, table = consistency.evaluate(ref_m, est_m, align, extrinsic)
     if summary.get("available") is False and summary.get("reason"):
@@ -337,8 +379,9 @@ def _efficiency(case, values, cfg, write_tables):
             t_est = io.read_csv(case.path("calibrate", "pairs.csv"))["t_est"]
         length = _record(case, values, "metrics", "metrics.json")["est_length_m"]
         dataset = Path(load["ref_file"]).stem  # discovery names a dataset by its reference's stem
-        summary, table = pipeline.efficiency_stage(t_est, values["metrics"]["ape"], length,
-                                                   (timing["t"], timing["frame_ms"]), dataset, cfg)
+        summary, table = pipeline.efficiency_stage(
+            t_est, values["metrics"]["ape"], length, (timing["t"], timing["frame_ms"]), dataset, cfg
+        )
     _store(case, values, "efficiency", summary, table, write_tables)
 
 
@@ -357,30 +400,62 @@ def _store(case, values, stage, summary, table, write_tables):
 def _report(case, values, cfg, write_tables):
     """10_report/: documents, figures and the case zip, from the artifacts (so only where they are written)."""
     if not cfg["report"]["per_case"] or not write_tables:
-        summary = {"available": False, "reason": "report.per_case is off" if write_tables else "no artifacts written"}
+        summary = {
+            "available": False,
+            "reason": "report.per_case is off" if write_tables else "no artifacts written",
+        }
     else:
         from epa.outputs import report
 
-        summary = {"available": True, **report.write_case_report(case, "/".join(case.root.parts[-3:]), cfg)}
+        summary = {
+            "available": True,
+            **report.write_case_report(case, "/".join(case.root.parts[-3:]), cfg),
+        }
     values["report/report.json"] = summary
     io.write_json(case.path("report", "report.json"), summary)
 
 
 STAGES: tuple[Stage, ...] = (
-    Stage("load", "01_load", ("load.json",), ("ref.tum", "est.tum", "timing.csv"), ("load",), _load),
+    Stage(
+        "load", "01_load", ("load.json",), ("ref.tum", "est.tum", "timing.csv"), ("load",), _load
+    ),
     Stage("crop", "02_crop", ("crop.json",), ("ref.tum", "est.tum"), ("crop",), _crop),
     Stage("sync", "03_sync", ("sync.json",), ("pairs.csv", "xcorr.csv"), ("mode", "sync"), _sync),
-    Stage("calibrate", "04_calibrate", ("calibrate.json",), ("pairs.csv", "est.tum"), ("mode", "sync", "calibrate"),
-          _calibrate),
+    Stage(
+        "calibrate",
+        "04_calibrate",
+        ("calibrate.json",),
+        ("pairs.csv", "est.tum"),
+        ("mode", "sync", "calibrate"),
+        _calibrate,
+    ),
     Stage("align", "05_align", ("transform.json",), ("aligned.tum",), ("mode", "align"), _align),
-    Stage("metrics", "06_metrics", ("metrics.json",), ("ape.csv", "rpe_segments.csv", "rpe_time.csv", "kitti_segments.csv"),
-          ("metrics",), _metrics),
-    Stage("drift", "07_drift", ("drift.json",),
-          ("fail_segments.csv", "pose_valid.csv", "rpe_segments_valid.csv", "rpe_time_valid.csv"),
-          ("drift", "metrics"), _drift),
+    Stage(
+        "metrics",
+        "06_metrics",
+        ("metrics.json",),
+        ("ape.csv", "rpe_segments.csv", "rpe_time.csv", "kitti_segments.csv"),
+        ("metrics",),
+        _metrics,
+    ),
+    Stage(
+        "drift",
+        "07_drift",
+        ("drift.json",),
+        ("fail_segments.csv", "pose_valid.csv", "rpe_segments_valid.csv", "rpe_time_valid.csv"),
+        ("drift", "metrics"),
+        _drift,
+    ),
     # consistency and efficiency report "available": false when there is no covariance / timing
     Stage("consistency", "08_consistency", ("consistency.json",), ("nees.csv",), (), _consistency),
-    Stage("efficiency", "09_efficiency", ("efficiency.json",), ("frames.csv",), ("efficiency",), _efficiency),
+    Stage(
+        "efficiency",
+        "09_efficiency",
+        ("efficiency.json",),
+        ("frames.csv",),
+        ("efficiency",),
+        _efficiency,
+    ),
     Stage("report", "10_report", ("report.json",), (), ("report",), _report),
 )
 BY_NAME = {s.name: s for s in STAGES}
@@ -397,16 +472,30 @@ def previous(stage: str) -> str | None:
     return NAMES[k - 1] if k else None
 
 
-def run_stage(stage: str, case: CaseFolder, cfg: dict, values: dict | None = None, *,
-              write_tables: bool = True) -> None:
+def run_stage(
+    stage: str,
+    case: CaseFolder,
+    cfg: dict,
+    values: dict | None = None,
+    *,
+    write_tables: bool = True,
+) -> None:
     """One stage for one case. Raises EpaError for a user mistake; any other exception is a bug."""
     st = BY_NAME[stage]
     st.run(case, {} if values is None else values, settings_for(stage, cfg), write_tables)
 
 
-def run_case(ref_path, est_path, out_dir, cfg: dict, *, write_tables: bool = False,
-             on_stage: Callable[[str], None] | None = None, ref_source: dict | None = None,
-             est_source: dict | None = None) -> dict:
+def run_case(
+    ref_path,
+    est_path,
+    out_dir,
+    cfg: dict,
+    *,
+    write_tables: bool = False,
+    on_stage: Callable[[str], None] | None = None,
+    ref_source: dict | None = None,
+    est_source: dict | None = None,
+) -> dict:
     """Every stage for one case in this process (``epa eval``); returns metrics.json and drift.json.
     A user mistake raises EpaError after the failed stage's markers are written."""
     case = CaseFolder(out_dir, ref_path, est_path, ref_source, est_source)
@@ -421,8 +510,12 @@ def run_case(ref_path, est_path, out_dir, cfg: dict, *, write_tables: bool = Fal
             if exc.path is None:  # a stage's finding about the case: name the estimate it is about
                 raise EpaError(f"{st.name}: {exc.message}", path=str(est_path)) from None
             raise
-    return {"metrics": values["metrics/metrics.json"], "drift": values["drift/drift.json"],
-            "consistency": values["consistency/consistency.json"], "efficiency": values["efficiency/efficiency.json"]}
+    return {
+        "metrics": values["metrics/metrics.json"],
+        "drift": values["drift/drift.json"],
+        "consistency": values["consistency/consistency.json"],
+        "efficiency": values["efficiency/efficiency.json"],
+    }
 
 
 def clear_tables(case: CaseFolder) -> None:

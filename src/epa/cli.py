@@ -20,13 +20,23 @@ def _parser() -> argparse.ArgumentParser:
     e = sub.add_parser("eval", help="evaluate one estimate against one reference")
     e.add_argument("ref", help="reference trajectory file")
     e.add_argument("est", help="estimated trajectory file")
-    e.add_argument("--out", required=True,
-                   help="output folder, laid out as a workflow case folder (06_metrics/metrics.json, 07_drift/drift.json, ...)")
-    e.add_argument("--artifacts", action="store_true",
-                   help="also write the per-pose and per-pair files (pairs.csv, ape.csv, ...) as the workflow does")
+    e.add_argument(
+        "--out",
+        required=True,
+        help="output folder, laid out as a workflow case folder (06_metrics/metrics.json, 07_drift/drift.json, ...)",
+    )
+    e.add_argument(
+        "--artifacts",
+        action="store_true",
+        help="also write the per-pose and per-pair files (pairs.csv, ape.csv, ...) as the workflow does",
+    )
     e.add_argument("-v", "--verbose", action="store_true", help="print each stage and its time")
-    e.add_argument("--config", help="YAML with stage settings (the workflow's keys: sync, align, ...)")
-    e.add_argument("--mode", choices=["epa", "ov_eval"], help="ov_eval: no Step 1/2, one-to-one 0.02 s")
+    e.add_argument(
+        "--config", help="YAML with stage settings (the workflow's keys: sync, align, ...)"
+    )
+    e.add_argument(
+        "--mode", choices=["epa", "ov_eval"], help="ov_eval: no Step 1/2, one-to-one 0.02 s"
+    )
     e.add_argument("--align", choices=["se3", "sim3", "posyaw", "none"], help="Step 3 method")
     e.add_argument("--first-n", type=int, help="align on the first N matched poses")
     e.add_argument("--policy", choices=["ov_eval", "evo"], help="association policy")
@@ -44,30 +54,57 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--est-topic", help="estimate bag topic (may be another topic of the same bag)")
     e.add_argument("--ref-frames", nargs=2, metavar=("PARENT", "CHILD"), help="reference TF frames")
     e.add_argument("--est-frames", nargs=2, metavar=("PARENT", "CHILD"), help="estimate TF frames")
-    e.add_argument("--stamp", choices=["header", "record"], help="bag stamps: message header (default) or record time")
-    e.add_argument("--report", action="store_true",
-                   help="also write 10_report/ (reports, figures; implies --artifacts, imports matplotlib)")
-    e.add_argument("--rerun", action="store_true",
-                   help='also write a Rerun recording 10_report/<name>.rrd (implies --report; pip install "epica[rerun]")')
-    e.add_argument("--timing", help="per-frame timing file of the estimate (default: <est>_timing.txt|csv beside it)")
-    e.add_argument("--rate", type=float, help="sensor rate (Hz) for EA-Drift (default: from the timing file)")
+    e.add_argument(
+        "--stamp",
+        choices=["header", "record"],
+        help="bag stamps: message header (default) or record time",
+    )
+    e.add_argument(
+        "--report",
+        action="store_true",
+        help="also write 10_report/ (reports, figures; implies --artifacts, imports matplotlib)",
+    )
+    e.add_argument(
+        "--rerun",
+        action="store_true",
+        help='also write a Rerun recording 10_report/<name>.rrd (implies --report; pip install "epica[rerun]")',
+    )
+    e.add_argument(
+        "--timing",
+        help="per-frame timing file of the estimate (default: <est>_timing.txt|csv beside it)",
+    )
+    e.add_argument(
+        "--rate", type=float, help="sensor rate (Hz) for EA-Drift (default: from the timing file)"
+    )
 
-    tr = sub.add_parser("traj", help="what is in a trajectory file or bag; export a topic to TUM or CSV")
+    tr = sub.add_parser(
+        "traj", help="what is in a trajectory file or bag; export a topic to TUM or CSV"
+    )
     tr.add_argument("source", help="text trajectory file, .bag, .mcap or ROS 2 bag folder")
     tr.add_argument("--topic", help="bag topic to read (without: list the bag's topics)")
-    tr.add_argument("--frames", nargs=2, metavar=("PARENT", "CHILD"), help="TF frames (with --topic /tf)")
+    tr.add_argument(
+        "--frames", nargs=2, metavar=("PARENT", "CHILD"), help="TF frames (with --topic /tf)"
+    )
     tr.add_argument("--stamp", choices=["header", "record"], default="header")
-    tr.add_argument("--format", default="auto", help="text format (auto, tum, kitti, euroc, openvins, csv)")
+    tr.add_argument(
+        "--format", default="auto", help="text format (auto, tum, kitti, euroc, openvins, csv)"
+    )
     tr.add_argument("--export", help="write the trajectory to FILE: TUM (.txt, .tum) or CSV (.csv)")
 
-    f = sub.add_parser("fig", help="render a plot bundle again (another style or size), recomputing nothing")
+    f = sub.add_parser(
+        "fig", help="render a plot bundle again (another style or size), recomputing nothing"
+    )
     f.add_argument("bundle", help="a bundle .json (10_report/bundles/, results/figures/bundles/)")
     f.add_argument("--out", required=True, help="output path without extension")
     f.add_argument("--style", default="paper", help="paper (3.5 in column), wide (7 in), slide")
-    f.add_argument("--width", type=float, help="width in inches (the height follows the style's proportions)")
+    f.add_argument(
+        "--width", type=float, help="width in inches (the height follows the style's proportions)"
+    )
     f.add_argument("--pdf", action="store_true", help="also write a vector PDF")
 
-    c = sub.add_parser("config", help="every setting: the defaults, or the effective settings of a config file")
+    c = sub.add_parser(
+        "config", help="every setting: the defaults, or the effective settings of a config file"
+    )
     c.add_argument("config", nargs="?", help="a config YAML (without it: the defaults)")
 
     from epa import cli_evo
@@ -75,11 +112,19 @@ def _parser() -> argparse.ArgumentParser:
     cli_evo.add_parsers(sub)
     cli_evo.add_res_parser(sub)
 
-    st = sub.add_parser("selftest", help="how well Steps 1-2 recover known offsets and extrinsics on a reference's own"
-                                         " motion")
-    st.add_argument("reference", help="the reference trajectory (a text file, or a bag with --config's sources)")
-    st.add_argument("--config", help="a config YAML: its load, sources, sync and calibrate settings are used")
-    st.add_argument("--rate", type=float, default=20.0, help="pose rate of the simulated estimates (Hz)")
+    st = sub.add_parser(
+        "selftest",
+        help="how well Steps 1-2 recover known offsets and extrinsics on a reference's own motion",
+    )
+    st.add_argument(
+        "reference", help="the reference trajectory (a text file, or a bag with --config's sources)"
+    )
+    st.add_argument(
+        "--config", help="a config YAML: its load, sources, sync and calibrate settings are used"
+    )
+    st.add_argument(
+        "--rate", type=float, default=20.0, help="pose rate of the simulated estimates (Hz)"
+    )
     st.add_argument("--trials", type=int, default=5, help="trials per noise level")
     st.add_argument("--scale", action="store_true", help="simulate and solve a scale (monocular)")
     st.add_argument("--seed", type=int, default=0)
@@ -97,21 +142,32 @@ def _eval_config(args) -> dict:
     if args.config:
         cfg.update(settings.load_yaml(args.config))
     overrides = {
-        ("mode",): args.mode, ("align", "method"): args.align, ("align", "first_n"): args.first_n,
-        ("sync", "policy"): args.policy, ("sync", "max_diff"): args.max_diff, ("sync", "offset"): args.offset,
-        ("metrics", "segments"): args.segments, ("load", "truth_format"): args.ref_format,
-        ("load", "estimate_format"): args.est_format, ("load", "unsorted"): args.unsorted,
+        ("mode",): args.mode,
+        ("align", "method"): args.align,
+        ("align", "first_n"): args.first_n,
+        ("sync", "policy"): args.policy,
+        ("sync", "max_diff"): args.max_diff,
+        ("sync", "offset"): args.offset,
+        ("metrics", "segments"): args.segments,
+        ("load", "truth_format"): args.ref_format,
+        ("load", "estimate_format"): args.est_format,
+        ("load", "unsorted"): args.unsorted,
         ("load", "time_unit"): args.time_unit,
         ("sync", "estimate_offset"): False if args.no_offset_estimate else None,
         ("calibrate", "enabled"): False if args.no_calibrate else None,
         ("calibrate", "scale"): True if args.scale else None,
-        ("load", "stamp"): args.stamp, ("efficiency", "sensor_rate_hz"): args.rate,
-        ("report", "per_case"): bool(args.report or args.rerun),  # epa eval stays free of matplotlib unless asked
+        ("load", "stamp"): args.stamp,
+        ("efficiency", "sensor_rate_hz"): args.rate,
+        ("report", "per_case"): bool(
+            args.report or args.rerun
+        ),  # epa eval stays free of matplotlib unless asked
         ("report", "rerun"): True if args.rerun else None,
-        ("sources", "reference", "topic"): args.ref_topic, ("sources", "reference", "frames"): args.ref_frames,
+        ("sources", "reference", "topic"): args.ref_topic,
+        ("sources", "reference", "frames"): args.ref_frames,
         ("sources", "algorithms", EVAL_ALGORITHM, "topic"): args.est_topic,
         ("sources", "algorithms", EVAL_ALGORITHM, "frames"): args.est_frames,
-        ("sources", "algorithms", EVAL_ALGORITHM, "timing"): args.timing and str(Path(args.timing).resolve()),
+        ("sources", "algorithms", EVAL_ALGORITHM, "timing"): args.timing
+        and str(Path(args.timing).resolve()),
     }
     for keys, value in overrides.items():
         if value is None:
@@ -130,7 +186,11 @@ def _input_bytes(path) -> int:
     """Bytes of a file, or of a folder's files (a ROS 2 bag); 0 when it is missing (load reports that)."""
     p = Path(path)
     try:
-        return sum(f.stat().st_size for f in p.iterdir() if f.is_file()) if p.is_dir() else p.stat().st_size
+        return (
+            sum(f.stat().st_size for f in p.iterdir() if f.is_file())
+            if p.is_dir()
+            else p.stat().st_size
+        )
     except OSError:
         return 0
 
@@ -158,8 +218,11 @@ def _config_listing(path) -> str:
     effective = _flat(settings.resolve(settings.load_yaml(path), source=str(path)))
     lines = []
     for k, v in effective.items():
-        note = "" if k in defaults and defaults[k] == v else (
-            f"  # set (default {json.dumps(defaults[k])})" if k in defaults else "  # set")
+        note = (
+            ""
+            if k in defaults and defaults[k] == v
+            else (f"  # set (default {json.dumps(defaults[k])})" if k in defaults else "  # set")
+        )
         lines.append(f"{k}: {json.dumps(v)}{note}\n")
     return "".join(lines)
 
@@ -179,8 +242,10 @@ def _eval(args) -> None:
     size_mb = sum(_input_bytes(p) for p in (args.ref, args.est)) / 1e6
     progress = args.verbose or size_mb >= LARGE_INPUT_MB
     if progress and not args.verbose:
-        print(f"epa: {size_mb:.0f} MB of input: each stage is printed as it starts, with its time when done",
-              file=sys.stderr)
+        print(
+            f"epa: {size_mb:.0f} MB of input: each stage is printed as it starts, with its time when done",
+            file=sys.stderr,
+        )
 
     def on_stage(name):
         now = time.perf_counter()
@@ -192,22 +257,34 @@ def _eval(args) -> None:
 
     from epa import readers
 
-    result = chain.run_case(args.ref, args.est, args.out, cfg, write_tables=args.artifacts or args.report or args.rerun,
-                            on_stage=on_stage,
-                            ref_source=readers.options(cfg, "reference"),
-                            est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM))
+    result = chain.run_case(
+        args.ref,
+        args.est,
+        args.out,
+        cfg,
+        write_tables=args.artifacts or args.report or args.rerun,
+        on_stage=on_stage,
+        ref_source=readers.options(cfg, "reference"),
+        est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM),
+    )
     on_stage(None)
     record = result["metrics"]
     ate = record["ate"]["trans_m"]["rmse"]
-    print(f"{record['n_matched']} poses matched, eval_source {record['eval_source']}, "
-          f"ATE rmse {ate:.4f} m -> {out.path('metrics', 'metrics.json')}")
+    print(
+        f"{record['n_matched']} poses matched, eval_source {record['eval_source']}, "
+        f"ATE rmse {ate:.4f} m -> {out.path('metrics', 'metrics.json')}"
+    )
     c, e = result["consistency"], result["efficiency"]
     if c.get("available"):
-        print(f"NEES orientation {c['nees_rot_mean']:.3f}, position {c['nees_pos_mean']:.3f} (3 = consistent),"
-              f" {c['outside_3sigma_pct']:.2f} % outside 3 sigma")
+        print(
+            f"NEES orientation {c['nees_rot_mean']:.3f}, position {c['nees_pos_mean']:.3f} (3 = consistent),"
+            f" {c['outside_3sigma_pct']:.2f} % outside 3 sigma"
+        )
     if e.get("available"):
-        print(f"frame time mean {e['frame_time_mean_ms']:.2f} ms (p95 {e['frame_time_p95_ms']:.2f}),"
-              f" EA-Drift {e['ea_drift']:.4f} % (seed formula {e['ea_drift_seed']:.4f} %)")
+        print(
+            f"frame time mean {e['frame_time_mean_ms']:.2f} ms (p95 {e['frame_time_p95_ms']:.2f}),"
+            f" EA-Drift {e['ea_drift']:.4f} % (seed formula {e['ea_drift_seed']:.4f} %)"
+        )
 
 
 def _traj(args) -> None:
@@ -219,14 +296,23 @@ def _traj(args) -> None:
         print(f"{args.source}: {len(infos)} topics")
         width = max([len(i.topic) for i in infos] + [5])
         for i in infos:
-            span = "" if i.start_s is None else f"{i.end_s - i.start_s:9.3f} s  {i.start_s:.6f} .. {i.end_s:.6f}"
+            span = (
+                ""
+                if i.start_s is None
+                else f"{i.end_s - i.start_s:9.3f} s  {i.start_s:.6f} .. {i.end_s:.6f}"
+            )
             mark = "*" if i.supported else " "
             print(f" {mark} {i.topic:<{width}}  {i.msgtype:<45} {i.count:8d} msgs  {span}".rstrip())
         print("   (* a pose type: read it with --topic, TF with --topic /tf --frames PARENT CHILD)")
         return
     # a source at the configured defaults, with what the command line names
-    opts = {**readers.options(settings.defaults(), "reference"), "format": args.format, "topic": args.topic,
-            "frames": args.frames, "stamp": args.stamp}
+    opts = {
+        **readers.options(settings.defaults(), "reference"),
+        "format": args.format,
+        "topic": args.topic,
+        "frames": args.frames,
+        "stamp": args.stamp,
+    }
     notes: list[str] = []
     traj = readers.read(args.source, opts, notes=notes)
     print(readers.describe(args.source, traj, notes))
@@ -234,7 +320,9 @@ def _traj(args) -> None:
         out = args.export
         fmt = {".txt": "tum", ".tum": "tum", ".csv": "csv"}.get(Path(out).suffix.lower())
         if fmt is None:
-            raise EpaError("export to .txt or .tum (TUM) or .csv (CSV with named columns)", path=out)
+            raise EpaError(
+                "export to .txt or .tum (TUM) or .csv (CSV with named columns)", path=out
+            )
         io.write_trajectory(out, traj, fmt)
         print(f"wrote {len(traj)} poses to {out} ({fmt})")
 
@@ -251,8 +339,14 @@ def _selftest(args) -> None:
     ref, _ = pipeline.load_reference(args.reference, cfg)
     if args.trials < 1 or args.rate <= 0:
         raise EpaError("--trials must be at least 1 and --rate positive")
-    print(selftest.report(selftest.run(ref, cfg, trials=args.trials, rate=args.rate, seed=args.seed),
-                          Path(args.reference).name, args.rate), end="")
+    print(
+        selftest.report(
+            selftest.run(ref, cfg, trials=args.trials, rate=args.rate, seed=args.seed),
+            Path(args.reference).name,
+            args.rate,
+        ),
+        end="",
+    )
 
 
 def main(argv=None) -> int:
@@ -264,8 +358,13 @@ def main(argv=None) -> int:
         elif args.command == "fig":
             from epa.outputs import figures
 
-            written = figures.render(figures.read_bundle(args.bundle), args.out, style=args.style, width=args.width,
-                                     formats=("png", "pdf") if args.pdf else ("png",))
+            written = figures.render(
+                figures.read_bundle(args.bundle),
+                args.out,
+                style=args.style,
+                width=args.width,
+                formats=("png", "pdf") if args.pdf else ("png",),
+            )
             print("wrote " + ", ".join(map(str, written)))
         elif args.command == "traj":
             _traj(args)
@@ -285,7 +384,9 @@ def main(argv=None) -> int:
             from epa import simulate
 
             manifest = simulate.simulate(args.out, seed=args.seed)
-            print(f"wrote {len(manifest['cases'])} estimates and {len(simulate.SEQUENCES)} references to {args.out}")
+            print(
+                f"wrote {len(manifest['cases'])} estimates and {len(simulate.SEQUENCES)} references to {args.out}"
+            )
     except EpaError as exc:
         print(f"epa: error: {exc.one_line()}", file=sys.stderr)
         return 2

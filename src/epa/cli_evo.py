@@ -15,9 +15,14 @@ from pathlib import Path
 
 from epa.errors import EpaError
 
-FORMS = {"tum": ("ref_file", "est_file"), "euroc": ("state_gt_csv", "est_file"), "kitti": ("ref_file", "est_file"),
-         "bag": ("bag", "ref_topic", "est_topic"), "bag2": ("bag", "ref_topic", "est_topic"),
-         "mcap": ("bag", "ref_topic", "est_topic")}
+FORMS = {
+    "tum": ("ref_file", "est_file"),
+    "euroc": ("state_gt_csv", "est_file"),
+    "kitti": ("ref_file", "est_file"),
+    "bag": ("bag", "ref_topic", "est_topic"),
+    "bag2": ("bag", "ref_topic", "est_topic"),
+    "mcap": ("bag", "ref_topic", "est_topic"),
+}
 RESULT_FORMAT = "epica-result/1"
 TF_LOOKUP_HZ = 10.0  # evo's setting tf_cache_lookup_frequency
 
@@ -25,61 +30,122 @@ TF_LOOKUP_HZ = 10.0  # evo's setting tf_cache_lookup_frequency
 def add_parsers(sub) -> None:
     for kind in ("ape", "rpe"):
         title = "absolute pose error" if kind == "ape" else "relative pose error"
-        p = sub.add_parser(kind, help=f"{title} with evo's command line (evo_{kind}'s forms, options and printout)")
-        forms = p.add_subparsers(dest="form", required=True, metavar="{tum,euroc,kitti,bag,bag2,mcap}")
+        p = sub.add_parser(
+            kind, help=f"{title} with evo's command line (evo_{kind}'s forms, options and printout)"
+        )
+        forms = p.add_subparsers(
+            dest="form", required=True, metavar="{tum,euroc,kitti,bag,bag2,mcap}"
+        )
         for form, positionals in FORMS.items():
             f = forms.add_parser(form, help=f"{' '.join(x.upper() for x in positionals)}")
             for name in positionals:
                 f.add_argument(name)
             _add_options(f, kind, timed=form != "kitti")
             if form in ("bag", "bag2", "mcap"):
-                f.add_argument("--tf_cache_lookup_frequency", type=float, default=TF_LOOKUP_HZ,
-                               help="a TF id (/tf:parent.child) is looked up at this rate (Hz), from the first "
-                                    "TF message on, as evo's setting of that name (default: 10)")
+                f.add_argument(
+                    "--tf_cache_lookup_frequency",
+                    type=float,
+                    default=TF_LOOKUP_HZ,
+                    help="a TF id (/tf:parent.child) is looked up at this rate (Hz), from the first "
+                    "TF message on, as evo's setting of that name (default: 10)",
+                )
 
 
 def _add_options(f, kind: str, timed: bool) -> None:
     from epa.metrics import relations
 
     choices = list(relations.RELATIONS) if kind == "rpe" else list(relations.RELATIONS[:-1])
-    f.add_argument("-r", "--pose_relation", default="trans_part", choices=choices,
-                   help="pose relation the error is based on (default: trans_part)")
+    f.add_argument(
+        "-r",
+        "--pose_relation",
+        default="trans_part",
+        choices=choices,
+        help="pose relation the error is based on (default: trans_part)",
+    )
     group = f.add_mutually_exclusive_group()
     group.add_argument("-a", "--align", action="store_true", help="Umeyama SE(3) alignment")
     group.add_argument("--align_origin", action="store_true", help="align the first poses")
-    f.add_argument("-s", "--correct_scale", action="store_true", help="with -a: Sim(3); alone: the scale only")
-    f.add_argument("--n_to_align", type=int, default=-1, help="align on the first N poses (default: all)")
-    f.add_argument("--project_to_plane", choices=["xy", "xz", "yz"], help="project both to a plane after aligning")
+    f.add_argument(
+        "-s", "--correct_scale", action="store_true", help="with -a: Sim(3); alone: the scale only"
+    )
+    f.add_argument(
+        "--n_to_align", type=int, default=-1, help="align on the first N poses (default: all)"
+    )
+    f.add_argument(
+        "--project_to_plane",
+        choices=["xy", "xz", "yz"],
+        help="project both to a plane after aligning",
+    )
     if kind == "rpe":
-        f.add_argument("-d", "--delta", type=float, default=1, help="delta between the poses of a pair")
-        f.add_argument("-u", "--delta_unit", default="f", choices=["f", "d", "r", "m"],
-                       help="unit of delta: f frames, d degrees, r radians, m metres")
-        f.add_argument("-t", "--delta_tol", type=float, default=0.1, help="relative delta tolerance (all pairs)")
-        f.add_argument("--all_pairs", action="store_true", help="all pairs instead of consecutive pairs")
-        f.add_argument("--pairs_from_reference", action="store_true", help="choose the pairs on the reference")
+        f.add_argument(
+            "-d", "--delta", type=float, default=1, help="delta between the poses of a pair"
+        )
+        f.add_argument(
+            "-u",
+            "--delta_unit",
+            default="f",
+            choices=["f", "d", "r", "m"],
+            help="unit of delta: f frames, d degrees, r radians, m metres",
+        )
+        f.add_argument(
+            "-t",
+            "--delta_tol",
+            type=float,
+            default=0.1,
+            help="relative delta tolerance (all pairs)",
+        )
+        f.add_argument(
+            "--all_pairs", action="store_true", help="all pairs instead of consecutive pairs"
+        )
+        f.add_argument(
+            "--pairs_from_reference", action="store_true", help="choose the pairs on the reference"
+        )
     if timed:
         f.add_argument("--t_max_diff", type=float, default=0.01, help="association tolerance (s)")
-        f.add_argument("--t_offset", type=float, default=0.0, help="added to the estimate's stamps (s)")
+        f.add_argument(
+            "--t_offset", type=float, default=0.0, help="added to the estimate's stamps (s)"
+        )
         f.add_argument("--t_start", type=float, help="use reference poses from this stamp (s)")
         f.add_argument("--t_end", type=float, help="use reference poses up to this stamp (s)")
-        f.add_argument("--sync_method", default="nearest_time", choices=["nearest_time", "interpolation"])
-        f.add_argument("--step1", action="store_true",
-                       help="epica: estimate the time offset (Step 1) and add it to --t_offset")
-    f.add_argument("--unsorted", default="error", choices=["error", "sort", "keep"],
-                   help="repeated or backward stamps: stop (default), sort and drop repeats, or keep repeats (evo)")
+        f.add_argument(
+            "--sync_method", default="nearest_time", choices=["nearest_time", "interpolation"]
+        )
+        f.add_argument(
+            "--step1",
+            action="store_true",
+            help="epica: estimate the time offset (Step 1) and add it to --t_offset",
+        )
+    f.add_argument(
+        "--unsorted",
+        default="error",
+        choices=["error", "sort", "keep"],
+        help="repeated or backward stamps: stop (default), sort and drop repeats, or keep repeats (evo)",
+    )
     f.add_argument("--save_results", help="write the result: FILE.zip (as evo) or FILE.json")
     f.add_argument("--silent", action="store_true", help="do not print the statistics block")
 
 
 def _read(args, which: str):
     bag = args.form in ("bag", "bag2", "mcap")
-    return read_source(args.form, args.bag if bag else _path(args, which),
-                       getattr(args, f"{which}_topic") if bag else None, reference=which == "ref",
-                       unsorted=args.unsorted, tf_rate=getattr(args, "tf_cache_lookup_frequency", TF_LOOKUP_HZ))
+    return read_source(
+        args.form,
+        args.bag if bag else _path(args, which),
+        getattr(args, f"{which}_topic") if bag else None,
+        reference=which == "ref",
+        unsorted=args.unsorted,
+        tf_rate=getattr(args, "tf_cache_lookup_frequency", TF_LOOKUP_HZ),
+    )
 
 
-def read_source(form: str, path, topic: str | None = None, *, reference: bool = False, unsorted: str = "error",
-                tf_rate: float = TF_LOOKUP_HZ):
+def read_source(
+    form: str,
+    path,
+    topic: str | None = None,
+    *,
+    reference: bool = False,
+    unsorted: str = "error",
+    tf_rate: float = TF_LOOKUP_HZ,
+):
     """One side of an evo command: a file of ``form`` or a bag topic, or a TF id ``/tf:parent.child``
     (optionally ``:/tf_static``) looked up at ``tf_rate`` Hz as evo does."""
     from epa import readers, settings
@@ -95,17 +161,23 @@ def read_source(form: str, path, topic: str | None = None, *, reference: bool = 
                 raise EpaError(f"TF id {topic!r} should look like /tf:parent.child", path=str(path))
             if tf_rate <= 0:
                 raise EpaError(f"--tf_cache_lookup_frequency must be positive, not {tf_rate}")
-            opts.update(frames=(parent, child), tf_rate=tf_rate, static_topic=static_topic or "/tf_static")
+            opts.update(
+                frames=(parent, child), tf_rate=tf_rate, static_topic=static_topic or "/tf_static"
+            )
             topic = tf_topic
         opts["topic"] = topic
     else:
-        opts["format"] = "euroc" if (form == "euroc" and reference) else ("kitti" if form == "kitti" else "tum")
+        opts["format"] = (
+            "euroc" if (form == "euroc" and reference) else ("kitti" if form == "kitti" else "tum")
+        )
         opts["kitti_printed"] = form == "kitti"  # evo computes on the printed rotation blocks
     try:
         return readers.read(path, opts)
     except EpaError as exc:
         if "repeats" in str(exc):
-            raise EpaError(f"{exc.one_line()}; --unsorted keep keeps repeated stamps as evo does") from None
+            raise EpaError(
+                f"{exc.one_line()}; --unsorted keep keeps repeated stamps as evo does"
+            ) from None
         raise
 
 
@@ -114,7 +186,11 @@ def run(args) -> None:
 
     names = {"pose_relation": "relation"}
     fields = set(evo_protocol.EvoOptions.__dataclass_fields__)
-    values = {names.get(k, k): v for k, v in vars(args).items() if names.get(k, k) in fields and v is not None}
+    values = {
+        names.get(k, k): v
+        for k, v in vars(args).items()
+        if names.get(k, k) in fields and v is not None
+    }
     o = evo_protocol.EvoOptions(**values)
     ref, est = _read(args, "ref"), _read(args, "est")
     fn = evo_protocol.ape if args.command == "ape" else evo_protocol.rpe
@@ -128,7 +204,9 @@ def run(args) -> None:
 
 def _path(args, which: str) -> str:
     """The file of one side of a text form (evo names the EuRoC reference state_gt_csv)."""
-    return getattr(args, "state_gt_csv" if (args.form == "euroc" and which == "ref") else f"{which}_file")
+    return getattr(
+        args, "state_gt_csv" if (args.form == "euroc" and which == "ref") else f"{which}_file"
+    )
 
 
 def _source(args, which: str) -> str:
@@ -144,8 +222,16 @@ def save(result, path, *, ref: str, est: str) -> None:
     from epa import io
     from epa.outputs import figures
 
-    doc = {"format": RESULT_FORMAT, "kind": result.kind, "title": result.title, "ref": ref, "est": est,
-           "stats": result.stats, "options": result.options, "info": result.info}
+    doc = {
+        "format": RESULT_FORMAT,
+        "kind": result.kind,
+        "title": result.title,
+        "ref": ref,
+        "est": est,
+        "stats": result.stats,
+        "options": result.options,
+        "info": result.info,
+    }
     path = Path(path)
     if path.suffix.lower() != ".zip":
         io.write_text(path, figures._json({**doc, "errors": result.errors}) + "\n")
@@ -170,9 +256,12 @@ def load_results(path) -> list[dict]:
             with zipfile.ZipFile(path) as z:
                 names = z.namelist()
                 inner = next((n for n in names if n.endswith("result.json")), None) or next(
-                    (n for n in names if n.endswith("metrics.json")), None)
+                    (n for n in names if n.endswith("metrics.json")), None
+                )
                 if inner is None:
-                    raise EpaError("the zip holds neither result.json nor metrics.json", path=str(path))
+                    raise EpaError(
+                        "the zip holds neither result.json nor metrics.json", path=str(path)
+                    )
                 doc = json.loads(z.read(inner))
         else:
             doc = json.loads(path.read_text(encoding="utf-8"))
@@ -184,27 +273,40 @@ def load_results(path) -> list[dict]:
         return [{"name": str(path), "what": doc["title"].split("\n")[0], "stats": doc["stats"]}]
     metrics = doc.get("metrics", doc) if isinstance(doc, dict) else None
     if not isinstance(metrics, dict) or "ate" not in metrics:
-        raise EpaError("neither an epa result (epica-result/1) nor a case's metrics.json", path=str(path))
-    rows = [{"name": str(path), "what": f"ATE {key}", "stats": metrics["ate"][key]}
-            for key in ("trans_m", "rot_deg") if key in metrics["ate"]]
+        raise EpaError(
+            "neither an epa result (epica-result/1) nor a case's metrics.json", path=str(path)
+        )
+    rows = [
+        {"name": str(path), "what": f"ATE {key}", "stats": metrics["ate"][key]}
+        for key in ("trans_m", "rot_deg")
+        if key in metrics["ate"]
+    ]
     for spec in metrics.get("rpe", []):
         label = f"RPE {spec.get('delta')} {spec.get('unit')}{' all pairs' if spec.get('all_pairs') else ''}"
-        rows += [{"name": str(path), "what": f"{label} {key}", "stats": spec[key]}
-                 for key in ("trans_m", "rot_deg") if key in spec]
+        rows += [
+            {"name": str(path), "what": f"{label} {key}", "stats": spec[key]}
+            for key in ("trans_m", "rot_deg")
+            if key in spec
+        ]
     return rows
 
 
 def res(args) -> None:
     rows = [row for path in args.results for row in load_results(path)]
     header = ["result", "metric", *STAT_COLUMNS]
-    table = [[r["name"], r["what"], *(_cell(r["stats"].get(c)) for c in STAT_COLUMNS)] for r in rows]
+    table = [
+        [r["name"], r["what"], *(_cell(r["stats"].get(c)) for c in STAT_COLUMNS)] for r in rows
+    ]
     widths = [max(len(str(x)) for x in col) for col in zip(header, *table)]
     for line in [header, *table]:
         print("  ".join(str(x).ljust(w) for x, w in zip(line, widths)).rstrip())
     if args.save_table:
         from epa import io
 
-        io.write_text(args.save_table, "\n".join(",".join(_csv(x) for x in line) for line in [header, *table]) + "\n")
+        io.write_text(
+            args.save_table,
+            "\n".join(",".join(_csv(x) for x in line) for line in [header, *table]) + "\n",
+        )
         print(f"wrote {args.save_table}")
 
 
@@ -217,7 +319,8 @@ def _csv(x: str) -> str:
 
 
 def add_res_parser(sub) -> None:
-    r = sub.add_parser("res", help="a table of saved results (epa ape/rpe --save_results, metrics.json, case zips)")
+    r = sub.add_parser(
+        "res", help="a table of saved results (epa ape/rpe --save_results, metrics.json, case zips)"
+    )
     r.add_argument("results", nargs="+", help="result .json/.zip files or case metrics.json files")
     r.add_argument("--save_table", help="also write the table as CSV")
-

@@ -17,4 +17,3 @@ class EpaError(Exception):
         if self.path is not None:
             where = self.path + (f":{self.line}" if self.line is not None else "") + ": "
         return (where + self.message).replace("\n", " ")
-

@@ -21,7 +21,12 @@ from epa.errors import EpaError
 from epa.metrics import accuracy, relations
 from epa.trajectory import Trajectory
 
-DELTA_UNITS = {"f": "frames", "d": "deg", "r": "rad", "m": "m"}  # evo's -u letters -> evo_pairs units
+DELTA_UNITS = {
+    "f": "frames",
+    "d": "deg",
+    "r": "rad",
+    "m": "m",
+}  # evo's -u letters -> evo_pairs units
 PLANES = ("xy", "xz", "yz")
 SYNC_METHODS = ("nearest_time", "interpolation")
 
@@ -82,26 +87,36 @@ def synchronise(ref: Trajectory, est: Trajectory, o: EvoOptions) -> tuple[Trajec
     """Matched copies, as evo's associate_trajectories: the shorter trajectory keeps its matched poses;
     the longer is either its nearest poses or, with interpolation, resampled at those stamps."""
     if o.sync_method not in SYNC_METHODS:
-        raise EpaError(f"unknown --sync_method {o.sync_method!r}; choose one of {', '.join(SYNC_METHODS)}")
+        raise EpaError(
+            f"unknown --sync_method {o.sync_method!r}; choose one of {', '.join(SYNC_METHODS)}"
+        )
     i_ref, i_est = sync.associate_evo(ref.t, est.t, o.t_max_diff, o.t_offset)
     if len(i_ref) == 0:
-        raise EpaError(f"found no matching timestamps between reference and estimate with max. time diff "
-                       f"{o.t_max_diff} (s) and time offset {o.t_offset} (s)")
+        raise EpaError(
+            f"found no matching timestamps between reference and estimate with max. time diff "
+            f"{o.t_max_diff} (s) and time offset {o.t_offset} (s)"
+        )
     if o.sync_method == "nearest_time":
         return ref.select(i_ref), est.select(i_est)
-    if len(est) > len(ref):  # the estimate is denser: resample it at the reference's stamps in its own clock
+    if len(est) > len(
+        ref
+    ):  # the estimate is denser: resample it at the reference's stamps in its own clock
         r = ref.select(i_ref)
         return r, est.at(r.t - o.t_offset)
     e = est.select(i_est)
     return ref.at(e.t + o.t_offset), e
 
 
-def align(ref: Trajectory, est: Trajectory, o: EvoOptions) -> tuple[Trajectory, alignment.Similarity | None]:
+def align(
+    ref: Trajectory, est: Trajectory, o: EvoOptions
+) -> tuple[Trajectory, alignment.Similarity | None]:
     """The estimate aligned as evo's flags say (-a, -s, -as, --n_to_align, --align_origin)."""
     if o.align and o.align_origin:
         raise EpaError("--align and --align_origin can't be used together")
     if o.align or o.correct_scale:
-        fit = alignment.fit(ref, est, method="sim3" if o.correct_scale else "se3", first_n=o.n_to_align)
+        fit = alignment.fit(
+            ref, est, method="sim3" if o.correct_scale else "se3", first_n=o.n_to_align
+        )
         if not o.align:  # -s alone: the scale only
             fit = alignment.Similarity(np.eye(3), np.zeros(3), fit.s)
         return fit.apply(est), fit
@@ -120,9 +135,11 @@ def project(traj: Trajectory, plane: str) -> Trajectory:
     m = traj.r
     cy = np.hypot(m[:, 0, 0], m[:, 1, 0])
     regular = cy > 4 * np.finfo(float).eps
-    angle = [np.where(regular, np.arctan2(m[:, 2, 1], m[:, 2, 2]), np.arctan2(-m[:, 1, 2], m[:, 1, 1])),
-             np.arctan2(-m[:, 2, 0], cy),
-             np.where(regular, np.arctan2(m[:, 1, 0], m[:, 0, 0]), 0.0)][normal]
+    angle = [
+        np.where(regular, np.arctan2(m[:, 2, 1], m[:, 2, 2]), np.arctan2(-m[:, 1, 2], m[:, 1, 1])),
+        np.arctan2(-m[:, 2, 0], cy),
+        np.where(regular, np.arctan2(m[:, 1, 0], m[:, 0, 0]), 0.0),
+    ][normal]
     q = np.zeros((len(traj), 4))
     q[:, normal] = np.sin(angle / 2)
     q[:, 3] = np.cos(angle / 2)
@@ -134,7 +151,11 @@ def project(traj: Trajectory, plane: str) -> Trajectory:
 def _title(head: str, o: EvoOptions) -> str:
     only_scale = o.correct_scale and not o.align
     if o.align:
-        head += "\n(with Sim(3) Umeyama alignment)" if o.correct_scale else "\n(with SE(3) Umeyama alignment)"
+        head += (
+            "\n(with Sim(3) Umeyama alignment)"
+            if o.correct_scale
+            else "\n(with SE(3) Umeyama alignment)"
+        )
     elif only_scale:
         head += "\n(scale corrected)"
     elif not o.align_origin:
@@ -156,21 +177,27 @@ def _relation_head(kind: str, relation: str) -> str:
 def prepare(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True):
     """Reference and estimate matched, aligned and projected; info on what was done."""
     if o.project_to_plane is not None and o.project_to_plane not in PLANES:
-        raise EpaError(f"unknown --project_to_plane {o.project_to_plane!r}; choose one of {', '.join(PLANES)}")
+        raise EpaError(
+            f"unknown --project_to_plane {o.project_to_plane!r}; choose one of {', '.join(PLANES)}"
+        )
     info: dict = {}
     if timed:
         if o.step1:
             found = sync.estimate_offset(ref, est)
             if not found.used:
-                raise EpaError(f"Step 1 found no trustworthy time offset ({found.reason}); give --t_offset instead")
+                raise EpaError(
+                    f"Step 1 found no trustworthy time offset ({found.reason}); give --t_offset instead"
+                )
             # Step 1's offset is what to add to the estimate's stamps, as evo's --t_offset
             o = EvoOptions(**{**asdict(o), "t_offset": o.t_offset + found.offset})
             info["step1_offset_s"] = found.offset
         ref = cut_reference(ref, o.t_start, o.t_end)
         ref, est = synchronise(ref, est, o)
     elif len(ref) != len(est):
-        raise EpaError(f"without timestamps the trajectories must have the same number of poses "
-                       f"(reference {len(ref)}, estimate {len(est)})")
+        raise EpaError(
+            f"without timestamps the trajectories must have the same number of poses "
+            f"(reference {len(ref)}, estimate {len(est)})"
+        )
     info["n_matched"] = len(ref)
     est, fit = align(ref, est, o)
     if fit is not None:
@@ -183,24 +210,48 @@ def prepare(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = Tr
 def ape(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True) -> EvoResult:
     ref, est, o, info = prepare(ref, est, o, timed=timed)
     errors = relations.ape(ref, est, o.relation)
-    return EvoResult("ape", _title(_relation_head("ape", o.relation), o), errors, relations.evo_statistics(errors),
-                     asdict(o), info)
+    return EvoResult(
+        "ape",
+        _title(_relation_head("ape", o.relation), o),
+        errors,
+        relations.evo_statistics(errors),
+        asdict(o),
+        info,
+    )
 
 
 def rpe(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True) -> EvoResult:
     if o.delta_unit not in DELTA_UNITS:
-        raise EpaError(f"unknown --delta_unit {o.delta_unit!r}; choose one of {', '.join(DELTA_UNITS)}")
+        raise EpaError(
+            f"unknown --delta_unit {o.delta_unit!r}; choose one of {', '.join(DELTA_UNITS)}"
+        )
     if o.delta_unit == "f" and float(o.delta) != int(o.delta):
         raise EpaError(f"--delta must be an integer for delta unit f (frames), not {o.delta}")
     ref, est, o, info = prepare(ref, est, o, timed=timed)
-    i, j = accuracy.evo_pairs(ref if o.pairs_from_reference else est, o.delta, DELTA_UNITS[o.delta_unit],
-                              all_pairs=o.all_pairs, rel_tol=o.delta_tol)
+    i, j = accuracy.evo_pairs(
+        ref if o.pairs_from_reference else est,
+        o.delta,
+        DELTA_UNITS[o.delta_unit],
+        all_pairs=o.all_pairs,
+        rel_tol=o.delta_tol,
+    )
     if len(i) == 0:
-        raise EpaError(f"delta = {o.delta} ({o.delta_unit}) produced no pose pairs: try a smaller delta "
-                       f"or a larger --delta_tol")
+        raise EpaError(
+            f"delta = {o.delta} ({o.delta_unit}) produced no pose pairs: try a smaller delta "
+            f"or a larger --delta_tol"
+        )
     errors = relations.rpe(ref, est, i, j, o.relation)
     delta = int(o.delta) if o.delta_unit == "f" else o.delta
-    head = (_relation_head("rpe", o.relation) + f"\nfor delta = {delta} ({DELTA_UNITS[o.delta_unit]})"
-            + (" using all pairs" if o.all_pairs else " using consecutive pairs"))
-    return EvoResult("rpe", _title(head, o), errors, relations.evo_statistics(errors), asdict(o),
-                     {**info, "n_pairs": int(len(i))})
+    head = (
+        _relation_head("rpe", o.relation)
+        + f"\nfor delta = {delta} ({DELTA_UNITS[o.delta_unit]})"
+        + (" using all pairs" if o.all_pairs else " using consecutive pairs")
+    )
+    return EvoResult(
+        "rpe",
+        _title(head, o),
+        errors,
+        relations.evo_statistics(errors),
+        asdict(o),
+        {**info, "n_pairs": int(len(i))},
+    )

@@ -43,17 +43,45 @@ def rot_to_quat(r: np.ndarray) -> np.ndarray:
     q = np.empty(r.shape[:-2] + (4,))
     # w largest
     s = np.sqrt(np.maximum(1 + trace, 1e-300)) * 2
-    qw = np.stack([(r[..., 2, 1] - r[..., 1, 2]) / s, (r[..., 0, 2] - r[..., 2, 0]) / s,
-                   (r[..., 1, 0] - r[..., 0, 1]) / s, 0.25 * s], axis=-1)
+    qw = np.stack(
+        [
+            (r[..., 2, 1] - r[..., 1, 2]) / s,
+            (r[..., 0, 2] - r[..., 2, 0]) / s,
+            (r[..., 1, 0] - r[..., 0, 1]) / s,
+            0.25 * s,
+        ],
+        axis=-1,
+    )
     s = np.sqrt(np.maximum(1 + m00 - m11 - m22, 1e-300)) * 2
-    qx = np.stack([0.25 * s, (r[..., 0, 1] + r[..., 1, 0]) / s, (r[..., 0, 2] + r[..., 2, 0]) / s,
-                   (r[..., 2, 1] - r[..., 1, 2]) / s], axis=-1)
+    qx = np.stack(
+        [
+            0.25 * s,
+            (r[..., 0, 1] + r[..., 1, 0]) / s,
+            (r[..., 0, 2] + r[..., 2, 0]) / s,
+            (r[..., 2, 1] - r[..., 1, 2]) / s,
+        ],
+        axis=-1,
+    )
     s = np.sqrt(np.maximum(1 - m00 + m11 - m22, 1e-300)) * 2
-    qy = np.stack([(r[..., 0, 1] + r[..., 1, 0]) / s, 0.25 * s, (r[..., 1, 2] + r[..., 2, 1]) / s,
-                   (r[..., 0, 2] - r[..., 2, 0]) / s], axis=-1)
+    qy = np.stack(
+        [
+            (r[..., 0, 1] + r[..., 1, 0]) / s,
+            0.25 * s,
+            (r[..., 1, 2] + r[..., 2, 1]) / s,
+            (r[..., 0, 2] - r[..., 2, 0]) / s,
+        ],
+        axis=-1,
+    )
     s = np.sqrt(np.maximum(1 - m00 - m11 + m22, 1e-300)) * 2
-    qz = np.stack([(r[..., 0, 2] + r[..., 2, 0]) / s, (r[..., 1, 2] + r[..., 2, 1]) / s, 0.25 * s,
-                   (r[..., 1, 0] - r[..., 0, 1]) / s], axis=-1)
+    qz = np.stack(
+        [
+            (r[..., 0, 2] + r[..., 2, 0]) / s,
+            (r[..., 1, 2] + r[..., 2, 1]) / s,
+            0.25 * s,
+            (r[..., 1, 0] - r[..., 0, 1]) / s,
+        ],
+        axis=-1,
+    )
     for k, cand in enumerate((qw, qx, qy, qz)):
         sel = pick == k
         q[sel] = cand[sel]
@@ -103,8 +131,14 @@ def skew(v: np.ndarray) -> np.ndarray:
     """[v]x, the matrix with [v]x w = v x w, for vectors (..., 3)."""
     v = np.asarray(v, dtype=float)
     z = np.zeros(v.shape[:-1])
-    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1), np.stack([v[..., 2], z, -v[..., 0]], -1),
-                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+    return np.stack(
+        [
+            np.stack([z, -v[..., 2], v[..., 1]], -1),
+            np.stack([v[..., 2], z, -v[..., 0]], -1),
+            np.stack([-v[..., 1], v[..., 0], z], -1),
+        ],
+        -2,
+    )
 
 
 def local_covariance(r: np.ndarray, cov_global: np.ndarray) -> np.ndarray:
@@ -122,8 +156,10 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of (..., 4) quaternions (x, y, z, w): R(a) R(b)."""
     av, aw = a[..., :3], a[..., 3:]
     bv, bw = b[..., :3], b[..., 3:]
-    return np.concatenate([aw * bv + bw * av + np.cross(av, bv), aw * bw - np.sum(av * bv, axis=-1, keepdims=True)],
-                          axis=-1)
+    return np.concatenate(
+        [aw * bv + bw * av + np.cross(av, bv), aw * bw - np.sum(av * bv, axis=-1, keepdims=True)],
+        axis=-1,
+    )
 
 
 def quat_conj(q: np.ndarray) -> np.ndarray:
@@ -156,7 +192,9 @@ def slerp(q0: np.ndarray, q1: np.ndarray, f: np.ndarray) -> np.ndarray:
     return w0 * q0 + w1 * q1
 
 
-def interpolate(t: np.ndarray, p: np.ndarray, q: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def interpolate(
+    t: np.ndarray, p: np.ndarray, q: np.ndarray, at: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Poses at stamps ``at``: positions linear, orientations slerp between the neighbouring poses;
     clamped to the first and last pose outside the stamps (as evo's interpolate)."""
     k = np.clip(np.searchsorted(t, at, side="left"), 1, len(t) - 1)

@@ -114,15 +114,22 @@ def case_log(path):
 
 
 # ----------------------------------------------------------------------------- one stage, many cases
-def run_cases(stage: str, cases: list[dict], results_dir, cfg: dict, upstream: dict[str, str]) -> dict[str, dict]:
+def run_cases(
+    stage: str, cases: list[dict], results_dir, cfg: dict, upstream: dict[str, str]
+) -> dict[str, dict]:
     """Run ``stage`` on each case ({key, truth, estimate}); never raises for a case's failure.
     ``upstream``: key -> reason for cases whose previous stage failed. Returns key -> status."""
     st = chain.BY_NAME[stage]
     status: dict[str, dict] = {}
     for c in cases:
         key = c["key"]
-        case = chain.CaseFolder(chain.case_dir(results_dir, key), c.get("truth"), c.get("estimate"),
-                                c.get("truth_source"), c.get("estimate_source"))
+        case = chain.CaseFolder(
+            chain.case_dir(results_dir, key),
+            c.get("truth"),
+            c.get("estimate"),
+            c.get("truth_source"),
+            c.get("estimate_source"),
+        )
         reason = upstream.get(key)
         with case_log(case.log(stage)):
             if reason is not None:
@@ -135,7 +142,9 @@ def run_cases(stage: str, cases: list[dict], results_dir, cfg: dict, upstream: d
                 except EpaError as exc:
                     reason = f"{stage}: {exc.one_line()}"
                     log.error("case failed: %s", reason)
-                except Exception as exc:  # a bug: this case's failure, with its traceback, not the grid's
+                except (
+                    Exception
+                ) as exc:  # a bug: this case's failure, with its traceback, not the grid's
                     reason = f"internal error: {type(exc).__name__}: {exc}".replace("\n", " ")
                     log.error("%s", traceback.format_exc().rstrip())
                     log.error("case failed: %s", reason)
@@ -182,8 +191,16 @@ def call(workers: int, fn, *args):
     return _pool(workers).submit(fn, *args).result()
 
 
-def run_job(stage: str, cases: list[dict], results_dir, cfg: dict, manifest, upstream_manifest=None,
-            log_path=None, workers: int = 1) -> dict[str, dict]:
+def run_job(
+    stage: str,
+    cases: list[dict],
+    results_dir,
+    cfg: dict,
+    manifest,
+    upstream_manifest=None,
+    log_path=None,
+    workers: int = 1,
+) -> dict[str, dict]:
     """One workflow job: ``stage`` for a batch of cases, then the batch manifest (written last,
     atomically, so a killed job leaves no manifest and is re-run)."""
     from concurrent.futures.process import BrokenProcessPool

@@ -15,7 +15,6 @@ from epa.errors import EpaError
 from epa.readers.text import FORMATS, upper_to_full
 from epa.trajectory import Trajectory
 
-
 # ----------------------------------------------------------------------------- artifacts
 _UMASK = os.umask(0o022)
 os.umask(_UMASK)
@@ -69,8 +68,23 @@ def read_json(path) -> dict:
 
 TUM_HEADER = "# t x y z qx qy qz qw"
 _UPPER = ([0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2])  # 11 12 13 22 23 33
-EUROC_HEADER = ("#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []")
-COV_HEADER = ["pr11", "pr12", "pr13", "pr22", "pr23", "pr33", "pt11", "pt12", "pt13", "pt22", "pt23", "pt33"]
+EUROC_HEADER = (
+    "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []"
+)
+COV_HEADER = [
+    "pr11",
+    "pr12",
+    "pr13",
+    "pr22",
+    "pr23",
+    "pr33",
+    "pt11",
+    "pt12",
+    "pt13",
+    "pt22",
+    "pt23",
+    "pt33",
+]
 
 
 # Stage artifacts are lossless (%.17g round-trips a float64 exactly): the next stage reads exactly
@@ -82,7 +96,9 @@ def _cov_columns(traj: Trajectory) -> np.ndarray | None:
     """The orientation then position covariance upper triangles (N, 12), or None without covariance."""
     if traj.cov_rot is None or traj.cov_pos is None:
         return None
-    return np.column_stack([traj.cov_rot[:, _UPPER[0], _UPPER[1]], traj.cov_pos[:, _UPPER[0], _UPPER[1]]])
+    return np.column_stack(
+        [traj.cov_rot[:, _UPPER[0], _UPPER[1]], traj.cov_pos[:, _UPPER[0], _UPPER[1]]]
+    )
 
 
 def write_tum(path, traj: Trajectory) -> None:
@@ -102,34 +118,62 @@ def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
     covariance columns when it has them)."""
     path = Path(path)
     cov = _cov_columns(traj)
-    if fmt == "openvins" and cov is None:  # never invent an uncertainty the estimator did not report
-        raise EpaError("the OpenVINS format holds covariance and this trajectory has none; write tum or csv",
-                       path=str(path))
-    if fmt in ("tum", "openvins"):  # write_tum adds the covariance columns (OpenVINS's layout) when there are some
+    if (
+        fmt == "openvins" and cov is None
+    ):  # never invent an uncertainty the estimator did not report
+        raise EpaError(
+            "the OpenVINS format holds covariance and this trajectory has none; write tum or csv",
+            path=str(path),
+        )
+    if fmt in (
+        "tum",
+        "openvins",
+    ):  # write_tum adds the covariance columns (OpenVINS's layout) when there are some
         return write_tum(path, traj)
     if fmt == "kitti":
         m = np.concatenate([traj.r, traj.p[:, :, None]], axis=2).reshape(len(traj), 12)
-        _atomic_write(path.with_name(path.stem + "_times.txt"), lambda fh: np.savetxt(fh, traj.t, fmt=EXACT))
+        _atomic_write(
+            path.with_name(path.stem + "_times.txt"), lambda fh: np.savetxt(fh, traj.t, fmt=EXACT)
+        )
         return _atomic_write(path, lambda fh: np.savetxt(fh, m, fmt=EXACT))
     if fmt == "euroc":
         ns = np.round(traj.t * 1e9).astype(np.int64)
         rows = np.column_stack([traj.p, traj.q[:, [3, 0, 1, 2]]])
-        return _atomic_write(path, lambda fh: fh.write(EUROC_HEADER + "\n" + "".join(
-            f"{a}," + ",".join(EXACT % v for v in row) + "\n" for a, row in zip(ns, rows))))
+        return _atomic_write(
+            path,
+            lambda fh: fh.write(
+                EUROC_HEADER
+                + "\n"
+                + "".join(
+                    f"{a}," + ",".join(EXACT % v for v in row) + "\n" for a, row in zip(ns, rows)
+                )
+            ),
+        )
     data = np.column_stack([traj.t, traj.p, traj.q] + ([] if cov is None else [cov]))
     if fmt == "csv":
         names = ["t", "x", "y", "z", "qx", "qy", "qz", "qw"] + ([] if cov is None else COV_HEADER)
-        return _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=EXACT, delimiter=",", header=",".join(names),
-                                                         comments=""))
-    raise EpaError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS[1:])}", path=str(path))
+        return _atomic_write(
+            path,
+            lambda fh: np.savetxt(
+                fh, data, fmt=EXACT, delimiter=",", header=",".join(names), comments=""
+            ),
+        )
+    raise EpaError(
+        f"unknown format {fmt!r}; choose one of {', '.join(FORMATS[1:])}", path=str(path)
+    )
 
 
 def read_tum_file(path) -> Trajectory:
     """Read a TUM artifact this project wrote (no detection, no repair)."""
     rows = np.loadtxt(path, ndmin=2, comments="#")
     if rows.shape[1] == 20:  # with covariance (see write_tum)
-        return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8], cov_rot=upper_to_full(rows[:, 8:14]),
-                          cov_pos=upper_to_full(rows[:, 14:20]))
+        return Trajectory(
+            rows[:, 0],
+            rows[:, 1:4],
+            rows[:, 4:8],
+            cov_rot=upper_to_full(rows[:, 8:14]),
+            cov_pos=upper_to_full(rows[:, 14:20]),
+        )
     return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8])
 
 
@@ -146,16 +190,31 @@ def read_pair_indices(path) -> tuple[np.ndarray, np.ndarray]:
 
 def write_csv(path, columns: dict[str, np.ndarray], fmt: str = EXACT) -> None:
     names = list(columns)
-    data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names]) if names else np.zeros((0, 0))
-    _atomic_write(path, lambda fh: np.savetxt(fh, data.reshape(-1, len(names)), fmt=fmt, delimiter=",",
-                                              header=",".join(names), comments=""))
+    data = (
+        np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
+        if names
+        else np.zeros((0, 0))
+    )
+    _atomic_write(
+        path,
+        lambda fh: np.savetxt(
+            fh,
+            data.reshape(-1, len(names)),
+            fmt=fmt,
+            delimiter=",",
+            header=",".join(names),
+            comments="",
+        ),
+    )
 
 
 def read_csv(path) -> dict[str, np.ndarray]:
     with open(path, encoding="utf-8") as fh:
         names = fh.readline().strip().split(",")
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # a header and no rows is an empty table, not a problem
+        warnings.simplefilter(
+            "ignore", UserWarning
+        )  # a header and no rows is an empty table, not a problem
         rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     if rows.size == 0:
         rows = np.zeros((0, len(names)))

@@ -15,22 +15,44 @@ from epa.errors import EpaError
 from epa.trajectory import Trajectory
 
 # name: white orientation noise (deg), white position noise (m), random walks (deg, m per sqrt(s))
-NOISE_LEVELS = {"low": (0.05, 0.002, 0.005, 0.001), "medium": (0.2, 0.005, 0.02, 0.005),
-                "high": (0.5, 0.01, 0.05, 0.01)}
+NOISE_LEVELS = {
+    "low": (0.05, 0.002, 0.005, 0.001),
+    "medium": (0.2, 0.005, 0.02, 0.005),
+    "high": (0.5, 0.01, 0.05, 0.01),
+}
 
 
 def trial(ref: Trajectory, cfg: dict, rng: np.random.Generator, level: str, rate: float) -> dict:
     """One simulated estimate; what Steps 1-2 found against the truth."""
     rot_noise, pos_noise, rot_walk, pos_walk = NOISE_LEVELS[level]
     scale = float(rng.uniform(0.5, 4.0)) if cfg["calibrate"]["scale"] else 1.0
-    truth = {"offset": float(rng.uniform(-0.5, 0.5) * cfg["sync"]["window"]),
-             "rotation": geometry.so3_exp(rng.normal(0, 1.0, 3)), "translation": rng.normal(0, 0.06, 3), "scale": scale}
-    est = simulate.observe(ref, rng, **truth, rate=rate, noise_rot_deg=rot_noise, noise_pos_m=pos_noise,
-                           walk_rot_deg=rot_walk, walk_pos_m=pos_walk, margin=0.5)
+    truth = {
+        "offset": float(rng.uniform(-0.5, 0.5) * cfg["sync"]["window"]),
+        "rotation": geometry.so3_exp(rng.normal(0, 1.0, 3)),
+        "translation": rng.normal(0, 0.06, 3),
+        "scale": scale,
+    }
+    est = simulate.observe(
+        ref,
+        rng,
+        **truth,
+        rate=rate,
+        noise_rot_deg=rot_noise,
+        noise_pos_m=pos_noise,
+        walk_rot_deg=rot_walk,
+        walk_pos_m=pos_walk,
+        margin=0.5,
+    )
     found = pipeline.offset_step(ref, est, cfg)
-    out = {"level": level, "step1_status": found.status, "offset_true_s": truth["offset"],
-           "offset_error_s": (found.estimated - truth["offset"]) if found.estimated is not None else None,
-           "offset_std_s": found.std}
+    out = {
+        "level": level,
+        "step1_status": found.status,
+        "offset_true_s": truth["offset"],
+        "offset_error_s": (found.estimated - truth["offset"])
+        if found.estimated is not None
+        else None,
+        "offset_std_s": found.std,
+    }
     # Step 2 on the offset Step 1 found (or, when it was not trusted, the true one: Step 2 alone)
     offset = found.offset if found.used else truth["offset"]
     try:
@@ -38,19 +60,27 @@ def trial(ref: Trajectory, cfg: dict, rng: np.random.Generator, level: str, rate
     except EpaError as exc:
         return {**out, "step2_status": "too little motion", "step2_reason": exc.message}
     matched = est.select(i_est)
-    ext = pipeline.extrinsic_step(ref.at(matched.t + offset), matched, cfg, found.std if found.used else 0.0)
+    ext = pipeline.extrinsic_step(
+        ref.at(matched.t + offset), matched, cfg, found.std if found.used else 0.0
+    )
     out.update(step2_status=ext.status, step2_reason=ext.reason)
     if "rotation_std_deg" in ext.info:
-        out.update(rotation_error_deg=float(np.degrees(geometry.rotation_angle(ext.R @ truth["rotation"].T))),
-                   rotation_std_deg=ext.info["rotation_std_deg"],
-                   translation_error_m=float(np.linalg.norm(ext.t - truth["translation"])),
-                   translation_std_m=ext.info["translation_std_m"],
-                   scale_error=float(ext.scale - scale) if cfg["calibrate"]["scale"] else None,
-                   unobservable=ext.reason if ext.status == "unobservable" else None)
+        out.update(
+            rotation_error_deg=float(
+                np.degrees(geometry.rotation_angle(ext.R @ truth["rotation"].T))
+            ),
+            rotation_std_deg=ext.info["rotation_std_deg"],
+            translation_error_m=float(np.linalg.norm(ext.t - truth["translation"])),
+            translation_std_m=ext.info["translation_std_m"],
+            scale_error=float(ext.scale - scale) if cfg["calibrate"]["scale"] else None,
+            unobservable=ext.reason if ext.status == "unobservable" else None,
+        )
     return out
 
 
-def run(ref: Trajectory, cfg: dict, *, trials: int = 5, rate: float = 20.0, seed: int = 0) -> list[dict]:
+def run(
+    ref: Trajectory, cfg: dict, *, trials: int = 5, rate: float = 20.0, seed: int = 0
+) -> list[dict]:
     rng = np.random.default_rng(seed)
     return [trial(ref, cfg, rng, level, rate) for level in NOISE_LEVELS for _ in range(trials)]
 
@@ -66,11 +96,16 @@ def _worst(std_lists) -> list:
 
 def report(results: list[dict], ref_name: str, rate: float) -> str:
     """The self-test's table: per noise level, what was trusted and how far from the truth."""
-    lines = [f"epa selftest: Steps 1-2 on simulated {rate:g} Hz estimates of the motion in {ref_name}",
-             "(median / max over the trials; errors against the known truth: the offset's, the rotation's angle, the",
-             " lever arm's length; std as reported: the offset's, the largest per-axis one of rotation and lever arm)", ""]
-    head = (f"{'noise':8} {'Step 1 trusted':>14} {'offset err ms':>14} {'std ms':>13} {'in 3 std':>9}  "
-            f"{'Step 2 trusted':>14} {'rot err deg':>13} {'std deg':>13} {'trans err mm':>13} {'std mm':>13}")
+    lines = [
+        f"epa selftest: Steps 1-2 on simulated {rate:g} Hz estimates of the motion in {ref_name}",
+        "(median / max over the trials; errors against the known truth: the offset's, the rotation's angle, the",
+        " lever arm's length; std as reported: the offset's, the largest per-axis one of rotation and lever arm)",
+        "",
+    ]
+    head = (
+        f"{'noise':8} {'Step 1 trusted':>14} {'offset err ms':>14} {'std ms':>13} {'in 3 std':>9}  "
+        f"{'Step 2 trusted':>14} {'rot err deg':>13} {'std deg':>13} {'trans err mm':>13} {'std mm':>13}"
+    )
     lines += [head, "-" * len(head)]
     for level in NOISE_LEVELS:
         rows = [r for r in results if r["level"] == level]
@@ -83,7 +118,8 @@ def report(results: list[dict], ref_name: str, rate: float) -> str:
             f"{len(s2):>6} of {len(rows):<5} {_fmt([r.get('rotation_error_deg') for r in s2], 1, '.3f'):>13}"
             f" {_fmt(_worst([r.get('rotation_std_deg') for r in s2]), 1, '.3f'):>13}"
             f" {_fmt([r.get('translation_error_m') for r in s2], 1e3, '.1f'):>13}"
-            f" {_fmt(_worst([r.get('translation_std_m') for r in s2]), 1e3, '.1f'):>13}")
+            f" {_fmt(_worst([r.get('translation_std_m') for r in s2]), 1e3, '.1f'):>13}"
+        )
     lines.append("")
     not_trusted = {}  # (step, status): an example reason
     for r in results:
@@ -93,14 +129,25 @@ def report(results: list[dict], ref_name: str, rate: float) -> str:
             not_trusted.setdefault((2, r["step2_status"]), r.get("step2_reason"))
     if not_trusted:
         lines.append("not trusted in some trials:")
-        lines += [f"  Step {step} {status}" + (f" (e.g. {why})" if why else "")
-                  for (step, status), why in not_trusted.items()]
+        lines += [
+            f"  Step {step} {status}" + (f" (e.g. {why})" if why else "")
+            for (step, status), why in not_trusted.items()
+        ]
     unobservable = {r["unobservable"] for r in results if r.get("unobservable")}
     if unobservable:
-        lines.append("this motion leaves part of the extrinsic unobservable: " + "; ".join(sorted(unobservable)))
+        lines.append(
+            "this motion leaves part of the extrinsic unobservable: "
+            + "; ".join(sorted(unobservable))
+        )
     trusted = [r for r in results if r["step2_status"] == "trusted"]
-    lines.append("verdict: " + ("Steps 1-2 recover offset and extrinsic on this motion; the errors above are what"
-                                " to expect" if len(trusted) == len(results) else
-                                f"Steps 1-2 are trusted in {len(trusted)} of {len(results)} trials on this motion;"
-                                " read the statuses before relying on them"))
+    lines.append(
+        "verdict: "
+        + (
+            "Steps 1-2 recover offset and extrinsic on this motion; the errors above are what"
+            " to expect"
+            if len(trusted) == len(results)
+            else f"Steps 1-2 are trusted in {len(trusted)} of {len(results)} trials on this motion;"
+            " read the statuses before relying on them"
+        )
+    )
     return "\n".join(lines) + "\n"

@@ -49,12 +49,16 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
         key = ".".join(str(p) for p in err.path) or "(top level)"
         what = err.message
         if err.validator == "not":
-            what = f"{err.instance!r} is not allowed: {err.schema.get('description', '')}".rstrip(": ")
+            what = f"{err.instance!r} is not allowed: {err.schema.get('description', '')}".rstrip(
+                ": "
+            )
         raise EpaError(f"{key}: {what}", path=source)
     cfg = apply_mode(_fill(cfg, schema()), given=config or {})
     crop = cfg["crop"]
     if crop["start"] is not None and crop["end"] is not None and crop["end"] <= crop["start"]:
-        raise EpaError(f"crop.end ({crop['end']}) must be after crop.start ({crop['start']})", path=source)
+        raise EpaError(
+            f"crop.end ({crop['end']}) must be after crop.start ({crop['start']})", path=source
+        )
     if cfg["report"]["rerun"]:
         from epa.outputs import recording
 
@@ -64,8 +68,12 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
 
 
 # What `mode: ov_eval` means for the stages, so that no stage has to test the mode.
-OV_EVAL_SETTINGS = {("sync", "estimate_offset"): False, ("sync", "policy"): "ov_eval", ("sync", "max_diff"): 0.02,
-                    ("calibrate", "enabled"): False}
+OV_EVAL_SETTINGS = {
+    ("sync", "estimate_offset"): False,
+    ("sync", "policy"): "ov_eval",
+    ("sync", "max_diff"): 0.02,
+    ("calibrate", "enabled"): False,
+}
 
 
 def apply_mode(cfg: dict, given: dict) -> dict:
@@ -78,14 +86,11 @@ def apply_mode(cfg: dict, given: dict) -> dict:
         given_section = given.get(section)
         user = given_section.get(key, value) if isinstance(given_section, dict) else value
         if user != value:
-            logging.getLogger("epa").warning("mode ov_eval overrides %s.%s: %r -> %r", section, key, user, value)
+            logging.getLogger("epa").warning(
+                "mode ov_eval overrides %s.%s: %r -> %r", section, key, user, value
+            )
         cfg[section][key] = value
     return cfg
-
-
-def defaults() -> dict:
-    """Every stage setting at its default (no truth/algorithms folders)."""
-    return _fill({}, schema())
 
 
 GRID_FOLDERS = ("truth_dir", "algorithms_dir")
@@ -102,8 +107,10 @@ def _strict_loader():
             for key_node, _ in node.value:
                 key = self.construct_object(key_node, deep=deep)
                 if key in seen:
-                    raise EpaError(f"{key!r} is given twice (the second would silently win)",
-                                   line=key_node.start_mark.line + 1)
+                    raise EpaError(
+                        f"{key!r} is given twice (the second would silently win)",
+                        line=key_node.start_mark.line + 1,
+                    )
                 seen.add(key)
             return super().construct_mapping(node, deep=deep)
 
@@ -124,11 +131,15 @@ def load_yaml(path) -> dict:
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         what = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise EpaError(f"not valid YAML: {what}", path=str(path), line=mark.line + 1 if mark else None) from None
+        raise EpaError(
+            f"not valid YAML: {what}", path=str(path), line=mark.line + 1 if mark else None
+        ) from None
     if data is None:
         return {}
     if not isinstance(data, dict):
-        raise EpaError(f"a config must be a mapping of settings, not a {type(data).__name__}", path=str(path))
+        raise EpaError(
+            f"a config must be a mapping of settings, not a {type(data).__name__}", path=str(path)
+        )
     return data
 
 
@@ -142,5 +153,7 @@ def check_user_configs(configfiles, overrides: dict | None) -> None:
         named |= load_yaml(path).keys()
     missing = [k for k in GRID_FOLDERS if k not in named]
     if missing:
-        raise EpaError(f"names no {' or '.join(missing)} (the bundled example's would be used)",
-                       path=", ".join(map(str, configfiles)))
+        raise EpaError(
+            f"names no {' or '.join(missing)} (the bundled example's would be used)",
+            path=", ".join(map(str, configfiles)),
+        )

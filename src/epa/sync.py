@@ -75,8 +75,14 @@ def associate_evo(t_ref: np.ndarray, t_est: np.ndarray, max_diff: float, offset:
     return (i_short, i_long) if est_longer else (i_long, i_short)
 
 
-def associate(ref: Trajectory, est: Trajectory, *, policy: str = "ov_eval", max_diff: float | None = None,
-              offset: float = 0.0):
+def associate(
+    ref: Trajectory,
+    est: Trajectory,
+    *,
+    policy: str = "ov_eval",
+    max_diff: float | None = None,
+    offset: float = 0.0,
+):
     """Indices (i_ref, i_est) of matched poses under the chosen policy."""
     if policy not in POLICIES:
         raise EpaError(f"unknown sync policy {policy!r}; choose one of {', '.join(POLICIES)}")
@@ -104,7 +110,9 @@ class OffsetEstimate:
     std: float | None = None  # standard deviation of the estimate (s), delete-one-block jackknife
     peak_corr: float = float("nan")
     peak_ratio: float = float("nan")
-    beyond_window_corr: float = float("nan")  # the best local maximum of the correlation beyond ±window
+    beyond_window_corr: float = float(
+        "nan"
+    )  # the best local maximum of the correlation beyond ±window
     ref_motion_rad_s: float = float("nan")
     est_motion_rad_s: float = float("nan")
     dt: float = float("nan")
@@ -116,8 +124,17 @@ class OffsetEstimate:
 
 
 # What Step 1 concluded; anything but "trusted" means the estimate was not used.
-STEP1_STATUS = ("trusted", "disabled", "too little motion", "no overlap", "at window edge", "outside window",
-                "weak peak", "ambiguous", "uncertain")
+STEP1_STATUS = (
+    "trusted",
+    "disabled",
+    "too little motion",
+    "no overlap",
+    "at window edge",
+    "outside window",
+    "weak peak",
+    "ambiguous",
+    "uncertain",
+)
 JACKKNIFE_BLOCKS = 10
 
 
@@ -159,24 +176,38 @@ def _peak(curve: np.ndarray) -> tuple[int, float]:
     return k, frac
 
 
-def _block_sums(a: np.ndarray, b: np.ndarray, span: tuple[int, int], starts: np.ndarray, lag: int) -> np.ndarray:
+def _block_sums(
+    a: np.ndarray, b: np.ndarray, span: tuple[int, int], starts: np.ndarray, lag: int
+) -> np.ndarray:
     """Over each block of b's support, at one lag: the correlation's products a[m + lag] b[m] and the
     two energies under the overlap, a[m + lag]^2 and b[m]^2 where a is defined. (3, blocks)."""
     b0, b1 = span
     lo, hi = b0 + lag, b1 + 1 + lag
-    bb = b[b0:b1 + 1]
+    bb = b[b0 : b1 + 1]
     if lo < 0 or hi > len(a):  # the shifted support runs off the grid: pad with "not defined"
         seg = np.zeros(len(bb))
-        seg[max(0, -lo):len(bb) - max(0, hi - len(a))] = a[max(lo, 0):min(hi, len(a))]
+        seg[max(0, -lo) : len(bb) - max(0, hi - len(a))] = a[max(lo, 0) : min(hi, len(a))]
     else:
         seg = a[lo:hi]
     defined = seg != 0.0  # on_grid leaves a exactly zero outside its support
-    return np.stack([np.add.reduceat(seg * bb, starts), np.add.reduceat(seg * seg, starts),
-                     np.add.reduceat(np.where(defined, bb * bb, 0.0), starts)])
+    return np.stack(
+        [
+            np.add.reduceat(seg * bb, starts),
+            np.add.reduceat(seg * seg, starts),
+            np.add.reduceat(np.where(defined, bb * bb, 0.0), starts),
+        ]
+    )
 
 
-def _jackknife_std(a: np.ndarray, b: np.ndarray, span: tuple[int, int], peak_lag: int, reach: int, dt: float,
-                   blocks: int = JACKKNIFE_BLOCKS) -> float:
+def _jackknife_std(
+    a: np.ndarray,
+    b: np.ndarray,
+    span: tuple[int, int],
+    peak_lag: int,
+    reach: int,
+    dt: float,
+    blocks: int = JACKKNIFE_BLOCKS,
+) -> float:
     """Standard deviation of the correlation peak's lag by the delete-one-block jackknife.
 
     The estimate signal's support is cut into ``blocks`` consecutive blocks; each replicate is the
@@ -214,10 +245,20 @@ def _jackknife_std(a: np.ndarray, b: np.ndarray, span: tuple[int, int], peak_lag
     return float(np.hypot(jack, dt / np.sqrt(12.0)))
 
 
-def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, resample_dt: float = 0.001,
-                    min_motion: float = 0.05, min_corr: float = 0.3, min_peak_ratio: float = 1.05,
-                    max_std: float = 0.01, speed_interval: float = 0.1, fallback: float = 0.0,
-                    max_samples: int = 2_000_000) -> OffsetEstimate:
+def estimate_offset(
+    ref: Trajectory,
+    est: Trajectory,
+    *,
+    window: float = 2.0,
+    resample_dt: float = 0.001,
+    min_motion: float = 0.05,
+    min_corr: float = 0.3,
+    min_peak_ratio: float = 1.05,
+    max_std: float = 0.01,
+    speed_interval: float = 0.1,
+    fallback: float = 0.0,
+    max_samples: int = 2_000_000,
+) -> OffsetEstimate:
     """Time offset by cross-correlating angular-speed signals on a uniform timeline (FFT).
 
     The peak is refined below one sample with a parabola through its neighbours; its standard
@@ -225,9 +266,16 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     too weak, the peak weak, ambiguous, on the edge of the window or its deviation above
     ``max_std``, the fallback offset is returned with the status and the reason.
     """
+
     def fail(status, reason, **kw):
-        return OffsetEstimate(offset=fallback, estimated=kw.pop("estimated", None), used=False, reason=reason,
-                              status=status, **kw)
+        return OffsetEstimate(
+            offset=fallback,
+            estimated=kw.pop("estimated", None),
+            used=False,
+            reason=reason,
+            status=status,
+            **kw,
+        )
 
     if len(ref) < 4 or len(est) < 4:
         return fail("too little motion", "too few poses for a correlation")
@@ -241,11 +289,20 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     t_b, w_b = angular_speed(est, max(1, int(round(interval / dt_est))))
     motion_a, motion_b = float(np.std(w_a)), float(np.std(w_b))
     if min(motion_a, motion_b) < min_motion:
-        return fail("too little motion", f"too little rotational motion (std of angular speed {min(motion_a, motion_b):.3g}"
-                    f" rad/s < {min_motion})", ref_motion_rad_s=motion_a, est_motion_rad_s=motion_b)
+        return fail(
+            "too little motion",
+            f"too little rotational motion (std of angular speed {min(motion_a, motion_b):.3g}"
+            f" rad/s < {min_motion})",
+            ref_motion_rad_s=motion_a,
+            est_motion_rad_s=motion_b,
+        )
     if t_b[0] > t_a[-1] + window or t_b[-1] < t_a[0] - window:
-        return fail("no overlap", f"the stamps do not overlap within the ±{window} s search window",
-                    ref_motion_rad_s=motion_a, est_motion_rad_s=motion_b)
+        return fail(
+            "no overlap",
+            f"the stamps do not overlap within the ±{window} s search window",
+            ref_motion_rad_s=motion_a,
+            est_motion_rad_s=motion_b,
+        )
     w_a, w_b = _clip_spikes(w_a), _clip_spikes(w_b)
     start = min(t_a[0], t_b[0]) - window
     end = max(t_a[-1], t_b[-1]) + window
@@ -261,8 +318,12 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     a, in_a = on_grid(t_a, w_a)
     b, in_b = on_grid(t_b, w_b)
     if in_a.sum() < 4 or in_b.sum() < 4:
-        return fail("no overlap", f"too few samples on the {dt:.3g} s correlation grid", ref_motion_rad_s=motion_a,
-                    est_motion_rad_s=motion_b)
+        return fail(
+            "no overlap",
+            f"too few samples on the {dt:.3g} s correlation grid",
+            ref_motion_rad_s=motion_a,
+            est_motion_rad_s=motion_b,
+        )
     n = len(grid)
     nfft = 1 << int(np.ceil(np.log2(2 * n)))
     # corr[k] = sum_m a[m + k] b[m]: the estimate signal shifted later by k samples matches the reference.
@@ -281,7 +342,9 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     energy_a = _window_sums(a * a, b0 + lags_all, b1 + lags_all)  # a under the shifted support of b
     energy_b = _window_sums(b * b, a0 - lags_all, a1 - lags_all)  # b under the shifted support of a
     overlap = np.minimum(b1, a1 - lags_all) - np.maximum(b0, a0 - lags_all) + 1
-    enough = overlap >= 0.5 * (min(a1 - a0, b1 - b0) + 1)  # at least half the shorter signal overlaps
+    enough = overlap >= 0.5 * (
+        min(a1 - a0, b1 - b0) + 1
+    )  # at least half the shorter signal overlaps
     corr_all = np.where(enough, corr_all / np.sqrt(np.maximum(energy_a * energy_b, 1e-300)), -1.0)
     maxima_all = _local_maxima(corr_all)
     beyond = maxima_all[np.abs(lags_all[maxima_all]) > kmax]
@@ -301,30 +364,63 @@ def estimate_offset(ref: Trajectory, est: Trajectory, *, window: float = 2.0, re
     outside = maxima[(maxima < left) | (maxima > right)]
     second = float(corr[outside].max()) if len(outside) else 0.0
     ratio = peak / second if second > 0 else float("inf")
-    curve = dict(curve_lag=lags * dt, curve_corr=corr, peak_corr=peak, peak_ratio=ratio, beyond_window_corr=best_beyond,
-                 ref_motion_rad_s=motion_a, est_motion_rad_s=motion_b, dt=dt)
+    curve = dict(
+        curve_lag=lags * dt,
+        curve_corr=corr,
+        peak_corr=peak,
+        peak_ratio=ratio,
+        beyond_window_corr=best_beyond,
+        ref_motion_rad_s=motion_a,
+        est_motion_rad_s=motion_b,
+        dt=dt,
+    )
     at_edge = abs(lags[k]) >= kmax - 1
     if at_edge:  # never clamped: the true offset may lie beyond the window
-        return fail("at window edge", f"correlation peak at the edge of the ±{window} s search window"
-                    " (the offset may lie outside it: widen sync.window)", estimated=estimated, **curve)
+        return fail(
+            "at window edge",
+            f"correlation peak at the edge of the ±{window} s search window"
+            " (the offset may lie outside it: widen sync.window)",
+            estimated=estimated,
+            **curve,
+        )
     # Beyond the window only a clearly better and itself strong match counts: quasi-periodic motion (a
     # figure-8, a pendulum) repeats itself tens of seconds later almost as well, and that is not this
     # offset; nor is a weak bump of a run that diverged.
     if best_beyond > max(peak * min_peak_ratio, min_corr):
         lag_beyond = float(lags_all[beyond[np.argmax(corr_all[beyond])]] * dt)
-        return fail("outside window", f"a better match ({best_beyond:.3f} at {lag_beyond:+.3f} s) lies outside the"
-                    f" ±{window} s search window than inside it ({peak:.3f}): widen sync.window",
-                    estimated=estimated, **curve)
+        return fail(
+            "outside window",
+            f"a better match ({best_beyond:.3f} at {lag_beyond:+.3f} s) lies outside the"
+            f" ±{window} s search window than inside it ({peak:.3f}): widen sync.window",
+            estimated=estimated,
+            **curve,
+        )
     if peak < min_corr:
-        return fail("weak peak", f"correlation peak {peak:.3f} below {min_corr}", estimated=estimated, **curve)
+        return fail(
+            "weak peak",
+            f"correlation peak {peak:.3f} below {min_corr}",
+            estimated=estimated,
+            **curve,
+        )
     if ratio < min_peak_ratio:
-        return fail("ambiguous", f"ambiguous peak: best/second = {ratio:.3f} < {min_peak_ratio}", estimated=estimated,
-                    **curve)
+        return fail(
+            "ambiguous",
+            f"ambiguous peak: best/second = {ratio:.3f} < {min_peak_ratio}",
+            estimated=estimated,
+            **curve,
+        )
     # the jackknife looks for replicate peaks within the main lobe, at most 0.25 s either side
     reach = max(3, min(k - left, right - k, int(round(0.25 / dt))))
     std = _jackknife_std(a, b, (b0, b1), int(lags[k]), reach, dt)
     curve["std"] = std
     if not std <= max_std:
-        return fail("uncertain", f"offset {estimated * 1000:.1f} ms too uncertain: std {std * 1000:.3g} ms >"
-                    f" {max_std * 1000:.3g} ms", estimated=estimated, **curve)
-    return OffsetEstimate(offset=estimated, estimated=estimated, used=True, reason="estimated", **curve)
+        return fail(
+            "uncertain",
+            f"offset {estimated * 1000:.1f} ms too uncertain: std {std * 1000:.3g} ms >"
+            f" {max_std * 1000:.3g} ms",
+            estimated=estimated,
+            **curve,
+        )
+    return OffsetEstimate(
+        offset=estimated, estimated=estimated, used=True, reason="estimated", **curve
+    )

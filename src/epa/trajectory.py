@@ -31,7 +31,7 @@ class Trajectory:
     def r(self) -> np.ndarray:
         return geometry.quat_to_rot(self.q) if self.r_printed is None else self.r_printed
 
-    def select(self, idx) -> "Trajectory":
+    def select(self, idx) -> Trajectory:
         return replace(
             self,
             t=self.t[idx],
@@ -43,19 +43,21 @@ class Trajectory:
             r_printed=None if self.r_printed is None else self.r_printed[idx],
         )
 
-    def at(self, stamps: np.ndarray) -> "Trajectory":
+    def at(self, stamps: np.ndarray) -> Trajectory:
         """The poses at ``stamps``: linear positions, slerp orientations (clamped at the ends)."""
         p, q = geometry.interpolate(self.t, self.p, self.q, stamps)
         return Trajectory(np.asarray(stamps, float), p, q)
 
-    def shifted(self, dt: float) -> "Trajectory":
+    def shifted(self, dt: float) -> Trajectory:
         return replace(self, t=self.t + dt)
 
     def length(self) -> float:
         return float(geometry.path_distances(self.p)[-1]) if len(self) else 0.0
 
     @staticmethod
-    def from_rp(t, r, p, **extra) -> "Trajectory":
+    def from_rp(t, r, p, **extra) -> Trajectory:
         """From rotation matrices; when they are printed ones (``r_printed``), q is their nearest rotation."""
         rot = r if extra.get("r_printed") is None else geometry.nearest_rotation(r)
-        return Trajectory(np.asarray(t, float), np.asarray(p, float), geometry.rot_to_quat(rot), **extra)
+        return Trajectory(
+            np.asarray(t, float), np.asarray(p, float), geometry.rot_to_quat(rot), **extra
+        )

@@ -18,15 +18,30 @@ RPE_UNITS = ("frames", "m", "s", "deg", "rad")
 def stats(x: np.ndarray) -> dict:
     x = np.asarray(x, float)
     if x.size == 0:
-        return {"n": 0, "rmse": np.nan, "mean": np.nan, "median": np.nan, "std": np.nan, "min": np.nan,
-                "max": np.nan}
-    return {"n": int(x.size), "rmse": float(np.sqrt(np.mean(x * x))), "mean": float(np.mean(x)),
-            "median": float(np.median(x)), "std": float(np.std(x)), "min": float(np.min(x)),
-            "max": float(np.max(x))}
+        return {
+            "n": 0,
+            "rmse": np.nan,
+            "mean": np.nan,
+            "median": np.nan,
+            "std": np.nan,
+            "min": np.nan,
+            "max": np.nan,
+        }
+    return {
+        "n": int(x.size),
+        "rmse": float(np.sqrt(np.mean(x * x))),
+        "mean": float(np.mean(x)),
+        "median": float(np.median(x)),
+        "std": float(np.std(x)),
+        "min": float(np.min(x)),
+        "max": float(np.max(x)),
+    }
 
 
 # ----------------------------------------------------------------------------- pair selection
-def closest_pairs(d: np.ndarray, delta: float, tol: float, *, strict: bool, skip: int) -> tuple[np.ndarray, np.ndarray]:
+def closest_pairs(
+    d: np.ndarray, delta: float, tol: float, *, strict: bool, skip: int
+) -> tuple[np.ndarray, np.ndarray]:
     """For every start i, the first j >= i + skip whose d[j] is closest to d[i] + delta.
 
     ``d`` must be non-decreasing (cumulative path length or time). Kept when the gap is < tol
@@ -78,7 +93,9 @@ def consecutive_pairs(d: np.ndarray, delta: float):
     return ids[:-1], ids[1:]
 
 
-def evo_pairs(traj: Trajectory, delta: float, unit: str, *, all_pairs: bool = False, rel_tol: float = 0.1):
+def evo_pairs(
+    traj: Trajectory, delta: float, unit: str, *, all_pairs: bool = False, rel_tol: float = 0.1
+):
     """Pairs as evo's id_pairs_from_delta chooses them (frames, metres, degrees, radians) plus seconds
     in the same manner. Consecutive: a pair ends where the amount accumulated since its start
     (frames, path, summed rotation angle) reaches delta. All pairs: per start, the partner closest to
@@ -120,7 +137,9 @@ def _pairs_at_angle(q: np.ndarray, angle: float, tol: float, block: int = 256):
     found_i, found_j = [], []
     for start in range(0, max(n - 1, 0), block):
         i = np.arange(start, min(start + block, n - 1))
-        rel = geometry.quat_angle(geometry.quat_mul(geometry.quat_conj(q[i])[:, None, :], q[None, :, :]))
+        rel = geometry.quat_angle(
+            geometry.quat_mul(geometry.quat_conj(q[i])[:, None, :], q[None, :, :])
+        )
         hit = (np.abs(rel - angle) <= tol) & (np.arange(n)[None, :] > i[:, None])
         a, b = np.nonzero(hit)
         found_i.append(i[a])
@@ -136,7 +155,9 @@ def segment_key(length) -> str:
     return f"{float(length):g}"
 
 
-def ape(ref: Trajectory, est: Trajectory, d: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def ape(
+    ref: Trajectory, est: Trajectory, d: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Per-pose translation error (m) and rotation error (deg) of aligned, matched poses."""
     d = geometry.pose_discrepancy(ref.q, est.q) if d is None else d
     return np.linalg.norm(est.p - ref.p, axis=1), np.degrees(geometry.quat_angle(d))
@@ -151,21 +172,43 @@ def ate_2d(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     return yaw, np.linalg.norm(ref.p[:, :2] - est.p[:, :2], axis=1)
 
 
-def evaluate(ref: Trajectory, est: Trajectory, *, segments=(8, 16, 24, 32, 40, 48), segment_tol: float = 0.5,
-             time_delta: float = 1.0, time_tol: float = 0.1, rpe=()) -> tuple[dict, dict]:
+def evaluate(
+    ref: Trajectory,
+    est: Trajectory,
+    *,
+    segments=(8, 16, 24, 32, 40, 48),
+    segment_tol: float = 0.5,
+    time_delta: float = 1.0,
+    time_tol: float = 0.1,
+    rpe=(),
+) -> tuple[dict, dict]:
     """All metrics of one case. Returns (summary dict for metrics.json, per-pose/per-pair tables)."""
     if len(ref) != len(est):
         raise EpaError("reference and estimate must be matched pose for pose")
     d = geometry.pose_discrepancy(ref.q, est.q)  # once, shared by every metric below
     trans, rot = ape(ref, est, d)
     dist = geometry.path_distances(ref.p)
-    summary = {"n_matched": len(ref), "ref_length_m": float(dist[-1]) if len(dist) else 0.0,
-               "duration_s": float(ref.t[-1] - ref.t[0]),
-               "ate": {"trans_m": stats(trans), "rot_deg": stats(rot)}}
+    summary = {
+        "n_matched": len(ref),
+        "ref_length_m": float(dist[-1]) if len(dist) else 0.0,
+        "duration_s": float(ref.t[-1] - ref.t[0]),
+        "ate": {"trans_m": stats(trans), "rot_deg": stats(rot)},
+    }
     yaw, trans_xy = ate_2d(ref, est)
-    summary["ate_2d"] = {"yaw_deg": stats(yaw), "trans_xy_m": stats(trans_xy)}  # yaw signed: its rmse is ov_eval's
-    tables = {"ape": {"t": ref.t, "dist_m": dist, "trans_m": trans, "rot_deg": rot, "yaw_deg": yaw,
-                      "trans_xy_m": trans_xy}}
+    summary["ate_2d"] = {
+        "yaw_deg": stats(yaw),
+        "trans_xy_m": stats(trans_xy),
+    }  # yaw signed: its rmse is ov_eval's
+    tables = {
+        "ape": {
+            "t": ref.t,
+            "dist_m": dist,
+            "trans_m": trans,
+            "rot_deg": rot,
+            "yaw_deg": yaw,
+            "trans_xy_m": trans_xy,
+        }
+    }
 
     seg_rows = {k: [] for k in ("length_m", "i", "j", "rot_deg", "trans_m")}
     summary["rpe_distance"], summary["drift_rate_pct"] = {}, {}
@@ -177,7 +220,9 @@ def evaluate(ref: Trajectory, est: Trajectory, *, segments=(8, 16, 24, 32, 40, 4
         summary["drift_rate_pct"][key] = float(np.mean(et / length) * 100) if len(et) else np.nan
         for name, v in zip(seg_rows, (np.full(len(i), float(length)), i, j, er, et)):
             seg_rows[name].append(v)
-    tables["rpe_segments"] = {k: np.concatenate(v) if v else np.zeros(0) for k, v in seg_rows.items()}
+    tables["rpe_segments"] = {
+        k: np.concatenate(v) if v else np.zeros(0) for k, v in seg_rows.items()
+    }
 
     i, j = time_pairs(ref.t, time_delta, time_tol)
     er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
@@ -187,9 +232,13 @@ def evaluate(ref: Trajectory, est: Trajectory, *, segments=(8, 16, 24, 32, 40, 4
     summary["rpe"] = []
     for spec in rpe:
         pairs_from = ref if spec.get("pairs_from", "est") == "ref" else est
-        i, j = evo_pairs(pairs_from, spec["delta"], spec["unit"], all_pairs=spec.get("all_pairs", False),
-                         rel_tol=spec.get("rel_tol", 0.1))
+        i, j = evo_pairs(
+            pairs_from,
+            spec["delta"],
+            spec["unit"],
+            all_pairs=spec.get("all_pairs", False),
+            rel_tol=spec.get("rel_tol", 0.1),
+        )
         er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
         summary["rpe"].append({**spec, "trans_m": stats(et), "rot_deg": stats(er)})
     return summary, tables
-

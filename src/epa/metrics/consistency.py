@@ -19,7 +19,9 @@ from epa.alignment import Similarity
 from epa.trajectory import Trajectory
 
 
-def reference_in_estimate_frame(ref: Trajectory, alignment: Similarity, extrinsic=None) -> tuple[np.ndarray, np.ndarray]:
+def reference_in_estimate_frame(
+    ref: Trajectory, alignment: Similarity, extrinsic=None
+) -> tuple[np.ndarray, np.ndarray]:
     """Rotations and positions of the (matched) reference poses expressed as the estimate's poses
     would be: Step 3 undone (world), then Step 2 undone (body -> sensor, scale)."""
     r, p = alignment.inverse().apply_rp(ref.r, ref.p)
@@ -48,7 +50,9 @@ def _is_pd(c: np.ndarray) -> bool:
         return False
 
 
-def evaluate(ref: Trajectory, est: Trajectory, alignment: Similarity, extrinsic=None) -> tuple[dict, dict]:
+def evaluate(
+    ref: Trajectory, est: Trajectory, alignment: Similarity, extrinsic=None
+) -> tuple[dict, dict]:
     """NEES and ±3σ statistics of matched poses. ``est`` is the estimate as read (with its own
     covariance); ``ref`` the matched reference; ``alignment``/``extrinsic`` what Steps 3/2 found."""
     if est.cov_rot is None or est.cov_pos is None:
@@ -61,11 +65,15 @@ def evaluate(ref: Trajectory, est: Trajectory, alignment: Similarity, extrinsic=
     sig_pos = np.sqrt(np.clip(np.diagonal(est.cov_pos, axis1=1, axis2=2), 0, None))
     sig_rot = np.sqrt(np.clip(np.diagonal(est.cov_rot, axis1=1, axis2=2), 0, None))
     valid = np.isfinite(nees_pos) & np.isfinite(nees_rot)
-    outside = np.concatenate([np.abs(e_pos) > 3 * sig_pos, np.abs(e_rot) > 3 * sig_rot], axis=1)[valid]
+    outside = np.concatenate([np.abs(e_pos) > 3 * sig_pos, np.abs(e_rot) > 3 * sig_rot], axis=1)[
+        valid
+    ]
     axes = ["pos_x", "pos_y", "pos_z", "rot_x", "rot_y", "rot_z"]
     n = int(valid.sum())
     summary = {
-        "available": n > 0, "n": n, "n_not_positive_definite": int((~valid).sum()),
+        "available": n > 0,
+        "n": n,
+        "n_not_positive_definite": int((~valid).sum()),
         "convention": "local orientation error, R_true = R_est Exp(e); errors in the estimate's frames",
         "nees_pos_mean": float(np.mean(nees_pos[valid])) if n else None,
         "nees_rot_mean": float(np.mean(nees_rot[valid])) if n else None,
@@ -73,15 +81,21 @@ def evaluate(ref: Trajectory, est: Trajectory, alignment: Similarity, extrinsic=
         "nees_rot_median": float(np.median(nees_rot[valid])) if n else None,
         # mean over the six axes of the share of poses outside ±3σ (0.27 % for a consistent Gaussian)
         "outside_3sigma_pct": float(100 * outside.mean()) if n else None,
-        "outside_3sigma_pct_by_axis": dict(zip(axes, (100 * outside.mean(axis=0)).tolist())) if n else None,
+        "outside_3sigma_pct_by_axis": dict(zip(axes, (100 * outside.mean(axis=0)).tolist()))
+        if n
+        else None,
     }
     if not n:
         summary["reason"] = "no pose has a positive-definite covariance"
-    table = {"t": est.t, "nees_pos": nees_pos, "nees_rot": nees_rot,
-             **{f"err_{a}": e_pos[:, k] for k, a in enumerate("xyz")},
-             **{f"sigma_{a}": sig_pos[:, k] for k, a in enumerate("xyz")},
-             **{f"err_rot_{a}": e_rot[:, k] for k, a in enumerate("xyz")},
-             **{f"sigma_rot_{a}": sig_rot[:, k] for k, a in enumerate("xyz")}}
+    table = {
+        "t": est.t,
+        "nees_pos": nees_pos,
+        "nees_rot": nees_rot,
+        **{f"err_{a}": e_pos[:, k] for k, a in enumerate("xyz")},
+        **{f"sigma_{a}": sig_pos[:, k] for k, a in enumerate("xyz")},
+        **{f"err_rot_{a}": e_rot[:, k] for k, a in enumerate("xyz")},
+        **{f"sigma_rot_{a}": sig_rot[:, k] for k, a in enumerate("xyz")},
+    }
     return summary, table
 
 
@@ -113,14 +127,26 @@ def across_runs(runs: dict[str, dict]) -> tuple[dict, dict]:
     def stack(name):
         return np.array([np.asarray(runs[k][name], float)[sel[k]] for k in runs])
 
-    table = {"t": common, "rmse_pos_m": np.sqrt(np.mean(stack("trans_m") ** 2, axis=0)),
-             "rmse_rot_deg": np.sqrt(np.mean(stack("rot_deg") ** 2, axis=0))}
+    table = {
+        "t": common,
+        "rmse_pos_m": np.sqrt(np.mean(stack("trans_m") ** 2, axis=0)),
+        "rmse_rot_deg": np.sqrt(np.mean(stack("rot_deg") ** 2, axis=0)),
+    }
     if all(runs[k].get("nees_pos") is not None for k in runs):
         table["nees_pos"] = np.nanmean(stack("nees_pos"), axis=0) if len(common) else np.zeros(0)
         table["nees_rot"] = np.nanmean(stack("nees_rot"), axis=0) if len(common) else np.zeros(0)
     n = len(common)
     mean = lambda name: float(np.sqrt(np.mean(table[name] ** 2))) if n else None  # noqa: E731
-    summary = {"runs": len(runs), "n_common": int(n), "rmse_pos_m": mean("rmse_pos_m"), "rmse_rot_deg": mean("rmse_rot_deg"),
-               "nees_pos_mean": float(np.nanmean(table["nees_pos"])) if n and "nees_pos" in table else None,
-               "nees_rot_mean": float(np.nanmean(table["nees_rot"])) if n and "nees_rot" in table else None}
+    summary = {
+        "runs": len(runs),
+        "n_common": int(n),
+        "rmse_pos_m": mean("rmse_pos_m"),
+        "rmse_rot_deg": mean("rmse_rot_deg"),
+        "nees_pos_mean": float(np.nanmean(table["nees_pos"]))
+        if n and "nees_pos" in table
+        else None,
+        "nees_rot_mean": float(np.nanmean(table["nees_rot"]))
+        if n and "nees_rot" in table
+        else None,
+    }
     return summary, table

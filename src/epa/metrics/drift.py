@@ -35,8 +35,16 @@ def _span_mask(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
     return np.cumsum(marks[:-1]) > 0
 
 
-def growth_stretches(t: np.ndarray, ape: np.ndarray, pi: np.ndarray, pj: np.ndarray, *, rise: float,
-                     rate: float, hold: float) -> list[tuple[int, int]]:
+def growth_stretches(
+    t: np.ndarray,
+    ape: np.ndarray,
+    pi: np.ndarray,
+    pj: np.ndarray,
+    *,
+    rise: float,
+    rate: float,
+    hold: float,
+) -> list[tuple[int, int]]:
     """APE jumps: a 1 s step (pi -> pj) rising more than ``rise`` faster than ``rate`` starts a
     stretch at pi, which lasts while APE stays above the level before the jump plus ``hold``."""
     d_ape = ape[pj] - ape[pi]
@@ -48,7 +56,7 @@ def growth_stretches(t: np.ndarray, ape: np.ndarray, pi: np.ndarray, pj: np.ndar
         a = int(pi[s])
         if a <= end_prev:
             continue
-        below = np.flatnonzero(ape[pj[s]:] <= ape[a] + hold)
+        below = np.flatnonzero(ape[pj[s] :] <= ape[a] + hold)
         b = int(pj[s] + below[0] - 1) if len(below) else len(ape) - 1
         out.append((a, b))
         end_prev = b
@@ -59,7 +67,13 @@ def knee_threshold(ape: np.ndarray, lo: float = 5.0, hi: float = 30.0) -> dict:
     """Knee of the sorted APE curve (largest gap below the chord, tail above p95 trimmed), else p95; clamped."""
     finite = np.sort(ape[np.isfinite(ape)])
     if finite.size == 0:
-        return {"threshold_m": hi, "mode": "none", "raw_m": np.nan, "clamped": True, "bounds_m": [lo, hi]}
+        return {
+            "threshold_m": hi,
+            "mode": "none",
+            "raw_m": np.nan,
+            "clamped": True,
+            "bounds_m": [lo, hi],
+        }
     p95 = float(np.percentile(finite, 95))
     y = finite[finite <= p95]
     raw, mode = p95, "p95"
@@ -71,7 +85,13 @@ def knee_threshold(ape: np.ndarray, lo: float = 5.0, hi: float = 30.0) -> dict:
         if gap[k] > 0.05:  # a curve within 5% of its chord has no knee worth the name
             raw, mode = float(y[k]), "knee"
     thr = float(np.clip(raw, lo, hi))
-    return {"threshold_m": thr, "mode": mode, "raw_m": raw, "clamped": thr != raw, "bounds_m": [lo, hi]}
+    return {
+        "threshold_m": thr,
+        "mode": mode,
+        "raw_m": raw,
+        "clamped": thr != raw,
+        "bounds_m": [lo, hi],
+    }
 
 
 THRESHOLD_KEYS = ("rpe_trans_max_m", "jump_rise_m", "jump_rate_m_s", "jump_hold_m")
@@ -84,10 +104,19 @@ def _invalid(t, ape_trans, time_i, time_j, time_trans, th: dict):
     n = len(t)
     bad_pair = ~np.isfinite(time_trans) | (time_trans > th["rpe_trans_max_m"])
     invalid = _span_mask(n, time_i[bad_pair], time_j[bad_pair])
-    stretches = growth_stretches(t, ape_trans, time_i, time_j, rise=th["jump_rise_m"], rate=th["jump_rate_m_s"],
-                                 hold=th["jump_hold_m"])
+    stretches = growth_stretches(
+        t,
+        ape_trans,
+        time_i,
+        time_j,
+        rise=th["jump_rise_m"],
+        rate=th["jump_rate_m_s"],
+        hold=th["jump_hold_m"],
+    )
     if stretches:
-        invalid |= _span_mask(n, np.array([a for a, _ in stretches]), np.array([b for _, b in stretches]))
+        invalid |= _span_mask(
+            n, np.array([a for a, _ in stretches]), np.array([b for _, b in stretches])
+        )
     return invalid | ~np.isfinite(ape_trans), stretches
 
 
@@ -101,11 +130,23 @@ def _success_distance(dist, invalid) -> float:
 def success_curve(t, dist, ape_trans, time_i, time_j, time_trans, th: dict) -> dict:
     """The distance success rate with every drift threshold multiplied by each of CURVE_FACTORS, and
     its area: the mean over the log-spaced factors (%), so a ranking need not hinge on one threshold."""
-    rates = np.array([_success_distance(dist, _invalid(t, ape_trans, time_i, time_j, time_trans,
-                                                       {k: f * th[k] for k in THRESHOLD_KEYS})[0])
-                      for f in CURVE_FACTORS])
-    return {"factor": CURVE_FACTORS, "rpe_trans_max_m": CURVE_FACTORS * th["rpe_trans_max_m"],
-            "success_rate_distance_pct": rates, "auc_pct": float(np.mean(rates))}
+    rates = np.array(
+        [
+            _success_distance(
+                dist,
+                _invalid(
+                    t, ape_trans, time_i, time_j, time_trans, {k: f * th[k] for k in THRESHOLD_KEYS}
+                )[0],
+            )
+            for f in CURVE_FACTORS
+        ]
+    )
+    return {
+        "factor": CURVE_FACTORS,
+        "rpe_trans_max_m": CURVE_FACTORS * th["rpe_trans_max_m"],
+        "success_rate_distance_pct": rates,
+        "auc_pct": float(np.mean(rates)),
+    }
 
 
 def detect(t, dist, ape_trans, ape_rot, time_i, time_j, time_trans, settings: dict) -> dict:
@@ -121,19 +162,34 @@ def detect(t, dist, ape_trans, ape_rot, time_i, time_j, time_trans, settings: di
     # maximal runs of invalid poses
     edges = np.diff(np.concatenate([[0], invalid.astype(int), [0]]))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
-    segments = {"index_start": starts, "index_end": ends, "t_start": t[starts], "t_end": t[ends],
-                "dist_start_m": dist[starts], "dist_end_m": dist[ends], "duration_s": t[ends] - t[starts],
-                "length_m": dist[ends] - dist[starts],
-                "ape_max_m": np.array([ape_trans[a:b + 1].max() for a, b in zip(starts, ends)]),
-                "ape_mean_m": np.array([ape_trans[a:b + 1].mean() for a, b in zip(starts, ends)])}
+    segments = {
+        "index_start": starts,
+        "index_end": ends,
+        "t_start": t[starts],
+        "t_end": t[ends],
+        "dist_start_m": dist[starts],
+        "dist_end_m": dist[ends],
+        "duration_s": t[ends] - t[starts],
+        "length_m": dist[ends] - dist[starts],
+        "ape_max_m": np.array([ape_trans[a : b + 1].max() for a, b in zip(starts, ends)]),
+        "ape_mean_m": np.array([ape_trans[a : b + 1].mean() for a, b in zip(starts, ends)]),
+    }
     finite = ape_trans[np.isfinite(ape_trans)]
     p5 = float(np.percentile(finite, 5)) if finite.size else np.nan
     global_failed = not np.isfinite(p5) or p5 > settings["global_fail_p5_m"]
     knee = knee_threshold(ape_trans, settings["knee_min_m"], settings["knee_max_m"])
-    return {"thresholds": th, "invalid": invalid, "valid_interval": valid_iv,
-            "success_rate_distance_pct": sr_dist, "success_rate_time_pct": sr_time,
-            "ape_p5_m": p5, "global_failed": bool(global_failed), "knee": knee, "fail_segments": segments,
-            "growth_stretches": stretches}
+    return {
+        "thresholds": th,
+        "invalid": invalid,
+        "valid_interval": valid_iv,
+        "success_rate_distance_pct": sr_dist,
+        "success_rate_time_pct": sr_time,
+        "ape_p5_m": p5,
+        "global_failed": bool(global_failed),
+        "knee": knee,
+        "fail_segments": segments,
+        "growth_stretches": stretches,
+    }
 
 
 def pair_valid(valid_interval: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -142,7 +198,9 @@ def pair_valid(valid_interval: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.n
     return (bad[j] - bad[i]) == 0
 
 
-def valid_metrics(det: dict, ape_trans, ape_rot, seg: dict, tpairs: dict, segments) -> tuple[dict, np.ndarray, np.ndarray]:
+def valid_metrics(
+    det: dict, ape_trans, ape_rot, seg: dict, tpairs: dict, segments
+) -> tuple[dict, np.ndarray, np.ndarray]:
     """Drift-valid ATE (poses touching a valid interval) and RPE / drift rate / 1 s RPE over valid pairs.
 
     Returns the metrics and the validity of each segment pair and each time pair (all False when
@@ -152,19 +210,42 @@ def valid_metrics(det: dict, ape_trans, ape_rot, seg: dict, tpairs: dict, segmen
     touch = np.zeros(len(ape_trans), bool)
     touch[:-1] |= viv
     touch[1:] |= viv
-    out = {"ate": {"trans_m": stats(ape_trans[touch]), "rot_deg": stats(ape_rot[touch])},
-           "rpe_distance": {}, "drift_rate_pct": {}}
-    sv = pair_valid(viv, seg["i"].astype(int), seg["j"].astype(int)) if len(seg["i"]) else np.zeros(0, bool)
+    out = {
+        "ate": {"trans_m": stats(ape_trans[touch]), "rot_deg": stats(ape_rot[touch])},
+        "rpe_distance": {},
+        "drift_rate_pct": {},
+    }
+    sv = (
+        pair_valid(viv, seg["i"].astype(int), seg["j"].astype(int))
+        if len(seg["i"])
+        else np.zeros(0, bool)
+    )
     for length in segments:
         key = segment_key(length)
         sel = sv & (seg["length_m"] == float(length))
-        out["rpe_distance"][key] = {"trans_m": stats(seg["trans_m"][sel]), "rot_deg": stats(seg["rot_deg"][sel])}
-        out["drift_rate_pct"][key] = float(np.mean(seg["trans_m"][sel] / length) * 100) if sel.any() else np.nan
-    tv = pair_valid(viv, tpairs["i"].astype(int), tpairs["j"].astype(int)) if len(tpairs["i"]) else np.zeros(0, bool)
-    out["rpe_time_1s"] = {"trans_m": stats(tpairs["trans_m"][tv]), "rot_deg": stats(tpairs["rot_deg"][tv])}
+        out["rpe_distance"][key] = {
+            "trans_m": stats(seg["trans_m"][sel]),
+            "rot_deg": stats(seg["rot_deg"][sel]),
+        }
+        out["drift_rate_pct"][key] = (
+            float(np.mean(seg["trans_m"][sel] / length) * 100) if sel.any() else np.nan
+        )
+    tv = (
+        pair_valid(viv, tpairs["i"].astype(int), tpairs["j"].astype(int))
+        if len(tpairs["i"])
+        else np.zeros(0, bool)
+    )
+    out["rpe_time_1s"] = {
+        "trans_m": stats(tpairs["trans_m"][tv]),
+        "rot_deg": stats(tpairs["rot_deg"][tv]),
+    }
     if nan_all:
         out = _nan_like(out)
-    return out, (sv if not nan_all else np.zeros_like(sv)), (tv if not nan_all else np.zeros_like(tv))
+    return (
+        out,
+        (sv if not nan_all else np.zeros_like(sv)),
+        (tv if not nan_all else np.zeros_like(tv)),
+    )
 
 
 def _nan_like(d):

@@ -36,13 +36,23 @@ def read_timing(path) -> tuple[np.ndarray, np.ndarray, str]:
     rows = tab.rows
     if "total" in header:
         if len(header) != rows.shape[1]:
-            raise EpaError(f"the header names {len(header)} columns but the rows have {rows.shape[1]}", path=str(path))
-        t, ms, what = rows[:, 0], rows[:, header.index("total")] * 1000.0, "OpenVINS timing CSV (total, s)"
+            raise EpaError(
+                f"the header names {len(header)} columns but the rows have {rows.shape[1]}",
+                path=str(path),
+            )
+        t, ms, what = (
+            rows[:, 0],
+            rows[:, header.index("total")] * 1000.0,
+            "OpenVINS timing CSV (total, s)",
+        )
     elif rows.shape[1] == 2:
         t, ms, what = rows[:, 0], rows[:, 1], "<timestamp> <ms>"
     else:
-        raise EpaError(f"a timing file has 2 columns (<timestamp> <milliseconds>) or an OpenVINS header with"
-                       f" 'total'; found {rows.shape[1]} columns", path=str(path))
+        raise EpaError(
+            f"a timing file has 2 columns (<timestamp> <milliseconds>) or an OpenVINS header with"
+            f" 'total'; found {rows.shape[1]} columns",
+            path=str(path),
+        )
     if np.median(np.abs(t)) > text.NS_THRESHOLD:
         t, what = t / 1e9, what + ", stamps in ns"
     if (ms < 0).any():
@@ -78,13 +88,17 @@ def weights(frame_ms: np.ndarray, rate_hz: float) -> np.ndarray:
 def ea_drift(err_m: np.ndarray, frame_ms: np.ndarray, rate_hz: float, path_length_m: float) -> dict:
     """The seed's EA-Drift and the per-frame normalised variant, in %."""
     w = weights(frame_ms, rate_hz)
-    s = float(np.sum(w * err_m ** 2))
+    s = float(np.sum(w * err_m**2))
     n = len(err_m)
-    return {"ea_drift_seed": 100 * np.sqrt(s) / path_length_m,
-            "ea_drift": 100 * np.sqrt(s / n) / path_length_m if n else None}
+    return {
+        "ea_drift_seed": 100 * np.sqrt(s) / path_length_m,
+        "ea_drift": 100 * np.sqrt(s / n) / path_length_m if n else None,
+    }
 
 
-def ea_drift_m2ud(err_m: np.ndarray, frame_ms: np.ndarray, rate_hz: float, path_length_m: float) -> float:
+def ea_drift_m2ud(
+    err_m: np.ndarray, frame_ms: np.ndarray, rate_hz: float, path_length_m: float
+) -> float:
     frame_time_ms = 1000.0 / rate_hz
     w = np.exp((frame_ms - frame_time_ms) / frame_time_ms)
     return float(100 * np.sqrt(np.sum((w * err_m) ** 2)) / path_length_m)
@@ -93,29 +107,51 @@ def ea_drift_m2ud(err_m: np.ndarray, frame_ms: np.ndarray, rate_hz: float, path_
 def runtime(frame_ms: np.ndarray, rate_hz: float) -> dict:
     period_ms = 1000.0 / rate_hz
     over = frame_ms > period_ms
-    return {"frames": int(len(frame_ms)), "frame_time_mean_ms": float(np.mean(frame_ms)),
-            "frame_time_p95_ms": float(np.percentile(frame_ms, 95)), "frame_time_max_ms": float(np.max(frame_ms)),
-            "frames_over_period": int(over.sum()), "frames_over_period_pct": float(100 * over.mean()),
-            "sensor_period_ms": period_ms}
+    return {
+        "frames": int(len(frame_ms)),
+        "frame_time_mean_ms": float(np.mean(frame_ms)),
+        "frame_time_p95_ms": float(np.percentile(frame_ms, 95)),
+        "frame_time_max_ms": float(np.max(frame_ms)),
+        "frames_over_period": int(over.sum()),
+        "frames_over_period_pct": float(100 * over.mean()),
+        "sensor_period_ms": period_ms,
+    }
 
 
-def evaluate(t_est: np.ndarray, t_ref: np.ndarray, err_m: np.ndarray, est_path_length_m: float,
-             timing: tuple[np.ndarray, np.ndarray], rate_hz: float, max_diff: float) -> tuple[dict, dict]:
+def evaluate(
+    t_est: np.ndarray,
+    t_ref: np.ndarray,
+    err_m: np.ndarray,
+    est_path_length_m: float,
+    timing: tuple[np.ndarray, np.ndarray],
+    rate_hz: float,
+    max_diff: float,
+) -> tuple[dict, dict]:
     """Efficiency of one case. ``t_est``/``t_ref``: matched stamps; ``err_m``: APE per matched pose."""
     t_tim, ms = timing
     idx = match_nearest(t_est, t_tim, max_diff)
     have = idx >= 0
     n_missing = int((~have).sum())
-    summary = {"sensor_rate_hz": rate_hz, "timing_max_diff_s": max_diff, "n_poses": int(len(t_est)),
-               "n_without_timing": n_missing, **runtime(ms, rate_hz)}
+    summary = {
+        "sensor_rate_hz": rate_hz,
+        "timing_max_diff_s": max_diff,
+        "n_poses": int(len(t_est)),
+        "n_without_timing": n_missing,
+        **runtime(ms, rate_hz),
+    }
     if not have.any():
         summary.update(available=False, reason=f"no pose has a timing entry within {max_diff} s")
         return summary, {}
     summary["available"] = True
     summary.update(ea_drift(err_m[have], ms[idx[have]], rate_hz, est_path_length_m))
     m2 = match_m2ud(t_ref, t_tim)
-    summary["ea_drift_m2ud"] = (ea_drift_m2ud(err_m, ms[m2], rate_hz, est_path_length_m) if (m2 >= 0).all()
-                                else None)  # the patch stops when a pose has no timing
-    table = {"t": t_est, "frame_ms": np.where(have, ms[np.maximum(idx, 0)], np.nan),
-             "weight": np.where(have, weights(ms[np.maximum(idx, 0)], rate_hz), np.nan), "err_m": err_m}
+    summary["ea_drift_m2ud"] = (
+        ea_drift_m2ud(err_m, ms[m2], rate_hz, est_path_length_m) if (m2 >= 0).all() else None
+    )  # the patch stops when a pose has no timing
+    table = {
+        "t": t_est,
+        "frame_ms": np.where(have, ms[np.maximum(idx, 0)], np.nan),
+        "weight": np.where(have, weights(ms[np.maximum(idx, 0)], rate_hz), np.nan),
+        "err_m": err_m,
+    }
     return summary, table

@@ -23,12 +23,16 @@ LENGTHS_M = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
 STEP = 10
 
 
-def segments(dist: np.ndarray, lengths=LENGTHS_M, step: int = STEP) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def segments(
+    dist: np.ndarray, lengths=LENGTHS_M, step: int = STEP
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(first, last, length) of every segment: lastFrameFromSegmentLength, a start every ``step`` poses."""
     first = np.arange(0, len(dist), step)
     firsts, lasts, lens = [], [], []
     for length in lengths:
-        last = np.searchsorted(dist, dist[first] + length, side="right")  # first pose strictly beyond
+        last = np.searchsorted(
+            dist, dist[first] + length, side="right"
+        )  # first pose strictly beyond
         ok = last < len(dist)
         firsts.append(first[ok])
         lasts.append(last[ok])
@@ -44,15 +48,29 @@ def odometry(ref: Trajectory, est: Trajectory) -> tuple[dict, dict]:
     (``geometry.relative_errors``): the devkit's inv(delta_est) delta_ref has the same angle and
     translation norm as the RPE's inv(delta_ref) delta_est."""
     f, l, lengths = segments(geometry.path_distances(ref.p))
-    rot_deg, trans_m = geometry.relative_errors(geometry.pose_discrepancy(ref.q, est.q), ref.p, est.p, f, l)
-    table = {"first": f, "last": l, "length_m": lengths, "trans_pct": 100.0 * trans_m / lengths,
-             "rot_deg_per_100m": 100.0 * rot_deg / lengths}
+    rot_deg, trans_m = geometry.relative_errors(
+        geometry.pose_discrepancy(ref.q, est.q), ref.p, est.p, f, l
+    )
+    table = {
+        "first": f,
+        "last": l,
+        "length_m": lengths,
+        "trans_pct": 100.0 * trans_m / lengths,
+        "rot_deg_per_100m": 100.0 * rot_deg / lengths,
+    }
     n = len(f)
-    summary = {"n_segments": int(n),
-               "trans_pct": float(np.mean(table["trans_pct"])) if n else None,
-               "rot_deg_per_100m": float(np.mean(table["rot_deg_per_100m"])) if n else None,
-               "per_length": {f"{L:g}": {"n": int((lengths == L).sum()),
-                                         "trans_pct": float(np.mean(table["trans_pct"][lengths == L])),
-                                         "rot_deg_per_100m": float(np.mean(table["rot_deg_per_100m"][lengths == L]))}
-                              for L in LENGTHS_M if (lengths == L).any()}}
+    summary = {
+        "n_segments": int(n),
+        "trans_pct": float(np.mean(table["trans_pct"])) if n else None,
+        "rot_deg_per_100m": float(np.mean(table["rot_deg_per_100m"])) if n else None,
+        "per_length": {
+            f"{L:g}": {
+                "n": int((lengths == L).sum()),
+                "trans_pct": float(np.mean(table["trans_pct"][lengths == L])),
+                "rot_deg_per_100m": float(np.mean(table["rot_deg_per_100m"][lengths == L])),
+            }
+            for L in LENGTHS_M
+            if (lengths == L).any()
+        },
+    }
     return summary, table

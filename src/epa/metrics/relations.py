@@ -26,13 +26,33 @@ from epa.errors import EpaError
 from epa.metrics import accuracy
 from epa.trajectory import Trajectory
 
-RELATIONS = ("full", "trans_part", "rot_part", "angle_deg", "angle_rad", "point_distance",
-             "point_distance_error_ratio")
-UNIT = {"full": "", "trans_part": "m", "rot_part": "", "angle_deg": "deg", "angle_rad": "rad",
-        "point_distance": "m", "point_distance_error_ratio": "%"}
-TITLE = {"full": "full transformation", "trans_part": "translation part", "rot_part": "rotation part",
-         "angle_rad": "rotation angle in radians", "angle_deg": "rotation angle in degrees",
-         "point_distance": "point distance", "point_distance_error_ratio": "point distance error ratio"}
+RELATIONS = (
+    "full",
+    "trans_part",
+    "rot_part",
+    "angle_deg",
+    "angle_rad",
+    "point_distance",
+    "point_distance_error_ratio",
+)
+UNIT = {
+    "full": "",
+    "trans_part": "m",
+    "rot_part": "",
+    "angle_deg": "deg",
+    "angle_rad": "rad",
+    "point_distance": "m",
+    "point_distance_error_ratio": "%",
+}
+TITLE = {
+    "full": "full transformation",
+    "trans_part": "translation part",
+    "rot_part": "rotation part",
+    "angle_rad": "rotation angle in radians",
+    "angle_deg": "rotation angle in degrees",
+    "point_distance": "point distance",
+    "point_distance_error_ratio": "point distance error ratio",
+}
 
 
 def _check(relation: str, rpe: bool) -> None:
@@ -49,7 +69,9 @@ def _printed(*trajs: Trajectory) -> bool:
     return any(t.r_printed is not None for t in trajs)
 
 
-def _between(r_a: np.ndarray, p_a: np.ndarray, r_b: np.ndarray, p_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _between(
+    r_a: np.ndarray, p_a: np.ndarray, r_b: np.ndarray, p_b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """A^-1 B as (rotations, translations), A^-1 taken as evo's se3_inverse takes it, [R^T, -R^T p]:
     evo's arithmetic exactly, also on KITTI's printed, not quite orthonormal, rotation blocks (the
     matrix twin of geometry.relative_motions, which works on quaternions)."""
@@ -78,7 +100,9 @@ def _of_error_poses(relation: str, r_e: np.ndarray, t_e: np.ndarray) -> np.ndarr
     if relation in ("angle_deg", "angle_rad"):
         return _angle(relation, geometry.rotation_angle(geometry.nearest_rotation(r_e)))
     rot = np.linalg.norm(r_e - np.eye(3), axis=(-2, -1))
-    return rot if relation == "rot_part" else np.sqrt(rot ** 2 + np.sum(t_e ** 2, axis=-1))  # full: last row is 0
+    return (
+        rot if relation == "rot_part" else np.sqrt(rot**2 + np.sum(t_e**2, axis=-1))
+    )  # full: last row is 0
 
 
 def ape(ref: Trajectory, est: Trajectory, relation: str = "trans_part") -> np.ndarray:
@@ -86,13 +110,21 @@ def ape(ref: Trajectory, est: Trajectory, relation: str = "trans_part") -> np.nd
     (accuracy.ape): |t(E)| = |p_est - p_ref| and angle(E) = angle(Q P^T), except on printed rotation
     blocks, where the angle is evo's (of the matrix product)."""
     _check(relation, rpe=False)
-    if relation in ("trans_part", "point_distance") or (relation.startswith("angle") and not _printed(ref, est)):
+    if relation in ("trans_part", "point_distance") or (
+        relation.startswith("angle") and not _printed(ref, est)
+    ):
         trans, rot_deg = accuracy.ape(ref, est)
-        return trans if relation in ("trans_part", "point_distance") else _angle(relation, np.radians(rot_deg))
+        return (
+            trans
+            if relation in ("trans_part", "point_distance")
+            else _angle(relation, np.radians(rot_deg))
+        )
     return _of_error_poses(relation, *_ape_error_poses(ref, est))
 
 
-def rpe(ref: Trajectory, est: Trajectory, i: np.ndarray, j: np.ndarray, relation: str = "trans_part") -> np.ndarray:
+def rpe(
+    ref: Trajectory, est: Trajectory, i: np.ndarray, j: np.ndarray, relation: str = "trans_part"
+) -> np.ndarray:
     """Per pair (i, j): the relation's value of E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j). Translation and
     angle are the RPE's (geometry.relative_errors), except on printed rotation blocks (evo's matrix
     arithmetic, _rpe_error_poses)."""
@@ -105,7 +137,9 @@ def rpe(ref: Trajectory, est: Trajectory, i: np.ndarray, j: np.ndarray, relation
         moved = d_ref != 0
         return diff[moved] / d_ref[moved] * 100
     if relation in ("trans_part", "angle_deg", "angle_rad") and not _printed(ref, est):
-        rot_deg, trans = geometry.relative_errors(geometry.pose_discrepancy(ref.q, est.q), ref.p, est.p, i, j)
+        rot_deg, trans = geometry.relative_errors(
+            geometry.pose_discrepancy(ref.q, est.q), ref.p, est.p, i, j
+        )
         return trans if relation == "trans_part" else _angle(relation, np.radians(rot_deg))
     return _of_error_poses(relation, *_rpe_error_poses(ref, est, i, j))
 
@@ -116,5 +150,12 @@ def evo_statistics(errors: np.ndarray) -> dict[str, float]:
     if e.size == 0:
         raise EpaError("no errors to summarise (no poses or pairs were compared)")
     s = accuracy.stats(e)
-    return {"max": s["max"], "mean": s["mean"], "median": s["median"], "min": s["min"], "rmse": s["rmse"],
-            "sse": float(np.sum(e * e)), "std": s["std"]}
+    return {
+        "max": s["max"],
+        "mean": s["mean"],
+        "median": s["median"],
+        "min": s["min"],
+        "rmse": s["rmse"],
+        "sse": float(np.sum(e * e)),
+        "std": s["std"],
+    }

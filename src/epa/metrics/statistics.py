@@ -47,7 +47,7 @@ def wilcoxon_exact(diff) -> float:
     # beyond 16 the normal approximation is good and the enumeration too long
     if n > 16:
         return float(stats.wilcoxon(d).pvalue)
-    signs = (np.arange(2 ** n)[:, None] >> np.arange(n)) & 1
+    signs = (np.arange(2**n)[:, None] >> np.arange(n)) & 1
     sums = signs @ ranks
     centre = ranks.sum() / 2
     return float(np.mean(np.abs(sums - centre) >= abs(observed - centre) - 1e-9))
@@ -64,7 +64,7 @@ def mann_whitney(a, b) -> float:
 def min_datasets_for(alpha: float = ALPHA) -> int:
     """The fewest paired datasets whose exact Wilcoxon test can reach p < alpha."""
     n = 1
-    while 2.0 / 2 ** n >= alpha:
+    while 2.0 / 2**n >= alpha:
         n += 1
     return n
 
@@ -75,25 +75,40 @@ def compare(a: dict, b: dict, rpe_a: dict, rpe_b: dict) -> dict:
     shared = sorted(set(a) & set(b))
     mean_a = np.array([np.mean(a[d]) for d in shared])
     mean_b = np.array([np.mean(b[d]) for d in shared])
-    out = {"datasets": shared, "wins_a": int(np.sum(mean_a < mean_b)), "wins_b": int(np.sum(mean_b < mean_a)),
-           "ties": int(np.sum(mean_a == mean_b))}
+    out = {
+        "datasets": shared,
+        "wins_a": int(np.sum(mean_a < mean_b)),
+        "wins_b": int(np.sum(mean_b < mean_a)),
+        "ties": int(np.sum(mean_a == mean_b)),
+    }
     out["median_ratio_ate"] = float(np.median(mean_a / mean_b)) if shared else np.nan
     rpe = [d for d in shared if d in rpe_a and d in rpe_b]
-    out["median_ratio_rpe"] = (float(np.median([np.mean(rpe_a[d]) / np.mean(rpe_b[d]) for d in rpe]))
-                               if rpe else np.nan)
+    out["median_ratio_rpe"] = (
+        float(np.median([np.mean(rpe_a[d]) / np.mean(rpe_b[d]) for d in rpe])) if rpe else np.nan
+    )
     out["p_datasets"] = wilcoxon_exact(mean_a - mean_b) if shared else np.nan
     out["datasets_testable"] = len(shared) >= min_datasets_for()
     out["per_dataset"] = {}
     for d in shared:
-        entry = {"runs_a": len(a[d]), "runs_b": len(b[d]), "mean_a": float(np.mean(a[d])),
-                 "mean_b": float(np.mean(b[d]))}
+        entry = {
+            "runs_a": len(a[d]),
+            "runs_b": len(b[d]),
+            "mean_a": float(np.mean(a[d])),
+            "mean_b": float(np.mean(b[d])),
+        }
         if len(a[d]) >= 2 and len(b[d]) >= 2:
             entry["p_runs"] = mann_whitney(a[d], b[d])
         out["per_dataset"][d] = entry
     # the verdict: which is better over the datasets ("a" / "b", None when not shown), else on
     # which datasets their runs differ and which is better there; neither: they cannot be told apart
-    out["better_over_datasets"] = (("a" if np.median(mean_a - mean_b) < 0 else "b")
-                                   if out["datasets_testable"] and out["p_datasets"] < ALPHA else None)
-    out["better_on_dataset"] = {d: "a" if e["mean_a"] < e["mean_b"] else "b"
-                                for d, e in out["per_dataset"].items() if e.get("p_runs", 1.0) < ALPHA}
+    out["better_over_datasets"] = (
+        ("a" if np.median(mean_a - mean_b) < 0 else "b")
+        if out["datasets_testable"] and out["p_datasets"] < ALPHA
+        else None
+    )
+    out["better_on_dataset"] = {
+        d: "a" if e["mean_a"] < e["mean_b"] else "b"
+        for d, e in out["per_dataset"].items()
+        if e.get("p_runs", 1.0) < ALPHA
+    }
     return out

@@ -7,7 +7,8 @@ that imports matplotlib (≈0.9 s), so no metric stage pays for it.
 
 Style: the Okabe-Ito colour-blind-safe palette, one colour per algorithm across every figure of a
 grid (by the algorithm's place in the sorted list of the grid's algorithms), viridis for error
-colour maps (its middle is not the grey of the reference), DejaVu Sans (no LaTeX needed), sizes in inches for a 3.5 in paper column.
+colour maps (its middle is not the grey of the reference), DejaVu Sans (no LaTeX needed),
+sizes in inches for a 3.5 in paper column.
 """
 
 from __future__ import annotations
@@ -27,7 +28,9 @@ STYLES = {  # name: (width in, height in, base font pt)
     "wide": (7.0, 2.8, 8.0),
     "slide": (6.4, 4.0, 12.0),
 }
-MAX_POINTS = 1000  # a plotted line at column width needs no more; keeps bundles small and drawing fast
+MAX_POINTS = (
+    1000  # a plotted line at column width needs no more; keeps bundles small and drawing fast
+)
 
 
 def thin(n: int, most: int | None = None) -> np.ndarray:
@@ -81,7 +84,13 @@ def _json(obj) -> str:
 def bundle(kind: str, title: str, data: dict, **meta) -> dict:
     if kind not in RENDERERS:
         raise ValueError(f"unknown figure kind {kind!r}")
-    return {"format": "epica-plot-bundle/1", "kind": kind, "title": title, "data": _plain(data), "meta": _plain(meta)}
+    return {
+        "format": "epica-plot-bundle/1",
+        "kind": kind,
+        "title": title,
+        "data": _plain(data),
+        "meta": _plain(meta),
+    }
 
 
 def write_bundle(path, b: dict) -> None:
@@ -96,8 +105,15 @@ def read_bundle(path) -> dict:
         raise EpaError("file not found", path=str(path)) from None
     except (OSError, ValueError) as exc:
         raise EpaError(f"not a plot bundle: {exc}", path=str(path)) from None
-    if not isinstance(b, dict) or b.get("format") != "epica-plot-bundle/1" or b.get("kind") not in RENDERERS:
-        raise EpaError("not an epica plot bundle (format epica-plot-bundle/1 with a known kind)", path=str(path))
+    if (
+        not isinstance(b, dict)
+        or b.get("format") != "epica-plot-bundle/1"
+        or b.get("kind") not in RENDERERS
+    ):
+        raise EpaError(
+            "not an epica plot bundle (format epica-plot-bundle/1 with a known kind)",
+            path=str(path),
+        )
     return b
 
 
@@ -109,15 +125,32 @@ def _setup(style: str):
     import matplotlib.pyplot as plt
 
     w, h, pt = STYLES[style]
-    plt.rcParams.update({
-        "font.family": "DejaVu Sans", "font.size": pt, "axes.titlesize": pt, "axes.labelsize": pt,
-        "xtick.labelsize": pt - 1, "ytick.labelsize": pt - 1, "legend.fontsize": pt - 1, "axes.linewidth": 0.6,
-        "lines.linewidth": 1.0, "axes.spines.top": False, "axes.spines.right": False, "legend.frameon": False,
-        "figure.dpi": 100, "savefig.dpi": 150, "pdf.fonttype": 42, "svg.fonttype": "none",
-        "axes.prop_cycle": matplotlib.cycler(color=OKABE_ITO),
-        # 1e4 and beyond as a power of ten above the axis: tick labels stay short enough for fixed margins
-        "axes.formatter.limits": (-3, 4),  # no mathtext: parsing it would cost more than drawing
-    })
+    plt.rcParams.update(
+        {
+            "font.family": "DejaVu Sans",
+            "font.size": pt,
+            "axes.titlesize": pt,
+            "axes.labelsize": pt,
+            "xtick.labelsize": pt - 1,
+            "ytick.labelsize": pt - 1,
+            "legend.fontsize": pt - 1,
+            "axes.linewidth": 0.6,
+            "lines.linewidth": 1.0,
+            "axes.spines.top": False,
+            "axes.spines.right": False,
+            "legend.frameon": False,
+            "figure.dpi": 100,
+            "savefig.dpi": 150,
+            "pdf.fonttype": 42,
+            "svg.fonttype": "none",
+            "axes.prop_cycle": matplotlib.cycler(color=OKABE_ITO),
+            # 1e4 and beyond as a power of ten above the axis: tick labels stay short enough for fixed margins
+            "axes.formatter.limits": (
+                -3,
+                4,
+            ),  # no mathtext: parsing it would cost more than drawing
+        }
+    )
     return plt, w, h
 
 
@@ -134,7 +167,10 @@ def _layout(plt, kind: str, size: tuple, make):
     fig = _KEPT.pop(key, None)
     if fig is None:
         fig = make()
-        fig._epa_layout, fig._epa_axes = key, len(fig.axes)  # axes added later (a colour bar) go on reuse
+        fig._epa_layout, fig._epa_axes = (
+            key,
+            len(fig.axes),
+        )  # axes added later (a colour bar) go on reuse
     else:
         _empty(fig)
     return fig
@@ -143,9 +179,10 @@ def _layout(plt, kind: str, size: tuple, make):
 def _empty(fig) -> None:
     """Back to the state of a new figure of the same layout: no data, labels or legends; default
     ticks, limits, aspect and colour cycle. Tick objects stay (that is the saving)."""
-    for ax in fig.axes[fig._epa_axes:]:
+    for ax in fig.axes[fig._epa_axes :]:
         ax.remove()
-    for ax in [*fig.axes, *(child for ax in fig.axes for child in ax.child_axes)]:  # insets are part of a layout
+    insets = [child for parent in fig.axes for child in parent.child_axes]
+    for ax in [*fig.axes, *insets]:  # insets are part of a layout
         for artist in [*ax.lines, *ax.collections, *ax.patches, *ax.texts, *ax.images]:
             artist.remove()
         if ax.legend_ is not None:
@@ -168,15 +205,19 @@ def _empty(fig) -> None:
 
 def _single(plt, w, h, top: float = 0.12):
     """One axes with fixed margins in inches (``top``: room above it, for a legend)."""
+
     def make():
         fig, ax = plt.subplots(figsize=(w, h))
         fig.subplots_adjust(left=0.6 / w, right=1 - 0.1 / w, bottom=0.45 / h, top=1 - top / h)
         return fig
+
     fig = _layout(plt, "single", (w, h, top), make)
     return fig, fig.axes[0]
 
 
-def render(b: dict, out_stem, *, style: str = "paper", width: float | None = None, formats=("png", "pdf")) -> list[Path]:
+def render(
+    b: dict, out_stem, *, style: str = "paper", width: float | None = None, formats=("png", "pdf")
+) -> list[Path]:
     """Draw a bundle to ``out_stem``.png / .pdf; returns the files written."""
     if style not in STYLES:
         raise EpaError(f"unknown style {style!r}; choose one of {', '.join(STYLES)}")
@@ -185,9 +226,13 @@ def render(b: dict, out_stem, *, style: str = "paper", width: float | None = Non
     fig = RENDERERS[b["kind"]](plt, b, w * scale, h * scale)
     from matplotlib.ticker import MaxNLocator
 
-    for ax in fig.axes:  # five ticks read well at column width, and tick labels are most of a figure's cost
+    for ax in (
+        fig.axes
+    ):  # five ticks read well at column width, and tick labels are most of a figure's cost
         for axis in (ax.xaxis, ax.yaxis):
-            if isinstance(axis.get_major_locator(), MaxNLocator):  # AutoLocator too; not log or fixed ticks
+            if isinstance(
+                axis.get_major_locator(), MaxNLocator
+            ):  # AutoLocator too; not log or fixed ticks
                 axis.get_major_locator().set_params(nbins=5)
     out = []
     for fmt in formats:
@@ -198,7 +243,12 @@ def render(b: dict, out_stem, *, style: str = "paper", width: float | None = Non
         meta = {"CreationDate": None} if fmt == "pdf" else {}
         # fixed margins, not bbox_inches="tight": that draws the figure twice (half the cost of a figure);
         # fast PNG compression: a few ms less per figure, for 11 % more bytes
-        fig.savefig(tmp, format=fmt, metadata=meta, **({"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}))
+        fig.savefig(
+            tmp,
+            format=fmt,
+            metadata=meta,
+            **({"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}),
+        )
         tmp.replace(path)
         out.append(path)
     key = getattr(fig, "_epa_layout", None)
@@ -210,7 +260,11 @@ def render(b: dict, out_stem, *, style: str = "paper", width: float | None = Non
 
 
 def _arr(x):
-    return np.array([np.nan if v is None else v for v in x], float) if isinstance(x, list) else np.asarray(x, float)
+    return (
+        np.array([np.nan if v is None else v for v in x], float)
+        if isinstance(x, list)
+        else np.asarray(x, float)
+    )
 
 
 def _trajectory(plt, b, w, h):
@@ -230,6 +284,7 @@ def _trajectory(plt, b, w, h):
         fig.add_axes([left / w, bottom / fh, aw / w, side / fh], sharex=ax_top)
         ax_top.tick_params(labelbottom=False)
         return fig
+
     fig = _layout(plt, "trajectory", (w, fh), make)
     ax_top, ax_side = fig.axes
     from matplotlib.collections import LineCollection
@@ -237,13 +292,20 @@ def _trajectory(plt, b, w, h):
     vmax = np.nanpercentile(err, 99) if err.size else 1.0
     # a line coloured by its error: reads for dense and for sparse (keyframe) estimates alike. Pieces
     # of a few poses (at most 250 pieces) look the same as one piece per pose and draw in half the time.
-    cuts = np.unique(np.linspace(0, max(len(est) - 1, 0), min(250, max(len(est) - 1, 1)) + 1).round().astype(int))
-    piece_err = np.array([np.nanmean(err[a:b + 1]) for a, b in zip(cuts[:-1], cuts[1:])])
+    cuts = np.unique(
+        np.linspace(0, max(len(est) - 1, 0), min(250, max(len(est) - 1, 1)) + 1).round().astype(int)
+    )
+    piece_err = np.array([np.nanmean(err[a : b + 1]) for a, b in zip(cuts[:-1], cuts[1:])])
     for ax, j, label in ((ax_top, 1, "y [m]"), (ax_side, 2, "z [m]")):
         ax.plot(ref[:, 0], ref[:, j], color="0.75", lw=2.2, label="reference", zorder=1)
         xy = est[:, [0, j]]
-        lc = LineCollection([xy[a:b + 1] for a, b in zip(cuts[:-1], cuts[1:])], cmap="viridis", lw=1.0, zorder=2,
-                            label="aligned estimate")
+        lc = LineCollection(
+            [xy[a : b + 1] for a, b in zip(cuts[:-1], cuts[1:])],
+            cmap="viridis",
+            lw=1.0,
+            zorder=2,
+            label="aligned estimate",
+        )
         lc.set_array(piece_err)
         lc.set_clim(0, vmax)
         ax.add_collection(lc)
@@ -252,7 +314,13 @@ def _trajectory(plt, b, w, h):
     ax_top.set_aspect("equal", adjustable="datalim")
     ax_side.set_xlabel("x [m]")
     # above the plot (a trajectory fills its axes), clear of a "x10^4" offset label
-    ax_top.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0 + 0.12 / th), ncols=2, fontsize="small", borderaxespad=0.1)
+    ax_top.legend(
+        loc="lower right",
+        bbox_to_anchor=(1.0, 1.0 + 0.12 / th),
+        ncols=2,
+        fontsize="small",
+        borderaxespad=0.1,
+    )
     cax = fig.add_axes([(w - right + 0.12) / w, (bottom + side + gap) / fh, 0.08 / w, th / fh])
     fig.colorbar(lc, cax=cax).set_label("APE [m]")
     return fig
@@ -263,7 +331,9 @@ def _ape_time(plt, b, w, h):
     t, ape = _arr(d["t"]), _arr(d["ape"])
     fig, ax = _single(plt, w, h)
     for k, (s, e) in enumerate(zip(d.get("fail_start", []), d.get("fail_end", []))):
-        ax.axvspan(s, e, color=OKABE_ITO[5], alpha=0.18, lw=0, label="fail segment" if k == 0 else None)
+        ax.axvspan(
+            s, e, color=OKABE_ITO[5], alpha=0.18, lw=0, label="fail segment" if k == 0 else None
+        )
     ax.plot(t, ape, color=OKABE_ITO[0], label="APE")
     thr = d.get("threshold")
     if thr is not None and (not ape.size or thr <= 1.5 * np.nanmax(ape)):
@@ -285,9 +355,17 @@ def _rpe_box(plt, b, w, h):
     groups = [_arr(v) for v in d["trans"]]
     have = [k for k, g in enumerate(groups) if g.size]
     if have:
-        ax.boxplot([groups[k] for k in have], positions=np.arange(len(have)), widths=0.6, showfliers=False,
-                   patch_artist=True, boxprops={"facecolor": OKABE_ITO[4], "alpha": 0.6, "lw": 0.6},
-                   medianprops={"color": "black", "lw": 1.0}, whiskerprops={"lw": 0.6}, capprops={"lw": 0.6})
+        ax.boxplot(
+            [groups[k] for k in have],
+            positions=np.arange(len(have)),
+            widths=0.6,
+            showfliers=False,
+            patch_artist=True,
+            boxprops={"facecolor": OKABE_ITO[4], "alpha": 0.6, "lw": 0.6},
+            medianprops={"color": "black", "lw": 1.0},
+            whiskerprops={"lw": 0.6},
+            capprops={"lw": 0.6},
+        )
         ax.set_xticks(np.arange(len(have)), [f"{lengths[k]:g}" for k in have])
     ax.set_xlabel("segment length [m]")
     ax.set_ylabel("RPE translation [m]")
@@ -299,16 +377,22 @@ def _xcorr(plt, b, w, h):
     lag, corr = _arr(d["lag"]), _arr(d["corr"])
     peak = d.get("peak")
     if peak is not None and lag.size:
+
         def make():
             fig, _ = _single(plt, w, h)
-            inset = fig.axes[0].inset_axes([0.34, 0.1, 0.34, 0.34])  # below the peak, where the zoomed curve is not
+            inset = fig.axes[0].inset_axes(
+                [0.34, 0.1, 0.34, 0.34]
+            )  # below the peak, where the zoomed curve is not
             inset.tick_params(labelsize=5.5, length=2, pad=1)
             return fig
+
         fig = _layout(plt, "xcorr", (w, h), make)
         ax, inset = fig.axes[0], fig.axes[0].child_axes[0]
         near = np.abs(lag - peak) <= max(0.1, 20 * (lag[1] - lag[0]) if lag.size > 1 else 0.1)
         ax.plot(lag[near] * 1000, corr[near], color=OKABE_ITO[0])
-        ax.axvline(peak * 1000, color=OKABE_ITO[5], lw=0.8, ls="--", label=f"offset {peak * 1000:.2f} ms")
+        ax.axvline(
+            peak * 1000, color=OKABE_ITO[5], lw=0.8, ls="--", label=f"offset {peak * 1000:.2f} ms"
+        )
         ax.legend(loc="upper left")
         inset.plot(lag, corr, color=OKABE_ITO[0], lw=0.6)
         inset.axvline(peak, color=OKABE_ITO[5], lw=0.6, ls="--")
@@ -334,8 +418,12 @@ def _steps(plt, b, w, h):
     ax.set_ylabel("y [m]")
     ax.set_aspect("equal", adjustable="datalim")
     # above the plot, clear of a "x10^4" offset label
-    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0 + 0.12 / (ax.get_position().height * h)), ncols=3,
-              borderaxespad=0.1)
+    ax.legend(
+        loc="lower right",
+        bbox_to_anchor=(1.0, 1.0 + 0.12 / (ax.get_position().height * h)),
+        ncols=3,
+        borderaxespad=0.1,
+    )
     return fig
 
 
@@ -343,20 +431,35 @@ def _sigma3(plt, b, w, h):
     d = b["data"]
     t = _arr(d["t"])
     fw, fh = max(w, 7.0), h * 1.3
+
     def make():
         fig, _ = plt.subplots(2, 3, figsize=(fw, fh), sharex=True)
-        fig.subplots_adjust(left=0.6 / fw, right=1 - 0.1 / fw, bottom=0.45 / fh, top=1 - 0.1 / fh, wspace=0.45,
-                            hspace=0.15)
+        fig.subplots_adjust(
+            left=0.6 / fw,
+            right=1 - 0.1 / fw,
+            bottom=0.45 / fh,
+            top=1 - 0.1 / fh,
+            wspace=0.45,
+            hspace=0.15,
+        )
         return fig
+
     fig = _layout(plt, "sigma3", (fw, fh), make)
     axes = np.array(fig.axes).reshape(2, 3)
-    labels = [("err_x", "sigma_x", "x [m]"), ("err_y", "sigma_y", "y [m]"), ("err_z", "sigma_z", "z [m]"),
-              ("err_rot_x", "sigma_rot_x", "roll [deg]"), ("err_rot_y", "sigma_rot_y", "pitch [deg]"),
-              ("err_rot_z", "sigma_rot_z", "yaw [deg]")]
+    labels = [
+        ("err_x", "sigma_x", "x [m]"),
+        ("err_y", "sigma_y", "y [m]"),
+        ("err_z", "sigma_z", "z [m]"),
+        ("err_rot_x", "sigma_rot_x", "roll [deg]"),
+        ("err_rot_y", "sigma_rot_y", "pitch [deg]"),
+        ("err_rot_z", "sigma_rot_z", "yaw [deg]"),
+    ]
     for ax, (e, s, name) in zip(axes.ravel(), labels):
         k = 57.29577951308232 if "rot" in e else 1.0
         err, sig = _arr(d[e]) * k, 3 * _arr(d[s]) * k
-        ax.fill_between(t, -sig, sig, color=OKABE_ITO[4], alpha=0.35, lw=0, label="±3σ", rasterized=True)
+        ax.fill_between(
+            t, -sig, sig, color=OKABE_ITO[4], alpha=0.35, lw=0, label="±3σ", rasterized=True
+        )
         ax.plot(t, err, color=OKABE_ITO[0], lw=0.5, label="error", rasterized=True)
         ax.set_ylabel(name)
     for ax in axes[1]:
@@ -373,28 +476,46 @@ def _grouped(plt, b, w, h):
     rotate = len(datasets) > 3
     fig, ax = plt.subplots(figsize=(w, h))
     # room above for the legend (bars and boxes may reach any height) and below for slanted names
-    fig.subplots_adjust(left=0.6 / w, right=1 - 0.1 / w, bottom=(0.75 if rotate else 0.35) / h, top=1 - 0.3 / h)
+    fig.subplots_adjust(
+        left=0.6 / w, right=1 - 0.1 / w, bottom=(0.75 if rotate else 0.35) / h, top=1 - 0.3 / h
+    )
     width = 0.8 / max(len(algs), 1)
     for a, alg in enumerate(algs):
         pos = np.arange(len(datasets)) - 0.4 + width * (a + 0.5)
         vals = [_arr(v) for v in d["values"][a]]
         color = colors[a % len(colors)]
         if d.get("bars"):
-            ax.bar(pos, [v[0] if v.size else np.nan for v in vals], width * 0.9, color=color, label=alg)
+            ax.bar(
+                pos, [v[0] if v.size else np.nan for v in vals], width * 0.9, color=color, label=alg
+            )
         else:
             keep = [k for k, v in enumerate(vals) if v.size]
             if keep:
-                bp = ax.boxplot([vals[k] for k in keep], positions=pos[keep], widths=width * 0.8, showfliers=True,
-                                patch_artist=True, manage_ticks=False, flierprops={"markersize": 2},
-                                medianprops={"color": "black", "lw": 0.8})
+                bp = ax.boxplot(
+                    [vals[k] for k in keep],
+                    positions=pos[keep],
+                    widths=width * 0.8,
+                    showfliers=True,
+                    patch_artist=True,
+                    manage_ticks=False,
+                    flierprops={"markersize": 2},
+                    medianprops={"color": "black", "lw": 0.8},
+                )
                 for box in bp["boxes"]:
                     box.set(facecolor=color, alpha=0.8, lw=0.5)
             ax.plot([], [], color=color, lw=4, label=alg)
-    ax.set_xticks(np.arange(len(datasets)), datasets, rotation=20 if rotate else 0, ha="right" if rotate else "center")
+    ax.set_xticks(
+        np.arange(len(datasets)),
+        datasets,
+        rotation=20 if rotate else 0,
+        ha="right" if rotate else "center",
+    )
     ax.set_ylabel(d["ylabel"])
     if d.get("log"):
         _log_axis(ax)
-    ax.legend(loc="lower left", bbox_to_anchor=(0.0, 1.0), ncols=min(len(algs), 4), borderaxespad=0.2)
+    ax.legend(
+        loc="lower left", bbox_to_anchor=(0.0, 1.0), ncols=min(len(algs), 4), borderaxespad=0.2
+    )
     return fig
 
 
@@ -406,16 +527,30 @@ def _lines(plt, b, w, h):
     d = b["data"]
     colors = d.get("colors") or OKABE_ITO
     panels = d["panels"]
-    fig, axes = plt.subplots(1, len(panels), figsize=(w, h), squeeze=False, sharey=d.get("sharey", False))
+    fig, axes = plt.subplots(
+        1, len(panels), figsize=(w, h), squeeze=False, sharey=d.get("sharey", False)
+    )
     # fixed margins: a layout engine costs several draws (0.8 s for three panels)
-    fig.subplots_adjust(left=0.6 / w, right=1 - 0.1 / w, bottom=0.75 / h, top=1 - 0.25 / h,
-                        wspace=0.15 if d.get("sharey") else 0.35)
+    fig.subplots_adjust(
+        left=0.6 / w,
+        right=1 - 0.1 / w,
+        bottom=0.75 / h,
+        top=1 - 0.25 / h,
+        wspace=0.15 if d.get("sharey") else 0.35,
+    )
     for ax, panel in zip(axes[0], panels):
         for k, line in enumerate(panel["lines"]):
             # dashes per line where lines may coincide (several at 100 %)
             style = ("-", "--", ":", "-.")[line.get("color", k) % 4] if d.get("dashes") else "-"
-            ax.plot(_arr(line["x"]), _arr(line["y"]), color=colors[line.get("color", k) % len(colors)], ls=style,
-                    marker="o" if d.get("markers") else None, ms=3, label=line["label"])
+            ax.plot(
+                _arr(line["x"]),
+                _arr(line["y"]),
+                color=colors[line.get("color", k) % len(colors)],
+                ls=style,
+                marker="o" if d.get("markers") else None,
+                ms=3,
+                label=line["label"],
+            )
         ax.set_title(panel.get("title", ""))
         ax.set_xlabel(d["xlabel"])
         if d.get("log"):
@@ -431,8 +566,14 @@ def _lines(plt, b, w, h):
     for ax in axes[0]:
         for handle, label in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(label, handle)
-    fig.legend(handles.values(), handles.keys(), loc="lower center", ncols=min(len(handles), 5),
-               bbox_to_anchor=(0.5, 0.0), borderaxespad=0.1)
+    fig.legend(
+        handles.values(),
+        handles.keys(),
+        loc="lower center",
+        ncols=min(len(handles), 5),
+        bbox_to_anchor=(0.5, 0.0),
+        borderaxespad=0.1,
+    )
     return fig
 
 
@@ -448,5 +589,13 @@ def _log_axis(ax):
     ax.yaxis.set_minor_formatter(NullFormatter())
 
 
-RENDERERS = {"trajectory": _trajectory, "ape_time": _ape_time, "rpe_box": _rpe_box, "xcorr": _xcorr,
-             "steps": _steps, "sigma3": _sigma3, "grouped": _grouped, "lines": _lines}
+RENDERERS = {
+    "trajectory": _trajectory,
+    "ape_time": _ape_time,
+    "rpe_box": _rpe_box,
+    "xcorr": _xcorr,
+    "steps": _steps,
+    "sigma3": _sigma3,
+    "grouped": _grouped,
+    "lines": _lines,
+}

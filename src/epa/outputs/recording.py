@@ -24,7 +24,7 @@ def available() -> bool:
 
 
 def _rgb(hex_colour: str) -> list[int]:
-    return [int(hex_colour[k:k + 2], 16) for k in (1, 3, 5)]
+    return [int(hex_colour[k : k + 2], 16) for k in (1, 3, 5)]
 
 
 def write_rrd(arts, name: str, out) -> None:
@@ -35,23 +35,40 @@ def write_rrd(arts, name: str, out) -> None:
 
     ref, aligned, ape = arts.ref, arts.aligned, arts.ape
     # a recording id derived from the case name: the same case gives the same id on a re-run
-    rec = rr.RecordingStream("epica", recording_id=uuid.uuid5(uuid.NAMESPACE_URL, f"epica:{name}"),
-                             send_properties=False)
+    rec = rr.RecordingStream(
+        "epica", recording_id=uuid.uuid5(uuid.NAMESPACE_URL, f"epica:{name}"), send_properties=False
+    )
     tmp = out.with_name("." + out.name + ".tmp")
     rec.save(str(tmp))
-    rec.log("world/reference", rr.LineStrips3D([arts.ref_cropped.p], colors=[[150, 150, 150]], radii=[0.02]), static=True)
-    rec.log("world/estimate", rr.LineStrips3D([aligned.p], colors=[_rgb(OKABE_ITO[0])], radii=[0.02]), static=True)
+    rec.log(
+        "world/reference",
+        rr.LineStrips3D([arts.ref_cropped.p], colors=[[150, 150, 150]], radii=[0.02]),
+        static=True,
+    )
+    rec.log(
+        "world/estimate",
+        rr.LineStrips3D([aligned.p], colors=[_rgb(OKABE_ITO[0])], radii=[0.02]),
+        static=True,
+    )
     times = rr.TimeColumn("time", duration=ref.t - ref.t[0])
-    rec.send_columns("world/estimate/now", indexes=[times],
-                     columns=rr.Points3D.columns(positions=aligned.p).partition(np.ones(len(aligned), int)))
-    rec.send_columns("world/reference/now", indexes=[times],
-                     columns=rr.Points3D.columns(positions=ref.p).partition(np.ones(len(ref), int)))
+    rec.send_columns(
+        "world/estimate/now",
+        indexes=[times],
+        columns=rr.Points3D.columns(positions=aligned.p).partition(np.ones(len(aligned), int)),
+    )
+    rec.send_columns(
+        "world/reference/now",
+        indexes=[times],
+        columns=rr.Points3D.columns(positions=ref.p).partition(np.ones(len(ref), int)),
+    )
     series = {"errors/ape_m": ape["trans_m"], "errors/ape_rot_deg": ape["rot_deg"]}
     n = arts.nees
     if n is not None:
         t_nees = rr.TimeColumn("time", duration=n["t"] - ref.t[0])
         for key in ("nees_pos", "nees_rot"):
-            rec.send_columns(f"consistency/{key}", indexes=[t_nees], columns=rr.Scalars.columns(scalars=n[key]))
+            rec.send_columns(
+                f"consistency/{key}", indexes=[t_nees], columns=rr.Scalars.columns(scalars=n[key])
+            )
     for entity, values in series.items():
         rec.send_columns(entity, indexes=[times], columns=rr.Scalars.columns(scalars=values))
     rec.flush()

@@ -79,35 +79,63 @@ def case_bundles(arts: CaseArtifacts) -> dict[str, dict]:
     sync = io.read_json(p("sync", "sync.json"))
     t0 = float(ref.t[0])
     k = figures.thin(len(ref))
-    out = {"trajectory": figures.bundle("trajectory", "Reference and aligned estimate, coloured by APE",
-                                        {"ref": ref.p[k], "est": aligned.p[k], "err": ape["trans_m"][k]})}
+    out = {
+        "trajectory": figures.bundle(
+            "trajectory",
+            "Reference and aligned estimate, coloured by APE",
+            {"ref": ref.p[k], "est": aligned.p[k], "err": ape["trans_m"][k]},
+        )
+    }
     out["ape_time"] = figures.bundle(
-        "ape_time", "APE over time, fail segments shaded",
-        {"t": ape["t"][k] - t0, "ape": ape["trans_m"][k],
-         "fail_start": np.asarray(fail.get("t_start", []), float) - t0,
-         "fail_end": np.asarray(fail.get("t_end", []), float) - t0,
-         "threshold": (drift.get("knee") or {}).get("threshold_m")})
+        "ape_time",
+        "APE over time, fail segments shaded",
+        {
+            "t": ape["t"][k] - t0,
+            "ape": ape["trans_m"][k],
+            "fail_start": np.asarray(fail.get("t_start", []), float) - t0,
+            "fail_end": np.asarray(fail.get("t_end", []), float) - t0,
+            "threshold": (drift.get("knee") or {}).get("threshold_m"),
+        },
+    )
     seg = io.read_csv(p("metrics", "rpe_segments.csv"))
     lengths = sorted({float(x) for x in seg["length_m"]}) if len(seg.get("length_m", [])) else []
-    out["rpe_box"] = figures.bundle("rpe_box", "RPE per segment length",
-                                    {"lengths": lengths, "trans": [seg["trans_m"][seg["length_m"] == L] for L in lengths]})
+    out["rpe_box"] = figures.bundle(
+        "rpe_box",
+        "RPE per segment length",
+        {"lengths": lengths, "trans": [seg["trans_m"][seg["length_m"] == L] for L in lengths]},
+    )
     xc = io.read_csv(p("sync", "xcorr.csv"))
     step1 = sync.get("step1", {})
-    out["xcorr"] = figures.bundle("xcorr", "Step 1: angular-speed cross-correlation",
-                                  {"lag": xc.get("lag_s", []), "corr": xc.get("corr", []),
-                                   "peak": step1.get("estimated") if step1.get("used") else None,
-                                   "reason": step1.get("reason", "")})
+    out["xcorr"] = figures.bundle(
+        "xcorr",
+        "Step 1: angular-speed cross-correlation",
+        {
+            "lag": xc.get("lag_s", []),
+            "corr": xc.get("corr", []),
+            "peak": step1.get("estimated") if step1.get("used") else None,
+            "reason": step1.get("reason", ""),
+        },
+    )
     est_m = arts.est
     # "before": the estimate as read, put on the reference by its first pose only
     r0 = ref.r[0] @ est_m.r[0].T
     before = (est_m.p - est_m.p[0]) @ r0.T + ref.p[0]
-    out["steps"] = figures.bundle("steps", "Before and after Steps 1-3 (top view)",
-                                  {"ref": ref.p[k], "before": before[k], "after": aligned.p[k]})
+    out["steps"] = figures.bundle(
+        "steps",
+        "Before and after Steps 1-3 (top view)",
+        {"ref": ref.p[k], "before": before[k], "after": aligned.p[k]},
+    )
     n = arts.nees
     if n is not None:
         kk = figures.thin(len(n["t"]))  # noqa: the bound is drawn as a band, 1000 samples suffice
-        out["sigma3"] = figures.bundle("sigma3", "Per-axis error and its ±3σ bound",
-                                       {"t": n["t"][kk] - n["t"][0], **{c: n[c][kk] for c in n if c.startswith(("err_", "sigma_"))}})
+        out["sigma3"] = figures.bundle(
+            "sigma3",
+            "Per-axis error and its ±3σ bound",
+            {
+                "t": n["t"][kk] - n["t"][0],
+                **{c: n[c][kk] for c in n if c.startswith(("err_", "sigma_"))},
+            },
+        )
     return out
 
 
@@ -115,8 +143,12 @@ def case_bundles(arts: CaseArtifacts) -> dict[str, dict]:
 def case_document(case) -> dict:
     """Every stage's record of a case, as one document."""
     doc = {}
-    for stage, name in (("metrics", "metrics.json"), ("drift", "drift.json"), ("consistency", "consistency.json"),
-                        ("efficiency", "efficiency.json")):
+    for stage, name in (
+        ("metrics", "metrics.json"),
+        ("drift", "drift.json"),
+        ("consistency", "consistency.json"),
+        ("efficiency", "efficiency.json"),
+    ):
         path = case.path(stage, name)
         if path.exists():
             doc[stage] = io.read_json(path)
@@ -137,8 +169,13 @@ SETTINGS_AND_MATRICES = ("load", "sync", "calibrate", "alignment", "thresholds",
 
 def summary_rows(doc: dict) -> list[tuple[str, str, float]]:
     """(section, metric, value) for every number in the document, except matrices and settings."""
-    return [(section, name, value) for section, record in doc.items()
-            for name, value in _numbers("", {k: v for k, v in record.items() if k not in SETTINGS_AND_MATRICES})]
+    return [
+        (section, name, value)
+        for section, record in doc.items()
+        for name, value in _numbers(
+            "", {k: v for k, v in record.items() if k not in SETTINGS_AND_MATRICES}
+        )
+    ]
 
 
 def summary_csv(doc: dict) -> str:
@@ -151,18 +188,58 @@ def summary_csv(doc: dict) -> str:
 
 
 TEXT = {
-    "en": {"title": "Evaluation of", "settings": "Settings", "steps": "Steps 1-3", "metrics": "Metrics",
-           "fail": "Fail segments", "figures": "Figures", "none": "none", "offset": "Step 1 time offset",
-           "extrinsic": "Step 2 extrinsic", "align": "Step 3 alignment", "used": "used", "not_used": "not used",
-           "source": "evaluated as", "metric": "metric", "value": "value", "start": "start [s]", "end": "end [s]",
-           "consistency": "Consistency", "efficiency": "Efficiency", "unavailable": "not available",
-           "status": "status", "std": "std", "per_axis": "per axis x, y, z", "unobservable": "unobservable"},
-    "zh": {"title": "评估：", "settings": "设置", "steps": "步骤 1-3", "metrics": "指标", "fail": "失效区段",
-           "figures": "图", "none": "无", "offset": "步骤 1 时间偏移", "extrinsic": "步骤 2 外参",
-           "align": "步骤 3 对齐", "used": "已使用", "not_used": "未使用", "source": "评估方式",
-           "metric": "指标", "value": "数值", "start": "开始 [s]", "end": "结束 [s]", "consistency": "一致性",
-           "efficiency": "效率", "unavailable": "不可用", "status": "状态", "std": "标准差",
-           "per_axis": "各轴 x, y, z", "unobservable": "不可观"},
+    "en": {
+        "title": "Evaluation of",
+        "settings": "Settings",
+        "steps": "Steps 1-3",
+        "metrics": "Metrics",
+        "fail": "Fail segments",
+        "figures": "Figures",
+        "none": "none",
+        "offset": "Step 1 time offset",
+        "extrinsic": "Step 2 extrinsic",
+        "align": "Step 3 alignment",
+        "used": "used",
+        "not_used": "not used",
+        "source": "evaluated as",
+        "metric": "metric",
+        "value": "value",
+        "start": "start [s]",
+        "end": "end [s]",
+        "consistency": "Consistency",
+        "efficiency": "Efficiency",
+        "unavailable": "not available",
+        "status": "status",
+        "std": "std",
+        "per_axis": "per axis x, y, z",
+        "unobservable": "unobservable",
+    },
+    "zh": {
+        "title": "评估：",
+        "settings": "设置",
+        "steps": "步骤 1-3",
+        "metrics": "指标",
+        "fail": "失效区段",
+        "figures": "图",
+        "none": "无",
+        "offset": "步骤 1 时间偏移",
+        "extrinsic": "步骤 2 外参",
+        "align": "步骤 3 对齐",
+        "used": "已使用",
+        "not_used": "未使用",
+        "source": "评估方式",
+        "metric": "指标",
+        "value": "数值",
+        "start": "开始 [s]",
+        "end": "结束 [s]",
+        "consistency": "一致性",
+        "efficiency": "效率",
+        "unavailable": "不可用",
+        "status": "状态",
+        "std": "标准差",
+        "per_axis": "各轴 x, y, z",
+        "unobservable": "不可观",
+    },
 }
 
 
@@ -175,7 +252,10 @@ def _num(v) -> float:
 
 
 def _axis_std(values, factor: float, unit: str, T: dict) -> str:
-    return " / ".join(T["unobservable"] if v is None else f"{_num(v) * factor:.3g}" for v in values) + f" {unit}"
+    return (
+        " / ".join(T["unobservable"] if v is None else f"{_num(v) * factor:.3g}" for v in values)
+        + f" {unit}"
+    )
 
 
 def report_md(doc: dict, case_name: str, figure_names: list[str], lang: str, fail: dict) -> str:
@@ -184,25 +264,53 @@ def report_md(doc: dict, case_name: str, figure_names: list[str], lang: str, fai
     sync, calib, align = m.get("sync", {}), m.get("calibrate", {}), m.get("alignment", {})
     step1 = sync.get("step1", {})
     ext = calib.get("extrinsic") or {}
-    lines = [f"# {T['title']} {case_name}", "", f"## {T['settings']}", "",
-             f"- mode `{sync.get('mode')}`, association `{sync.get('policy')}` (max {sync.get('max_diff_s')} s),"
-             f" alignment `{align.get('method')}`", f"- {T['source']}: `{m.get('eval_source')}`", "",
-             f"## {T['steps']}", "",
-             f"- {T['offset']}: {_num(m.get('time_offset_s')) * 1000:.3f} ms"
-             f" ({T['used'] if step1.get('used') else T['not_used']}: {step1.get('reason', '')};"
-             f" peak {_num(step1.get('peak_corr')):.3f}, ratio {_num(step1.get('peak_ratio')):.3f});"
-             f" {T['status']} `{step1.get('status')}`, {T['std']} {_num(step1.get('std')) * 1000:.3f} ms",
-             f"- {T['extrinsic']}: " + (f"{_num(ext.get('rotation_deg')):.3f} deg, {_num(ext.get('translation_norm_m')):.4f} m"
-                                        f" ({T['used'] if calib.get('plan', {}).get('apply_extrinsic') else T['not_used']}:"
-                                        f" {calib.get('plan', {}).get('reason', '')})" if ext else T["none"])
-             + f"; {T['status']} `{calib.get('step2_status')}`",
-             *([f"  - {T['std']} ({T['per_axis']}): rotation {_axis_std(ext.get('rotation_std_deg'), 1, 'deg', T)},"
-                f" translation {_axis_std(ext.get('translation_std_m'), 1000, 'mm', T)}"] if ext.get("rotation_std_deg") else []),
-             f"- {T['align']}: {align.get('method')}, yaw {_num(align.get('yaw_deg')):.3f} deg,"
-             f" scale {_num(align.get('scale')):.6f}",
-             "", f"## {T['metrics']}", "", f"| {T['metric']} | {T['value']} |", "|---|---|"]
-    for section, metric, value in summary_rows({k: doc[k] for k in ("metrics", "drift") if k in doc}):
-        if metric.endswith(("rmse", "mean", "median", "max", "_pct")) or metric in ("n_matched", "ref_length_m"):
+    lines = [
+        f"# {T['title']} {case_name}",
+        "",
+        f"## {T['settings']}",
+        "",
+        f"- mode `{sync.get('mode')}`, association `{sync.get('policy')}` (max {sync.get('max_diff_s')} s),"
+        f" alignment `{align.get('method')}`",
+        f"- {T['source']}: `{m.get('eval_source')}`",
+        "",
+        f"## {T['steps']}",
+        "",
+        f"- {T['offset']}: {_num(m.get('time_offset_s')) * 1000:.3f} ms"
+        f" ({T['used'] if step1.get('used') else T['not_used']}: {step1.get('reason', '')};"
+        f" peak {_num(step1.get('peak_corr')):.3f}, ratio {_num(step1.get('peak_ratio')):.3f});"
+        f" {T['status']} `{step1.get('status')}`, {T['std']} {_num(step1.get('std')) * 1000:.3f} ms",
+        f"- {T['extrinsic']}: "
+        + (
+            f"{_num(ext.get('rotation_deg')):.3f} deg, {_num(ext.get('translation_norm_m')):.4f} m"
+            f" ({T['used'] if calib.get('plan', {}).get('apply_extrinsic') else T['not_used']}:"
+            f" {calib.get('plan', {}).get('reason', '')})"
+            if ext
+            else T["none"]
+        )
+        + f"; {T['status']} `{calib.get('step2_status')}`",
+        *(
+            [
+                f"  - {T['std']} ({T['per_axis']}): rotation {_axis_std(ext.get('rotation_std_deg'), 1, 'deg', T)},"
+                f" translation {_axis_std(ext.get('translation_std_m'), 1000, 'mm', T)}"
+            ]
+            if ext.get("rotation_std_deg")
+            else []
+        ),
+        f"- {T['align']}: {align.get('method')}, yaw {_num(align.get('yaw_deg')):.3f} deg,"
+        f" scale {_num(align.get('scale')):.6f}",
+        "",
+        f"## {T['metrics']}",
+        "",
+        f"| {T['metric']} | {T['value']} |",
+        "|---|---|",
+    ]
+    for section, metric, value in summary_rows(
+        {k: doc[k] for k in ("metrics", "drift") if k in doc}
+    ):
+        if metric.endswith(("rmse", "mean", "median", "max", "_pct")) or metric in (
+            "n_matched",
+            "ref_length_m",
+        ):
             lines.append(f"| {section}.{metric} | {value:.6g} |")
     for key in ("consistency", "efficiency"):
         rec = doc.get(key, {})
@@ -217,7 +325,9 @@ def report_md(doc: dict, case_name: str, figure_names: list[str], lang: str, fai
     starts = np.asarray(fail.get("t_start", []), float)
     if starts.size:  # stamps of the reference clock, as in 07_drift/fail_segments.csv
         lines += [f"| {T['start']} | {T['end']} |", "|---|---|"]
-        lines += [f"| {s:.3f} | {e:.3f} |" for s, e in zip(starts, np.asarray(fail["t_end"], float))]
+        lines += [
+            f"| {s:.3f} | {e:.3f} |" for s, e in zip(starts, np.asarray(fail["t_end"], float))
+        ]
     else:
         lines.append(T["none"])
     lines += ["", f"## {T['figures']}", ""] + [f"![{n}](figures/{n}.png)" for n in figure_names]
@@ -226,8 +336,11 @@ def report_md(doc: dict, case_name: str, figure_names: list[str], lang: str, fai
 
 def case_zip(case_root: Path, out: Path) -> None:
     """Every artifact of the case and a manifest (file, bytes, sha256), for sharing one evaluation."""
-    files = sorted(p for p in case_root.rglob("*") if p.is_file() and p != out and not p.name.startswith(".")
-                   and p.suffix != ".zip")
+    files = sorted(
+        p
+        for p in case_root.rglob("*")
+        if p.is_file() and p != out and not p.name.startswith(".") and p.suffix != ".zip"
+    )
     manifest = []
     tmp = out.with_name("." + out.name + ".tmp")
     with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as z:
@@ -235,8 +348,13 @@ def case_zip(case_root: Path, out: Path) -> None:
             data = f.read_bytes()
             rel = f.relative_to(case_root).as_posix()
             z.writestr(rel, data)
-            manifest.append({"file": rel, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()})
-        z.writestr("MANIFEST.json", json.dumps({"format": "epica-case-bundle/1", "files": manifest}, indent=1))
+            manifest.append(
+                {"file": rel, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+            )
+        z.writestr(
+            "MANIFEST.json",
+            json.dumps({"format": "epica-case-bundle/1", "files": manifest}, indent=1),
+        )
     tmp.replace(out)
 
 
@@ -252,7 +370,9 @@ def write_case_report(case, name: str, cfg: dict) -> dict:
     if c["figures"]:
         for fig_name, b in case_bundles(arts).items():
             figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b)
-            figures.render(b, folder / "figures" / fig_name, formats=("png", "pdf") if c["pdf"] else ("png",))
+            figures.render(
+                b, folder / "figures" / fig_name, formats=("png", "pdf") if c["pdf"] else ("png",)
+            )
             drawn.append(fig_name)
     for lang in ("en", "zh"):
         io.write_text(folder / f"report_{lang}.md", report_md(doc, name, drawn, lang, arts.fail))
@@ -285,26 +405,69 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
             return np.nan
 
     def cells(key):
-        return [[[num(r, key) for r in ok if r["algorithm"] == a and r["dataset"] == d and np.isfinite(num(r, key))]
-                 for d in datasets] for a in algs]
+        return [
+            [
+                [
+                    num(r, key)
+                    for r in ok
+                    if r["algorithm"] == a and r["dataset"] == d and np.isfinite(num(r, key))
+                ]
+                for d in datasets
+            ]
+            for a in algs
+        ]
 
-    out = {"ate": figures.bundle("grouped", "ATE per algorithm and dataset (runs)",
-                                 {"datasets": datasets, "algorithms": algs, "values": cells("ate_trans_rmse_m"),
-                                  "ylabel": "ATE RMSE [m]", "log": True, "colors": colors}),
-           "success_rate": figures.bundle("grouped", "Success rate per algorithm and dataset",
-                                          {"datasets": datasets, "algorithms": algs, "bars": True,
-                                           "values": [[[np.nanmean(v)] if v else [] for v in a]
-                                                      for a in cells("success_rate_distance_pct")],
-                                           "ylabel": "success rate [% of path]", "colors": colors})}
+    out = {
+        "ate": figures.bundle(
+            "grouped",
+            "ATE per algorithm and dataset (runs)",
+            {
+                "datasets": datasets,
+                "algorithms": algs,
+                "values": cells("ate_trans_rmse_m"),
+                "ylabel": "ATE RMSE [m]",
+                "log": True,
+                "colors": colors,
+            },
+        ),
+        "success_rate": figures.bundle(
+            "grouped",
+            "Success rate per algorithm and dataset",
+            {
+                "datasets": datasets,
+                "algorithms": algs,
+                "bars": True,
+                "values": [
+                    [[np.nanmean(v)] if v else [] for v in a]
+                    for a in cells("success_rate_distance_pct")
+                ],
+                "ylabel": "success rate [% of path]",
+                "colors": colors,
+            },
+        ),
+    }
     lines = []
     for k, a in enumerate(algs):
-        ys = [np.nanmean([num(r, f"drift_rate_{segment_key(s)}m_pct") for r in ok if r["algorithm"] == a] or [np.nan])
-              for s in segments]
+        ys = [
+            np.nanmean(
+                [num(r, f"drift_rate_{segment_key(s)}m_pct") for r in ok if r["algorithm"] == a]
+                or [np.nan]
+            )
+            for s in segments
+        ]
         lines.append({"label": a, "x": list(segments), "y": ys, "color": k})
-    out["drift_rate"] = figures.bundle("lines", "Distance drift rate against segment length",
-                                       {"panels": [{"lines": lines}], "xlabel": "segment length [m]",
-                                        "ylabel": "drift rate [%]", "markers": True, "colors": colors,
-                                        "log": True})  # a diverged run would flatten the others
+    out["drift_rate"] = figures.bundle(
+        "lines",
+        "Distance drift rate against segment length",
+        {
+            "panels": [{"lines": lines}],
+            "xlabel": "segment length [m]",
+            "ylabel": "drift rate [%]",
+            "markers": True,
+            "colors": colors,
+            "log": True,
+        },
+    )  # a diverged run would flatten the others
     panels = []
     for d in datasets:
         panel_lines = []
@@ -314,11 +477,29 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
                 t = io.read_csv(path)
                 if len(t.get("t", [])):
                     kk = figures.thin(len(t["t"]), 1500)
-                    panel_lines.append({"label": a, "x": t["t"][kk] - t["t"][0], "y": t["rmse_pos_m"][kk], "color": k})
+                    panel_lines.append(
+                        {
+                            "label": a,
+                            "x": t["t"][kk] - t["t"][0],
+                            "y": t["rmse_pos_m"][kk],
+                            "color": k,
+                        }
+                    )
         panels.append({"title": d, "lines": panel_lines})
-    out["rmse_time"] = figures.bundle("lines", "RMSE over time across runs", {
-        "panels": panels, "xlabel": "time [s]", "ylabel": "RMSE [m]", "colors": colors, "log": True})
-    with open(Path(summary_csv_path).parent / "success_curves.csv", encoding="utf-8", newline="") as fh:
+    out["rmse_time"] = figures.bundle(
+        "lines",
+        "RMSE over time across runs",
+        {
+            "panels": panels,
+            "xlabel": "time [s]",
+            "ylabel": "RMSE [m]",
+            "colors": colors,
+            "log": True,
+        },
+    )
+    with open(
+        Path(summary_csv_path).parent / "success_curves.csv", encoding="utf-8", newline=""
+    ) as fh:
         curves = list(csv.DictReader(fh))
     panels = []
     for d in datasets:
@@ -326,19 +507,38 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
         for k, a in enumerate(algs):
             rows = [r for r in curves if r["algorithm"] == a and r["dataset"] == d]
             if rows:
-                panel_lines.append({"label": a, "x": [num(r, "factor") for r in rows],
-                                    "y": [num(r, "success_rate_distance_pct") for r in rows], "color": k})
+                panel_lines.append(
+                    {
+                        "label": a,
+                        "x": [num(r, "factor") for r in rows],
+                        "y": [num(r, "success_rate_distance_pct") for r in rows],
+                        "color": k,
+                    }
+                )
         panels.append({"title": d, "lines": panel_lines})
-    out["success_curve"] = figures.bundle("lines", "Success rate against the drift threshold", {
-        "panels": panels, "xlabel": "threshold / default", "ylabel": "success rate [% of path]", "colors": colors,
-        "logx": True, "sharey": True, "dashes": True, "ylim": [0, 102]})
+    out["success_curve"] = figures.bundle(
+        "lines",
+        "Success rate against the drift threshold",
+        {
+            "panels": panels,
+            "xlabel": "threshold / default",
+            "ylabel": "success rate [% of path]",
+            "colors": colors,
+            "logx": True,
+            "sharey": True,
+            "dashes": True,
+            "ylim": [0, 102],
+        },
+    )
     return out
 
 
 def write_grid_figures(results_dir, segments, style: str = "wide") -> list[Path]:
     results_dir = Path(results_dir)
     written = []
-    for name, b in grid_bundles(results_dir / "summary.csv", results_dir / "consistency", segments).items():
+    for name, b in grid_bundles(
+        results_dir / "summary.csv", results_dir / "consistency", segments
+    ).items():
         figures.write_bundle(results_dir / "figures" / "bundles" / f"{name}.json", b)
         written += figures.render(b, results_dir / "figures" / name, style=style)
     return written

@@ -15,29 +15,50 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import numpy as np
-
 from epa import geometry
-from epa.readers import bags, text
 from epa.errors import EpaError
+from epa.readers import bags, text
 from epa.trajectory import Trajectory
 
 log = logging.getLogger("epa")
-KEYS = ("format", "topic", "frames", "static_topic", "stamp", "time_unit", "unsorted", "kitti_rate", "timing",
-        "orientation_covariance")
+KEYS = (
+    "format",
+    "topic",
+    "frames",
+    "static_topic",
+    "stamp",
+    "time_unit",
+    "unsorted",
+    "kitti_rate",
+    "timing",
+    "orientation_covariance",
+)
 TIMING_DEFAULTS = ("{run}_timing.txt", "{run}_timing.csv")
 
 
-def options(cfg: dict, side: str, *, algorithm: str | None = None, dataset: str | None = None) -> dict:
+def options(
+    cfg: dict, side: str, *, algorithm: str | None = None, dataset: str | None = None
+) -> dict:
     """The settings of one source: ``side`` is ``reference`` or ``estimate``."""
     load = cfg["load"]
-    opts = {"format": load["truth_format" if side == "reference" else "estimate_format"], "topic": None,
-            "frames": None, "static_topic": "/tf_static", "stamp": load["stamp"], "time_unit": load["time_unit"],
-            "unsorted": load["unsorted"], "kitti_rate": load["kitti_rate"], "timing": None,
-            "orientation_covariance": "local"}
+    opts = {
+        "format": load["truth_format" if side == "reference" else "estimate_format"],
+        "topic": None,
+        "frames": None,
+        "static_topic": "/tf_static",
+        "stamp": load["stamp"],
+        "time_unit": load["time_unit"],
+        "unsorted": load["unsorted"],
+        "kitti_rate": load["kitti_rate"],
+        "timing": None,
+        "orientation_covariance": "local",
+    }
     src = cfg.get("sources") or {}
-    layers = ([src.get("reference") or {}, (src.get("datasets") or {}).get(dataset) or {}] if side == "reference"
-              else [(src.get("algorithms") or {}).get(algorithm) or {}])
+    layers = (
+        [src.get("reference") or {}, (src.get("datasets") or {}).get(dataset) or {}]
+        if side == "reference"
+        else [(src.get("algorithms") or {}).get(algorithm) or {}]
+    )
     for layer in layers:
         opts.update({k: v for k, v in layer.items() if v is not None})
     return opts
@@ -51,7 +72,9 @@ def timing_file(run_path, opts: dict) -> Path | None:
     if opts.get("timing"):
         path = run_path.parent / opts["timing"].replace("{run}", name)
         if not path.is_file():
-            raise EpaError(f"timing file not found (sources timing: {opts['timing']})", path=str(path))
+            raise EpaError(
+                f"timing file not found (sources timing: {opts['timing']})", path=str(path)
+            )
         return path
     for pattern in TIMING_DEFAULTS:
         path = run_path.parent / pattern.replace("{run}", name)
@@ -67,9 +90,15 @@ def read(path, opts: dict, *, notes: list | None = None, kitti_times=None) -> Tr
     if bags.is_bag(path):
         own: list[str] = []
         try:
-            traj = bags.read_bag(path, opts.get("topic"), frames=opts.get("frames"), stamp=opts.get("stamp", "header"),
-                                 static_topic=opts.get("static_topic") or "/tf_static", tf_rate=opts.get("tf_rate"),
-                                 notes=own)
+            traj = bags.read_bag(
+                path,
+                opts.get("topic"),
+                frames=opts.get("frames"),
+                stamp=opts.get("stamp", "header"),
+                static_topic=opts.get("static_topic") or "/tf_static",
+                tf_rate=opts.get("tf_rate"),
+                notes=own,
+            )
         except EpaError as exc:
             if exc.path is None:
                 raise EpaError(exc.message, path=f"{path} topic {opts.get('topic')}") from None
@@ -79,14 +108,28 @@ def read(path, opts: dict, *, notes: list | None = None, kitti_times=None) -> Tr
             notes.extend(own)
         return traj
     if opts.get("topic") or opts.get("frames"):
-        raise EpaError("a topic is set for this source but it is not a bag (.bag, .mcap or a ROS 2 bag folder)",
-                       path=str(path))
-    traj = text.read_trajectory(path, opts.get("format", "auto"), time_unit=opts.get("time_unit", "auto"),
-                                on_unsorted=opts.get("unsorted", "error"), kitti_rate=opts.get("kitti_rate", 10.0),
-                                kitti_times=kitti_times, kitti_printed=opts.get("kitti_printed", False), notes=notes)
+        raise EpaError(
+            "a topic is set for this source but it is not a bag (.bag, .mcap or a ROS 2 bag folder)",
+            path=str(path),
+        )
+    traj = text.read_trajectory(
+        path,
+        opts.get("format", "auto"),
+        time_unit=opts.get("time_unit", "auto"),
+        on_unsorted=opts.get("unsorted", "error"),
+        kitti_rate=opts.get("kitti_rate", 10.0),
+        kitti_times=kitti_times,
+        kitti_printed=opts.get("kitti_printed", False),
+        notes=notes,
+    )
     if traj.cov_rot is not None and opts.get("orientation_covariance") == "global":
-        traj = Trajectory(traj.t, traj.p, traj.q, cov_rot=geometry.local_covariance(traj.r, traj.cov_rot),
-                          cov_pos=traj.cov_pos)
+        traj = Trajectory(
+            traj.t,
+            traj.p,
+            traj.q,
+            cov_rot=geometry.local_covariance(traj.r, traj.cov_rot),
+            cov_pos=traj.cov_pos,
+        )
         if notes is not None:
             notes.append("orientation covariance converted from global to local")
     return traj
@@ -102,8 +145,11 @@ def _bag_order(traj: Trajectory, path: Path, opts: dict, notes: list) -> Traject
     try:
         traj, note = text.in_order(traj, opts.get("unsorted", "error"))
     except text.Unordered as bad:
-        raise EpaError(f"message {bad.k + 1}: stamp {float(traj.t[bad.k])!r} {bad.what} (set unsorted: sort to sort"
-                       " and drop duplicates)", path=where) from None
+        raise EpaError(
+            f"message {bad.k + 1}: stamp {float(traj.t[bad.k])!r} {bad.what} (set unsorted: sort to sort"
+            " and drop duplicates)",
+            path=where,
+        ) from None
     if note is not None:
         notes.append(note)
         log.warning("%s: %s", path, note)  # a repair is a warning; what was read is a note
@@ -119,5 +165,7 @@ def describe(path, traj: Trajectory, notes: list[str]) -> str:
     rate = (n - 1) / span if span > 0 else float("nan")
     cov = ", with covariance" if traj.cov_rot is not None else ""
     read_as = "; ".join(notes) or "as configured"
-    return (f"{path}: {read_as}\n  {n} poses{cov}, {span:.3f} s ({traj.t[0]:.6f} .. {traj.t[-1]:.6f}),"
-            f" {rate:.2f} Hz, path length {traj.length():.3f} m")
+    return (
+        f"{path}: {read_as}\n  {n} poses{cov}, {span:.3f} s ({traj.t[0]:.6f} .. {traj.t[-1]:.6f}),"
+        f" {rate:.2f} Hz, path length {traj.length():.3f} m"
+    )

@@ -22,9 +22,14 @@ from epa.trajectory import Trajectory
 
 log = logging.getLogger("epa")
 
-POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
-              "geometry_msgs/msg/TransformStamped", "nav_msgs/msg/Odometry", "nav_msgs/msg/Path",
-              "tf2_msgs/msg/TFMessage")
+POSE_TYPES = (
+    "geometry_msgs/msg/PoseStamped",
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "geometry_msgs/msg/TransformStamped",
+    "nav_msgs/msg/Odometry",
+    "nav_msgs/msg/Path",
+    "tf2_msgs/msg/TFMessage",
+)
 BAG_SUFFIXES = (".bag", ".mcap")
 
 
@@ -33,7 +38,9 @@ def is_bag(path) -> bool:
     reported as a missing bag)."""
     path = Path(path)
     try:
-        return path.suffix.lower() in BAG_SUFFIXES or (path.is_dir() and (path / "metadata.yaml").is_file())
+        return path.suffix.lower() in BAG_SUFFIXES or (
+            path.is_dir() and (path / "metadata.yaml").is_file()
+        )
     except OSError:  # an unusable path: the text reader reports it
         return False
 
@@ -69,7 +76,10 @@ class _Open:
         from rosbags.highlevel import AnyReader
 
         if not self.path.exists():
-            raise EpaError("file not found" if self.path.suffix else "bag folder not found", path=str(self.path))
+            raise EpaError(
+                "file not found" if self.path.suffix else "bag folder not found",
+                path=str(self.path),
+            )
         try:
             self.reader = AnyReader([self.path])
             self.reader.open()
@@ -123,9 +133,16 @@ def _stamp(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
-def read_bag(path, topic: str | None = None, *, frames: tuple[str, str] | list | None = None,
-             stamp: str = "header", static_topic: str = "/tf_static", tf_rate: float | None = None,
-             notes: list | None = None) -> Trajectory:
+def read_bag(
+    path,
+    topic: str | None = None,
+    *,
+    frames: tuple[str, str] | list | None = None,
+    stamp: str = "header",
+    static_topic: str = "/tf_static",
+    tf_rate: float | None = None,
+    notes: list | None = None,
+) -> Trajectory:
     """The trajectory of one topic of a bag (or one TF chain, given ``frames`` parent, child). A TF
     chain is sampled at the stamps of its busiest link, or with ``tf_rate`` (Hz) as evo samples it."""
     path = Path(path)
@@ -135,18 +152,24 @@ def read_bag(path, topic: str | None = None, *, frames: tuple[str, str] | list |
             topic = _only_pose_topic(path, available, frames)
             if notes is not None:
                 notes.append(f"topic {topic} (the bag's only pose topic)")
-            log.warning("%s: reading topic %s (the bag's only pose topic; set topic to choose)", path, topic)
+            log.warning(
+                "%s: reading topic %s (the bag's only pose topic; set topic to choose)", path, topic
+            )
         where = f"{path} topic {topic}"
         if topic not in available:
             raise EpaError(f"no topic {topic!r}; the bag has {_listing(available)}", path=str(path))
         msgtype = available[topic]
         if msgtype not in POSE_TYPES:
-            raise EpaError(f"topic {topic} is {msgtype}, not a pose type ({', '.join(t.split('/')[-1] for t in POSE_TYPES)})",
-                           path=str(path))
+            raise EpaError(
+                f"topic {topic} is {msgtype}, not a pose type ({', '.join(t.split('/')[-1] for t in POSE_TYPES)})",
+                path=str(path),
+            )
         if msgtype == "tf2_msgs/msg/TFMessage":
             if not frames or len(frames) != 2:
-                raise EpaError(f"topic {topic} is TF: give the parent and child frame (frames: [parent, child])",
-                               path=str(path))
+                raise EpaError(
+                    f"topic {topic} is TF: give the parent and child frame (frames: [parent, child])",
+                    path=str(path),
+                )
             return _read_tf(reader, path, topic, static_topic, tuple(frames), stamp, notes, tf_rate)
         conns = [c for c in reader.connections if c.topic == topic]
         try:
@@ -163,11 +186,17 @@ def read_bag(path, topic: str | None = None, *, frames: tuple[str, str] | list |
 
 
 def _listing(available: dict) -> str:
-    return ", ".join(f"{t} ({m.split('/')[-1]})" for t, m in sorted(available.items())) or "no topics"
+    return (
+        ", ".join(f"{t} ({m.split('/')[-1]})" for t, m in sorted(available.items())) or "no topics"
+    )
 
 
 def _only_pose_topic(path, available: dict, frames) -> str:
-    poses = sorted(t for t, m in available.items() if m in POSE_TYPES and (frames or m != "tf2_msgs/msg/TFMessage"))
+    poses = sorted(
+        t
+        for t, m in available.items()
+        if m in POSE_TYPES and (frames or m != "tf2_msgs/msg/TFMessage")
+    )
     if frames and "/tf" in available:
         return "/tf"
     if len(poses) != 1:
@@ -206,15 +235,20 @@ def _read_poses(reader, conns, msgtype: str, stamp: str) -> Trajectory:
         raws.append(raw)
         records.append(record_ns)
     fast = _decode_all(reader, raws, conns[0].msgtype, msgtype, ros1=not reader.is2)
-    if fast is not None:  # every message decoded at once from fixed offsets (checked against rosbags)
+    if (
+        fast is not None
+    ):  # every message decoded at once from fixed offsets (checked against rosbags)
         t, p, q, cov = fast
         if stamp == "record":
             t = np.asarray(records, float) / 1e9
         return _finish(t, p, q, cov)
     count = len(raws)
     t, p, q = np.empty(count), np.empty((count, 3)), np.empty((count, 4))
-    cov = np.empty((count, 36)) if msgtype in ("geometry_msgs/msg/PoseWithCovarianceStamped",
-                                                "nav_msgs/msg/Odometry") else None
+    cov = (
+        np.empty((count, 36))
+        if msgtype in ("geometry_msgs/msg/PoseWithCovarianceStamped", "nav_msgs/msg/Odometry")
+        else None
+    )
     for k, (record_ns, raw) in enumerate(zip(records, raws)):
         msg = reader.deserialize(raw, conns[0].msgtype)
         t[k] = _stamp(msg.header) if stamp == "header" else record_ns / 1e9
@@ -225,8 +259,12 @@ def _read_poses(reader, conns, msgtype: str, stamp: str) -> Trajectory:
 
 
 # Doubles after the header (and child frame id) of each fixed-layout type: pose (7), covariance (36).
-_LAYOUT = {"geometry_msgs/msg/PoseStamped": (False, 7), "geometry_msgs/msg/PoseWithCovarianceStamped": (False, 43),
-           "nav_msgs/msg/Odometry": (True, 43), "geometry_msgs/msg/TransformStamped": (True, 7)}
+_LAYOUT = {
+    "geometry_msgs/msg/PoseStamped": (False, 7),
+    "geometry_msgs/msg/PoseWithCovarianceStamped": (False, 43),
+    "nav_msgs/msg/Odometry": (True, 43),
+    "geometry_msgs/msg/TransformStamped": (True, 7),
+}
 
 
 def _decode_all(reader, raws: list, conn_type: str, msgtype: str, ros1: bool):
@@ -237,7 +275,10 @@ def _decode_all(reader, raws: list, conn_type: str, msgtype: str, ros1: bool):
         return None
     child, n_doubles = _LAYOUT[msgtype]
     first = raws[0]
-    u32 = lambda off: int.from_bytes(first[off:off + 4], "little")
+
+    def u32(off):
+        return int.from_bytes(first[off : off + 4], "little")
+
     if ros1:  # seq, sec, nsec, frame_id; no alignment
         sec_at, off = 4, 16 + u32(12)
         if child:
@@ -254,17 +295,21 @@ def _decode_all(reader, raws: list, conn_type: str, msgtype: str, ros1: bool):
     if off + 8 * n_doubles > size:
         return None
     rows = np.frombuffer(b"".join(raws), np.uint8).reshape(len(raws), size)
-    sec = rows[:, sec_at:sec_at + 4].copy().view("<u4" if ros1 else "<i4")[:, 0].astype(float)
-    nsec = rows[:, sec_at + 4:sec_at + 8].copy().view("<u4")[:, 0].astype(float)
-    doubles = rows[:, off:off + 8 * n_doubles].copy().view("<f8")
+    sec = rows[:, sec_at : sec_at + 4].copy().view("<u4" if ros1 else "<i4")[:, 0].astype(float)
+    nsec = rows[:, sec_at + 4 : sec_at + 8].copy().view("<u4")[:, 0].astype(float)
+    doubles = rows[:, off : off + 8 * n_doubles].copy().view("<f8")
     t = sec + nsec * 1e-9
     p, q = doubles[:, 0:3], doubles[:, 3:7]
     cov = doubles[:, 7:43] if n_doubles == 43 else None
     for k in (0, len(raws) - 1):
         msg = reader.deserialize(raws[k], conn_type)
         pos, quat, c = _pose_of(msg, msgtype)
-        if (_stamp(msg.header) != t[k] or tuple(p[k]) != tuple(pos) or tuple(q[k]) != tuple(quat)
-                or (cov is not None and not np.array_equal(cov[k], np.asarray(c, float)))):
+        if (
+            _stamp(msg.header) != t[k]
+            or tuple(p[k]) != tuple(pos)
+            or tuple(q[k]) != tuple(quat)
+            or (cov is not None and not np.array_equal(cov[k], np.asarray(c, float)))
+        ):
             return None
     return t, p, q, cov
 
@@ -287,7 +332,9 @@ def _finish(t, p, q, cov36) -> Trajectory:
 
 
 # ----------------------------------------------------------------------------- TF
-def _tf_edges(reader, topic: str, stamp: str) -> tuple[dict[tuple[str, str], tuple[list, list]], int | None]:
+def _tf_edges(
+    reader, topic: str, stamp: str
+) -> tuple[dict[tuple[str, str], tuple[list, list]], int | None]:
     """Per (frame_id, child_frame_id): its rows (t, x, y, z, qx, qy, qz, qw) and their stamps in
     integer ns; and the stamp of the topic's first transform, in message order (where evo starts)."""
     conns = [c for c in reader.connections if c.topic == topic]
@@ -297,16 +344,24 @@ def _tf_edges(reader, topic: str, stamp: str) -> tuple[dict[tuple[str, str], tup
         msg = reader.deserialize(raw, conn.msgtype)
         for tf in msg.transforms:
             (pos, quat, _) = _pose_of(tf, "geometry_msgs/msg/TransformStamped")
-            ns = tf.header.stamp.sec * 10**9 + tf.header.stamp.nanosec if stamp == "header" else int(record_ns)
+            ns = (
+                tf.header.stamp.sec * 10**9 + tf.header.stamp.nanosec
+                if stamp == "header"
+                else int(record_ns)
+            )
             t = _stamp(tf.header) if stamp == "header" else record_ns / 1e9
-            rows, stamps = edges.setdefault((tf.header.frame_id.lstrip("/"), tf.child_frame_id.lstrip("/")), ([], []))
+            rows, stamps = edges.setdefault(
+                (tf.header.frame_id.lstrip("/"), tf.child_frame_id.lstrip("/")), ([], [])
+            )
             rows.append((t, *pos, *quat))
             stamps.append(ns)
             first_ns = ns if first_ns is None else first_ns
     return edges, first_ns
 
 
-def _chain(edges: set[tuple[str, str]], parent: str, child: str) -> list[tuple[str, str, bool]] | None:
+def _chain(
+    edges: set[tuple[str, str]], parent: str, child: str
+) -> list[tuple[str, str, bool]] | None:
     """The path parent -> child in the frame tree as (frame_id, child_frame_id, inverted) steps."""
     nbrs: dict[str, list] = {}
     for a, b in edges:
@@ -340,8 +395,16 @@ def _interp(rows: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return geometry.interpolate(rows[:, 0], rows[:, 1:4], rows[:, 4:8], t)
 
 
-def _read_tf(reader, path: Path, topic: str, static_topic: str, frames: tuple[str, str], stamp: str, notes,
-             rate: float | None = None):
+def _read_tf(
+    reader,
+    path: Path,
+    topic: str,
+    static_topic: str,
+    frames: tuple[str, str],
+    stamp: str,
+    notes,
+    rate: float | None = None,
+):
     parent, child = (f.lstrip("/") for f in frames)
     dynamic, first_ns = _tf_edges(reader, topic, stamp)
     static = _tf_edges(reader, static_topic, stamp)[0] if static_topic in reader.topics else {}
@@ -349,22 +412,39 @@ def _read_tf(reader, path: Path, topic: str, static_topic: str, frames: tuple[st
     if steps is None:
         known = sorted({f for e in set(dynamic) | set(static) for f in e})
         missing = [f for f in (parent, child) if f not in known]
-        what = f"unknown frame {', '.join(map(repr, missing))}" if missing else f"no chain from {parent!r} to {child!r}"
-        raise EpaError(f"{what}; the TF frames are {', '.join(known) or 'none'}", path=f"{path} topic {topic}")
+        what = (
+            f"unknown frame {', '.join(map(repr, missing))}"
+            if missing
+            else f"no chain from {parent!r} to {child!r}"
+        )
+        raise EpaError(
+            f"{what}; the TF frames are {', '.join(known) or 'none'}", path=f"{path} topic {topic}"
+        )
     series = {}
     for a, b, _ in steps:
         rows, ns = dynamic.get((a, b)) or static[(a, b)]
         order = np.argsort(np.asarray(ns), kind="stable")
-        series[(a, b)] = (np.array(rows, float)[order], np.asarray(ns, np.int64)[order], (a, b) not in dynamic)
+        series[(a, b)] = (
+            np.array(rows, float)[order],
+            np.asarray(ns, np.int64)[order],
+            (a, b) not in dynamic,
+        )
     moving = [e for e, (_, _, is_static) in series.items() if not is_static]
     if not moving:
-        raise EpaError(f"the chain {parent} -> {child} is static (only {static_topic}): no trajectory",
-                       path=f"{path} topic {topic}")
+        raise EpaError(
+            f"the chain {parent} -> {child} is static (only {static_topic}): no trajectory",
+            path=f"{path} topic {topic}",
+        )
     if rate is not None:
         # evo looks up through ROS 1's tf2_py, which carries every stamp as a double of seconds
         # (fromSec(to_sec())): up to 1.2e-7 s off for epoch stamps, 1e-7 m in the poses. So do we.
-        series = {e: (rows, _through_double_seconds(ns), is_static) for e, (rows, ns, is_static) in series.items()}
-        t_ns = _through_double_seconds(_evo_lookup_stamps(first_ns, min(int(series[e][1][-1]) for e in moving), rate))
+        series = {
+            e: (rows, _through_double_seconds(ns), is_static)
+            for e, (rows, ns, is_static) in series.items()
+        }
+        t_ns = _through_double_seconds(
+            _evo_lookup_stamps(first_ns, min(int(series[e][1][-1]) for e in moving), rate)
+        )
         sampled = f"every {1 / rate:g} s from the first message of {topic}, as evo"
     else:
         # the stamps of the dynamic link with most messages; the others are interpolated within their span
@@ -374,19 +454,29 @@ def _read_tf(reader, path: Path, topic: str, static_topic: str, frames: tuple[st
         ns = series[e][1]
         t_ns = t_ns[(t_ns >= ns[0]) & (t_ns <= ns[-1])]
     t_ns = np.unique(t_ns)
-    if rate is None and len(steps) == 1 and not steps[0][2]:  # one direct link: its own poses, bit for bit
+    if (
+        rate is None and len(steps) == 1 and not steps[0][2]
+    ):  # one direct link: its own poses, bit for bit
         rows = series[(steps[0][0], steps[0][1])][0]
         rows = rows[np.concatenate([[True], np.diff(rows[:, 0]) > 0])]
         if notes is not None:
-            notes.append(f"bag TF {parent} -> {child} ({len(rows)} poses of {topic}, {stamp} stamps)")
+            notes.append(
+                f"bag TF {parent} -> {child} ({len(rows)} poses of {topic}, {stamp} stamps)"
+            )
         q = rows[:, 4:8]
         return Trajectory(rows[:, 0], rows[:, 1:4], q / np.linalg.norm(q, axis=1, keepdims=True))
     if len(t_ns) == 0:
-        raise EpaError(f"the transforms of {parent} -> {child} never overlap in time", path=f"{path} topic {topic}")
+        raise EpaError(
+            f"the transforms of {parent} -> {child} never overlap in time",
+            path=f"{path} topic {topic}",
+        )
     # interpolate in time since the first stamp: ns differences are exact, epoch seconds are not
     origin = int(t_ns[0])
     since = (t_ns - origin) * 1e-9
-    r_total, p_total = np.broadcast_to(np.eye(3), (len(t_ns), 3, 3)).copy(), np.zeros((len(t_ns), 3))
+    r_total, p_total = (
+        np.broadcast_to(np.eye(3), (len(t_ns), 3, 3)).copy(),
+        np.zeros((len(t_ns), 3)),
+    )
     for a, b, inverted in steps:
         rows, ns, is_static = series[(a, b)]
         if is_static:
@@ -429,8 +519,14 @@ def _evo_lookup_stamps(start_ns: int, latest_ns: int, rate: float) -> np.ndarray
 
 
 # ----------------------------------------------------------------------------- writing (tests, benchmarks)
-def write_bag(path, topics: dict[str, tuple[str, Trajectory]], *, storage: str = "ros1",
-              frames: tuple[str, str] = ("world", "body"), extra: dict[str, tuple[str, list]] | None = None) -> None:
+def write_bag(
+    path,
+    topics: dict[str, tuple[str, Trajectory]],
+    *,
+    storage: str = "ros1",
+    frames: tuple[str, str] = ("world", "body"),
+    extra: dict[str, tuple[str, list]] | None = None,
+) -> None:
     """Write trajectories as bag topics: ``topics`` maps topic -> (message type, trajectory).
     ``storage``: ``ros1`` (.bag), ``sqlite3`` or ``mcap`` (ROS 2 bag folder). TFMessage topics carry
     ``frames`` (parent, child); a Path topic is one message holding every pose. ``extra`` adds raw
@@ -443,7 +539,11 @@ def write_bag(path, topics: dict[str, tuple[str, Trajectory]], *, storage: str =
     if "tf2_msgs/msg/TFMessage" not in ts.types:  # the Noetic store lacks tf2_msgs
         from rosbags.typesys import get_types_from_msg
 
-        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+        ts.register(
+            get_types_from_msg(
+                "geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"
+            )
+        )
     T = ts.types
     if ros1:
         from rosbags.rosbag1 import Writer
@@ -452,17 +552,26 @@ def write_bag(path, topics: dict[str, tuple[str, Trajectory]], *, storage: str =
     else:
         from rosbags.rosbag2 import StoragePlugin, Writer
 
-        writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
+        writer = Writer(
+            path,
+            version=9,
+            storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3,
+        )
 
     def header(t, frame):
         sec = int(np.floor(t))
         stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((t - sec) * 1e9)))
-        return T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame) if ros1 else \
-            T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+        return (
+            T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame)
+            if ros1
+            else T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+        )
 
     def pose(p, q):
-        return T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
-                                           orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))
+        return T["geometry_msgs/msg/Pose"](
+            position=T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
+            orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]),
+        )
 
     def cov(traj, k):
         if traj.cov_ros is not None:
@@ -479,25 +588,45 @@ def write_bag(path, topics: dict[str, tuple[str, Trajectory]], *, storage: str =
             if msgtype == "geometry_msgs/msg/PoseStamped":
                 yield t, T[msgtype](header=header(t, parent), pose=pose(p, q))
             elif msgtype == "geometry_msgs/msg/PoseWithCovarianceStamped":
-                pwc = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose(p, q), covariance=cov(traj, k))
+                pwc = T["geometry_msgs/msg/PoseWithCovariance"](
+                    pose=pose(p, q), covariance=cov(traj, k)
+                )
                 yield t, T[msgtype](header=header(t, parent), pose=pwc)
             elif msgtype == "nav_msgs/msg/Odometry":
-                pwc = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose(p, q), covariance=cov(traj, k))
+                pwc = T["geometry_msgs/msg/PoseWithCovariance"](
+                    pose=pose(p, q), covariance=cov(traj, k)
+                )
                 tw = T["geometry_msgs/msg/TwistWithCovariance"](
-                    twist=T["geometry_msgs/msg/Twist"](linear=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
-                                                       angular=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0)),
-                    covariance=np.zeros(36))
-                yield t, T[msgtype](header=header(t, parent), child_frame_id=child, pose=pwc, twist=tw)
+                    twist=T["geometry_msgs/msg/Twist"](
+                        linear=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
+                        angular=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
+                    ),
+                    covariance=np.zeros(36),
+                )
+                yield (
+                    t,
+                    T[msgtype](header=header(t, parent), child_frame_id=child, pose=pwc, twist=tw),
+                )
             elif msgtype in ("geometry_msgs/msg/TransformStamped", "tf2_msgs/msg/TFMessage"):
                 tf = T["geometry_msgs/msg/TransformStamped"](
-                    header=header(t, parent), child_frame_id=child,
+                    header=header(t, parent),
+                    child_frame_id=child,
                     transform=T["geometry_msgs/msg/Transform"](
                         translation=T["geometry_msgs/msg/Vector3"](x=p[0], y=p[1], z=p[2]),
-                        rotation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])))
-                yield t, (tf if msgtype.endswith("TransformStamped") else T[msgtype](transforms=[tf]))
+                        rotation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]),
+                    ),
+                )
+                yield (
+                    t,
+                    (tf if msgtype.endswith("TransformStamped") else T[msgtype](transforms=[tf])),
+                )
         if msgtype == "nav_msgs/msg/Path":
-            poses = [T["geometry_msgs/msg/PoseStamped"](header=header(traj.t[k], parent), pose=pose(traj.p[k], traj.q[k]))
-                     for k in range(len(traj))]
+            poses = [
+                T["geometry_msgs/msg/PoseStamped"](
+                    header=header(traj.t[k], parent), pose=pose(traj.p[k], traj.q[k])
+                )
+                for k in range(len(traj))
+            ]
             yield traj.t[-1], T[msgtype](header=header(traj.t[-1], parent), poses=poses)
 
     serialize = ts.serialize_ros1 if ros1 else ts.serialize_cdr

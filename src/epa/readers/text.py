@@ -38,10 +38,20 @@ class _Table:
     """Numeric rows of a text file. The file line of each row and the raw row text are derived
     only when needed (an error message, the sec.nsec repair), so the common path stays in C."""
 
-    def __init__(self, path: Path, rows: np.ndarray, body: list[str], first_line: int, header: list[str] | None):
+    def __init__(
+        self,
+        path: Path,
+        rows: np.ndarray,
+        body: list[str],
+        first_line: int,
+        header: list[str] | None,
+    ):
         self.path, self.rows, self.header = path, rows, header
         self.notes: list[str] = []  # every interpretation made that the file did not state
-        self._body, self._first_line = body, first_line  # the file's lines from the first data row on
+        self._body, self._first_line = (
+            body,
+            first_line,
+        )  # the file's lines from the first data row on
 
     def data_lines(self) -> tuple[list[str], list[int]]:
         """The data rows' text and their 1-based file line numbers (comments and blanks skipped)."""
@@ -57,7 +67,9 @@ class _Table:
         return self.data_lines()[1][row]
 
     def fail(self, row: int | None, message: str):
-        raise EpaError(message, path=str(self.path), line=None if row is None else self.line_of(row))
+        raise EpaError(
+            message, path=str(self.path), line=None if row is None else self.line_of(row)
+        )
 
 
 def _split(line: str) -> list[str]:
@@ -80,7 +92,9 @@ def _is_number(tok: str) -> bool:
 
 def _read_table(path: Path) -> _Table:
     try:
-        if not stat.S_ISREG(path.stat().st_mode) and not path.is_dir():  # a pipe or /dev/zero would never end
+        if (
+            not stat.S_ISREG(path.stat().st_mode) and not path.is_dir()
+        ):  # a pipe or /dev/zero would never end
             raise EpaError("not a regular file (a device, pipe or socket)", path=str(path))
         data = path.read_bytes()
     except FileNotFoundError:
@@ -91,12 +105,16 @@ def _read_table(path: Path) -> _Table:
         raise EpaError(f"cannot read: {exc.strerror}", path=str(path)) from None
     _check_text(path, data[:4096])
     text = data.decode("utf-8", errors="replace")
-    text = text.removeprefix("\ufeff")  # a byte-order mark (spreadsheet exports) is not part of the data
+    text = text.removeprefix(
+        "\ufeff"
+    )  # a byte-order mark (spreadsheet exports) is not part of the data
     raw = text.splitlines()
     header: list[str] | None = None
     start = 0
     header_line = None  # the one uncommented header line a file may have
-    for start, line in enumerate(raw):  # leading comments and a header line; the last one names the columns
+    for start, line in enumerate(
+        raw
+    ):  # leading comments and a header line; the last one names the columns
         s = line.strip()
         if not s:
             continue
@@ -106,9 +124,15 @@ def _read_table(path: Path) -> _Table:
             header = _header_names(s)
             continue
         if not _is_number(_split(s)[0]):
-            if header_line is not None:  # two header rows (units, a pasted file): not a guess we make
-                raise EpaError(f"not a number: {_split(s)[0]!r} (a second header line; line {header_line} was"
-                               " taken as the header)", path=str(path), line=start + 1)
+            if (
+                header_line is not None
+            ):  # two header rows (units, a pasted file): not a guess we make
+                raise EpaError(
+                    f"not a number: {_split(s)[0]!r} (a second header line; line {header_line} was"
+                    " taken as the header)",
+                    path=str(path),
+                    line=start + 1,
+                )
             header, header_line = _header_names(s), start + 1
             continue
         break
@@ -117,13 +141,23 @@ def _read_table(path: Path) -> _Table:
     body = raw[start:]
     first = body[0] if body else ""
     if ";" in first and "," in first:
-        raise EpaError("fields separated by ';' with ',' inside: decimal commas are not supported (export"
-                       " with '.' as the decimal separator)", path=str(path), line=start + 1)
+        raise EpaError(
+            "fields separated by ';' with ',' inside: decimal commas are not supported (export"
+            " with '.' as the decimal separator)",
+            path=str(path),
+            line=start + 1,
+        )
     tab = _Table(path, np.zeros((0, 0)), body, start + 1, header)
-    parse = [line.replace(",", " ").replace(";", " ") for line in body] if ("," in first or ";" in first) else body
+    parse = (
+        [line.replace(",", " ").replace(";", " ") for line in body]
+        if ("," in first or ";" in first)
+        else body
+    )
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
+            warnings.simplefilter(
+                "ignore", UserWarning
+            )  # "input contained no data": reported below
             # one comment character keeps numpy on its C path; "%" comments are rare, so pay only then
             comments = ("#", "%") if "%" in text else "#"
             rows = np.loadtxt(parse, ndmin=2, dtype=float, comments=comments)
@@ -132,8 +166,11 @@ def _read_table(path: Path) -> _Table:
     if rows.size == 0:
         raise EpaError("no data rows (the file is empty or holds only comments)", path=str(path))
     if header_line is not None and len(header) != rows.shape[1]:
-        raise EpaError(f"the header names {len(header)} columns but the rows have {rows.shape[1]}",
-                       path=str(path), line=header_line)
+        raise EpaError(
+            f"the header names {len(header)} columns but the rows have {rows.shape[1]}",
+            path=str(path),
+            line=header_line,
+        )
     bad = ~np.isfinite(rows)
     if bad.any():
         tab.fail(int(np.argmax(bad.any(axis=1))), "non-finite value (nan or inf)")
@@ -142,11 +179,15 @@ def _read_table(path: Path) -> _Table:
 
 
 # Files that are not text trajectories, by their first bytes: say what they are.
-_MAGIC = {b"\x1f\x8b": "gzip-compressed (decompress it first)", b"PK\x03\x04": "a zip archive (extract it first)",
-          b"#ROSBAG": "a ROS 1 bag (give it as a bag source with a topic)",
-          b"SQLite format 3": "an SQLite database (a ROS 2 bag's .db3: give the bag folder with a topic)",
-          b"\x89MCAP": "an MCAP file (give it as a bag source with a topic)",
-          b"\xff\xfe": "UTF-16 text (save it as UTF-8)", b"\xfe\xff": "UTF-16 text (save it as UTF-8)"}
+_MAGIC = {
+    b"\x1f\x8b": "gzip-compressed (decompress it first)",
+    b"PK\x03\x04": "a zip archive (extract it first)",
+    b"#ROSBAG": "a ROS 1 bag (give it as a bag source with a topic)",
+    b"SQLite format 3": "an SQLite database (a ROS 2 bag's .db3: give the bag folder with a topic)",
+    b"\x89MCAP": "an MCAP file (give it as a bag source with a topic)",
+    b"\xff\xfe": "UTF-16 text (save it as UTF-8)",
+    b"\xfe\xff": "UTF-16 text (save it as UTF-8)",
+}
 
 
 def _check_text(path: Path, head: bytes) -> None:
@@ -167,8 +208,11 @@ def _diagnose(tab: _Table):
             if not _is_number(tok):
                 raise EpaError(f"not a number: {tok!r}", path=str(tab.path), line=no)
         if len(toks) != width:
-            raise EpaError(f"expected {width} columns like the first data row, found {len(toks)}",
-                           path=str(tab.path), line=no)
+            raise EpaError(
+                f"expected {width} columns like the first data row, found {len(toks)}",
+                path=str(tab.path),
+                line=no,
+            )
     raise EpaError("could not parse the numeric rows", path=str(tab.path))
 
 
@@ -178,12 +222,28 @@ def _norm_name(name: str) -> str:
     return name.replace(" ", "_")
 
 
-_TIME_NAMES = {"t", "time", "timestamp", "timestamps", "stamp", "timestamp_kf", "sec", "time_s", "timestamp_ns"}
+_TIME_NAMES = {
+    "t",
+    "time",
+    "timestamp",
+    "timestamps",
+    "stamp",
+    "timestamp_kf",
+    "sec",
+    "time_s",
+    "timestamp_ns",
+}
 _POS_RE = re.compile(r"^(?:p_rs_r_|p_|pos_|position_|t|p)?([xyz])$")
 _QUAT_RE = re.compile(r"^(?:q_rs_|q_|q|quat_|orientation_|rot_)([xyzw])$")
 _COV_NAMES = {
-    "rot": (["pr11", "pr12", "pr13", "pr22", "pr23", "pr33"], ["qrr", "qrp", "qry", "qpp", "qpy", "qyy"]),
-    "pos": (["pt11", "pt12", "pt13", "pt22", "pt23", "pt33"], ["pxx", "pxy", "pxz", "pyy", "pyz", "pzz"]),
+    "rot": (
+        ["pr11", "pr12", "pr13", "pr22", "pr23", "pr33"],
+        ["qrr", "qrp", "qry", "qpp", "qpy", "qyy"],
+    ),
+    "pos": (
+        ["pt11", "pt12", "pt13", "pt22", "pt23", "pt33"],
+        ["pxx", "pxy", "pxz", "pyy", "pyz", "pzz"],
+    ),
 }
 
 
@@ -221,11 +281,23 @@ def upper_to_full(u: np.ndarray) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- readers
-def _finish(tab: _Table, t: np.ndarray, p: np.ndarray, q_xyzw: np.ndarray, *, time_unit: str,
-            header_ns: bool = False, on_unsorted: str = "error", cov_rot=None, cov_pos=None) -> Trajectory:
+def _finish(
+    tab: _Table,
+    t: np.ndarray,
+    p: np.ndarray,
+    q_xyzw: np.ndarray,
+    *,
+    time_unit: str,
+    header_ns: bool = False,
+    on_unsorted: str = "error",
+    cov_rot=None,
+    cov_pos=None,
+) -> Trajectory:
     if time_unit == "sec_nsec":
         t = _sec_nsec(tab)
-    elif time_unit == "ns" or (time_unit == "auto" and (header_ns or np.median(np.abs(t)) > NS_THRESHOLD)):
+    elif time_unit == "ns" or (
+        time_unit == "auto" and (header_ns or np.median(np.abs(t)) > NS_THRESHOLD)
+    ):
         if time_unit == "auto" and not header_ns:  # decided by the median: all must agree
             _check_one_unit(tab, t, ns=True)
             tab.notes.append("stamps read as nanoseconds (above 1e12, so not seconds)")
@@ -238,8 +310,12 @@ def _finish(tab: _Table, t: np.ndarray, p: np.ndarray, q_xyzw: np.ndarray, *, ti
     if zero.any():
         tab.fail(int(np.argmax(zero)), "zero quaternion")
     off = np.abs(norms - 1).max()
-    if off > QUAT_NORM_TOL:  # printed quaternions are unit to their digits; far off hints at wrong columns
-        tab.notes.append(f"quaternions normalised (norm off by up to {off:.3g}; check the column order)")
+    if (
+        off > QUAT_NORM_TOL
+    ):  # printed quaternions are unit to their digits; far off hints at wrong columns
+        tab.notes.append(
+            f"quaternions normalised (norm off by up to {off:.3g}; check the column order)"
+        )
     q = q_xyzw / norms[:, None]
     traj = Trajectory(t, p, q, cov_rot=cov_rot, cov_pos=cov_pos)
     return _check_order(traj, tab, on_unsorted)
@@ -252,9 +328,15 @@ def _check_one_unit(tab: _Table, t: np.ndarray, *, ns: bool) -> None:
     if odd.any():
         k = int(np.argmax(odd))
         if ns:
-            tab.fail(k, f"timestamp {float(t[k])!r} is in seconds but most stamps are nanoseconds: the file mixes"
-                        " units (set load.time_unit if every stamp is in one unit)")
-        tab.fail(k, f"timestamp {float(t[k]):.0f} is in nanoseconds but most stamps are seconds: the file mixes units")
+            tab.fail(
+                k,
+                f"timestamp {float(t[k])!r} is in seconds but most stamps are nanoseconds: the file mixes"
+                " units (set load.time_unit if every stamp is in one unit)",
+            )
+        tab.fail(
+            k,
+            f"timestamp {float(t[k]):.0f} is in nanoseconds but most stamps are seconds: the file mixes units",
+        )
 
 
 def beyond_reach(p: np.ndarray) -> int | None:
@@ -266,7 +348,10 @@ def beyond_reach(p: np.ndarray) -> int | None:
 def _check_positions(tab: _Table, p: np.ndarray) -> None:
     k = beyond_reach(p)
     if k is not None:
-        tab.fail(k, f"position {np.abs(p[k]).max():.3g} m is beyond {MAX_POSITION_M:.0e} m (a diverged or corrupt row)")
+        tab.fail(
+            k,
+            f"position {np.abs(p[k]).max():.3g} m is beyond {MAX_POSITION_M:.0e} m (a diverged or corrupt row)",
+        )
 
 
 def _sec_nsec(tab: _Table) -> np.ndarray:
@@ -295,8 +380,9 @@ def sort_unique(traj: Trajectory) -> tuple[Trajectory, str]:
     order = np.argsort(traj.t, kind="stable")
     keep = np.concatenate([[True], np.diff(traj.t[order]) > 0])
     n_back, n_dup = int((np.diff(traj.t) < 0).sum()), int((~keep).sum())
-    return traj.select(order[keep]), (f"{n_back} backward and {n_dup} repeated timestamps: sorted, kept the first"
-                                      " of each repeat")
+    return traj.select(order[keep]), (
+        f"{n_back} backward and {n_dup} repeated timestamps: sorted, kept the first of each repeat"
+    )
 
 
 class Unordered(Exception):
@@ -315,7 +401,10 @@ def in_order(traj: Trajectory, on_unsorted: str) -> tuple[Trajectory, str | None
     if bad is None:
         return traj, None
     if on_unsorted == "keep" and not (np.diff(traj.t) < 0).any():
-        return traj, f"{int((np.diff(traj.t) == 0).sum())} repeated timestamps kept (unsorted: keep)"
+        return (
+            traj,
+            f"{int((np.diff(traj.t) == 0).sum())} repeated timestamps kept (unsorted: keep)",
+        )
     if on_unsorted != "sort":
         raise Unordered(*bad)
     return sort_unique(traj)
@@ -325,8 +414,11 @@ def _check_order(traj: Trajectory, tab: _Table, on_unsorted: str) -> Trajectory:
     try:
         traj, note = in_order(traj, on_unsorted)
     except Unordered as bad:
-        tab.fail(bad.k, f"timestamp {float(traj.t[bad.k])!r} {bad.what} (set load.unsorted: sort to sort and drop"
-                        " duplicates)")
+        tab.fail(
+            bad.k,
+            f"timestamp {float(traj.t[bad.k])!r} {bad.what} (set load.unsorted: sort to sort and drop"
+            " duplicates)",
+        )
     if note is not None:
         tab.notes.append(note)
     return traj
@@ -336,21 +428,33 @@ def read_tum(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -> Traj
     rows = tab.rows
     if rows.shape[1] != 8:
         tab.fail(0, f"TUM needs 8 columns (t x y z qx qy qz qw), found {rows.shape[1]}")
-    return _finish(tab, rows[:, 0], rows[:, 1:4], rows[:, 4:8], time_unit=time_unit, on_unsorted=on_unsorted)
+    return _finish(
+        tab, rows[:, 0], rows[:, 1:4], rows[:, 4:8], time_unit=time_unit, on_unsorted=on_unsorted
+    )
 
 
 def read_openvins(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
     rows = tab.rows
     if rows.shape[1] != 20:
         tab.fail(0, f"OpenVINS needs 20 columns (TUM + 12 covariance), found {rows.shape[1]}")
-    return _finish(tab, rows[:, 0], rows[:, 1:4], rows[:, 4:8], time_unit=time_unit, on_unsorted=on_unsorted,
-                   cov_rot=upper_to_full(rows[:, 8:14]), cov_pos=upper_to_full(rows[:, 14:20]))
+    return _finish(
+        tab,
+        rows[:, 0],
+        rows[:, 1:4],
+        rows[:, 4:8],
+        time_unit=time_unit,
+        on_unsorted=on_unsorted,
+        cov_rot=upper_to_full(rows[:, 8:14]),
+        cov_pos=upper_to_full(rows[:, 14:20]),
+    )
 
 
 def read_euroc(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
     rows = tab.rows
     if rows.shape[1] < 8:
-        tab.fail(0, f"EuRoC CSV needs at least 8 columns (t x y z qw qx qy qz), found {rows.shape[1]}")
+        tab.fail(
+            0, f"EuRoC CSV needs at least 8 columns (t x y z qw qx qy qz), found {rows.shape[1]}"
+        )
     q = rows[:, [5, 6, 7, 4]]
     return _finish(tab, rows[:, 0], rows[:, 1:4], q, time_unit=time_unit, on_unsorted=on_unsorted)
 
@@ -358,18 +462,36 @@ def read_euroc(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -> Tr
 def read_named_csv(tab: _Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
     cols = _named_columns(tab.header, tab.rows.shape[1])
     if cols is None:
-        raise EpaError("the header does not name time, x, y, z, qx, qy, qz, qw columns"
-                       f" (header: {', '.join(tab.header or ['none'])})", path=str(tab.path))
+        raise EpaError(
+            "the header does not name time, x, y, z, qx, qy, qz, qw columns"
+            f" (header: {', '.join(tab.header or ['none'])})",
+            path=str(tab.path),
+        )
     rows = tab.rows
-    cov = {k: upper_to_full(rows[:, cols["cov_" + k]]) for k in ("rot", "pos") if "cov_" + k in cols}
-    return _finish(tab, rows[:, cols["t"]], rows[:, [cols["px"], cols["py"], cols["pz"]]],
-                   rows[:, [cols["qx"], cols["qy"], cols["qz"], cols["qw"]]], time_unit=time_unit,
-                   header_ns=cols["ns"], on_unsorted=on_unsorted,
-                   cov_rot=cov.get("rot"), cov_pos=cov.get("pos"))
+    cov = {
+        k: upper_to_full(rows[:, cols["cov_" + k]]) for k in ("rot", "pos") if "cov_" + k in cols
+    }
+    return _finish(
+        tab,
+        rows[:, cols["t"]],
+        rows[:, [cols["px"], cols["py"], cols["pz"]]],
+        rows[:, [cols["qx"], cols["qy"], cols["qz"], cols["qw"]]],
+        time_unit=time_unit,
+        header_ns=cols["ns"],
+        on_unsorted=on_unsorted,
+        cov_rot=cov.get("rot"),
+        cov_pos=cov.get("pos"),
+    )
 
 
-def read_kitti(tab: _Table, *, times: np.ndarray | None = None, rate: float = 10.0, keep_printed: bool = False,
-               **_) -> Trajectory:
+def read_kitti(
+    tab: _Table,
+    *,
+    times: np.ndarray | None = None,
+    rate: float = 10.0,
+    keep_printed: bool = False,
+    **_,
+) -> Trajectory:
     rows = tab.rows
     if rows.shape[1] != 12:
         tab.fail(0, f"KITTI needs 12 columns (3x4 row-major pose), found {rows.shape[1]}")
@@ -388,13 +510,22 @@ def read_kitti(tab: _Table, *, times: np.ndarray | None = None, rate: float = 10
         tab.fail(int(np.argmax(bad)), f"rotation block is not a rotation (det = {det[bad][0]:.4g})")
     # Project onto SO(3): KITTI files print about 7 digits, so R^T R is only approximately I.
     _check_positions(tab, m[:, :, 3])
-    traj = Trajectory(t, m[:, :, 3].copy(), geometry.rot_to_quat(geometry.nearest_rotation(r)),
-                      r_printed=r.copy() if keep_printed else None)
+    traj = Trajectory(
+        t,
+        m[:, :, 3].copy(),
+        geometry.rot_to_quat(geometry.nearest_rotation(r)),
+        r_printed=r.copy() if keep_printed else None,
+    )
     return _check_order(traj, tab, "error")
 
 
-READERS = {"tum": read_tum, "openvins": read_openvins, "euroc": read_euroc, "csv": read_named_csv,
-           "kitti": read_kitti}
+READERS = {
+    "tum": read_tum,
+    "openvins": read_openvins,
+    "euroc": read_euroc,
+    "csv": read_named_csv,
+    "kitti": read_kitti,
+}
 
 
 FORMAT_SETTINGS = "load.truth_format / load.estimate_format"
@@ -411,15 +542,21 @@ def detect_format(path: Path, tab: _Table) -> str:
     if _named_columns(tab.header, width) is not None:
         return "csv"
     if tab.header and len(tab.header) == width and not all(_is_number(h) for h in tab.header):
-        raise EpaError(f"cannot tell the columns from the header ({', '.join(tab.header)}): name them t (or"
-                       " timestamp), x, y, z, qx, qy, qz, qw, or set " + FORMAT_SETTINGS, path=str(path))
+        raise EpaError(
+            f"cannot tell the columns from the header ({', '.join(tab.header)}): name them t (or"
+            " timestamp), x, y, z, qx, qy, qz, qw, or set " + FORMAT_SETTINGS,
+            path=str(path),
+        )
     if path.suffix.lower() == ".csv" and width >= 8:
         return "euroc"
     by_width = {8: "tum", 12: "kitti", 20: "openvins"}
     if width in by_width:
         return by_width[width]
-    raise EpaError(f"cannot tell the format from {width} columns: expected 8 (TUM), 12 (KITTI),"
-                   f" 20 (OpenVINS) or a CSV header naming the columns; set {FORMAT_SETTINGS}", path=str(path))
+    raise EpaError(
+        f"cannot tell the format from {width} columns: expected 8 (TUM), 12 (KITTI),"
+        f" 20 (OpenVINS) or a CSV header naming the columns; set {FORMAT_SETTINGS}",
+        path=str(path),
+    )
 
 
 def kitti_times_for(path: Path) -> Path | None:
@@ -433,21 +570,33 @@ def kitti_times_for(path: Path) -> Path | None:
     return None
 
 
-def read_trajectory(path, fmt: str = "auto", *, time_unit: str = "auto", on_unsorted: str = "error",
-                    kitti_rate: float = 10.0, kitti_times=None, kitti_printed: bool = False,
-                    notes: list | None = None) -> Trajectory:
+def read_trajectory(
+    path,
+    fmt: str = "auto",
+    *,
+    time_unit: str = "auto",
+    on_unsorted: str = "error",
+    kitti_rate: float = 10.0,
+    kitti_times=None,
+    kitti_printed: bool = False,
+    notes: list | None = None,
+) -> Trajectory:
     """Read any supported trajectory file into seconds and unit quaternions. Every interpretation the
     file did not state (detected format, nanoseconds, sorting, KITTI times) is logged as a warning
     and appended to ``notes``. ``kitti_printed`` also keeps KITTI's printed rotation blocks (evo's
     commands compute on them)."""
     path = Path(path)
     if fmt not in FORMATS:
-        raise EpaError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}", path=str(path))
+        raise EpaError(
+            f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}", path=str(path)
+        )
     tab = _read_table(path)
     detected = []  # a detected format is a note, not a warning: it is routine
     if fmt == "auto":
         fmt = detect_format(path, tab)
-        detected.append(f"format {fmt} ({tab.rows.shape[1]} columns{', header names them' if fmt == 'csv' else ''})")
+        detected.append(
+            f"format {fmt} ({tab.rows.shape[1]} columns{', header names them' if fmt == 'csv' else ''})"
+        )
     times = None
     if fmt == "kitti":
         tpath = Path(kitti_times) if kitti_times else kitti_times_for(path)
@@ -456,8 +605,14 @@ def read_trajectory(path, fmt: str = "auto", *, time_unit: str = "auto", on_unso
             tab.notes.append(f"KITTI stamps from {tpath.name}")
         else:
             tab.notes.append(f"KITTI stamps at {kitti_rate} Hz (no times file; load.kitti_rate)")
-    traj = READERS[fmt](tab, time_unit=time_unit, on_unsorted=on_unsorted, times=times, rate=kitti_rate,
-                        keep_printed=kitti_printed)
+    traj = READERS[fmt](
+        tab,
+        time_unit=time_unit,
+        on_unsorted=on_unsorted,
+        times=times,
+        rate=kitti_rate,
+        keep_printed=kitti_printed,
+    )
     if len(traj) < 2:
         raise EpaError(f"only {len(traj)} pose(s); at least 2 are needed", path=str(path))
     for note in tab.notes:
