@@ -10,14 +10,19 @@ the pose topic with ``epa traj`` (in-process, best of 3) and with evo's ``read_b
 
 import argparse
 import shutil
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from epa import bags, simulate
-from epa.trajectory import Trajectory
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+import bag_fixture  # noqa: E402 - the tests' bag writer
+
+from epa import simulate  # noqa: E402
+from epa.core.trajectory import Trajectory  # noqa: E402
+from epa.readers import bags  # noqa: E402
 
 
 def write(path: Path, storage: str, poses: Trajectory, n_images: int) -> None:
@@ -54,7 +59,7 @@ def write(path: Path, storage: str, poses: Trajectory, n_images: int) -> None:
                 [(int(t * 1e9), image(t)) for t in stamps],
             )
         }
-    bags.write_bag(
+    bag_fixture.write_bag(
         path, {"/pose": ("geometry_msgs/msg/PoseStamped", poses)}, storage=storage, extra=extra
     )
 

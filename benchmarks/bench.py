@@ -15,8 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import calibration, io, pipeline, settings, simulate, sync
-from epa.trajectory import Trajectory
+from epa import simulate
+from epa.artifacts import files as io
+from epa.core.trajectory import Trajectory
+from epa.steps import calibrate as calibration
+from epa.steps import sync
+from epa.workflow import pipeline, settings
 
 
 def timed(cmd):

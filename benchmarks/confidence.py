@@ -26,7 +26,10 @@ DATA = ROOT.parent / "shared" / "data"
 CHILD = r"""
 import json, sys, time
 from pathlib import Path
-from epa import chain, grid, settings, simulate
+from epa.workflow import chain
+from epa.workflow import jobs as grid
+from epa.workflow import settings
+from epa import simulate
 
 out, repeat = Path(sys.argv[1]), int(sys.argv[2])
 grids = {}

@@ -88,8 +88,8 @@ def run_example(cwd: Path, per_case: bool) -> tuple[float, dict[str, float]]:
 
 
 def in_process(results: Path) -> dict:
-    from epa import chain
     from epa.outputs import figures, report
+    from epa.workflow import chain
 
     figures._setup("paper")  # import matplotlib outside the timings
     build, draw, size = [], defaultdict(list), []

@@ -108,7 +108,7 @@ def in_pairs(cmds, workers=2) -> float:
 
 
 def bench_euroc(tmp: Path, skip_evo: bool) -> dict:
-    from epa import io
+    from epa.artifacts import files as io
     from epa.readers import text
 
     cwd = tmp / "euroc"
@@ -151,8 +151,8 @@ def bench_euroc(tmp: Path, skip_evo: bool) -> dict:
 
 def in_process(grid_dir: Path, results_dir: Path) -> tuple[float, dict, list[str]]:
     """Every stage of every case, case by case in this process; seconds, config, case keys."""
-    from epa import cases as epa_cases
-    from epa import chain, settings
+    from epa.workflow import chain, settings
+    from epa.workflow import discovery as epa_cases
 
     cfg = settings.resolve(
         {"truth_dir": str(grid_dir / "truth"), "algorithms_dir": str(grid_dir / "algorithms")}
@@ -168,7 +168,8 @@ def in_process(grid_dir: Path, results_dir: Path) -> tuple[float, dict, list[str
 
 # ----------------------------------------------------------------------------- the example
 def bench_example(tmp: Path) -> dict:
-    from epa import chain, simulate
+    from epa import simulate
+    from epa.workflow import chain
 
     cwd = tmp / "example"
     simulate.simulate(cwd / "sim")
@@ -192,8 +193,9 @@ def bench_example(tmp: Path) -> dict:
 # ----------------------------------------------------------------------------- large simulated grids
 def short_grid(cwd: Path, n_cases: int, seed: int = 0) -> None:
     """n_cases short cases: 20 s references at 50 Hz, estimates at 20 Hz with noise and drift."""
-    from epa import io, simulate
-    from epa.trajectory import Trajectory
+    from epa import simulate
+    from epa.artifacts import files as io
+    from epa.core.trajectory import Trajectory
 
     rng = np.random.default_rng(seed)
     n_alg, n_run = 10, 10

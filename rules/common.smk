@@ -4,10 +4,13 @@
 import os
 
 import epa
-from epa.errors import EpaError
+from epa.core.errors import EpaError
 from snakemake.exceptions import WorkflowError
-from epa import cases as epa_cases, chain as epa_chain, grid as epa_grid, readers as epa_readers
-from epa import settings as epa_settings
+from epa.workflow import discovery as epa_cases
+from epa.workflow import chain as epa_chain
+from epa.workflow import jobs as epa_grid
+from epa import readers as epa_readers
+from epa.workflow import settings as epa_settings
 from epa.outputs import report as epa_report, tables as epa_tables
 from epa.readers import bags as epa_bags
 

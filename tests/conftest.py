@@ -11,7 +11,8 @@ DATA = Path(os.environ.get("EPA_SHARED_DATA", ROOT.parent / "shared" / "data"))
 def run_stages(cases: list[dict], out: Path, cfg: dict, stages=None) -> dict:
     """Run stages (default: all) over a grid of cases in this process, as the stage jobs do; returns
     each stage's manifest path."""
-    from epa import chain, grid
+    from epa.workflow import chain
+    from epa.workflow import jobs as grid
 
     manifests = {}
     for stage in stages or chain.NAMES:

@@ -7,10 +7,13 @@ import stat
 import numpy as np
 import pytest
 
-from epa import alignment, cases, chain, io, pipeline, settings
-from epa.errors import EpaError
+from epa.artifacts import files as io
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
 from epa.readers import text
-from epa.trajectory import Trajectory
+from epa.steps import align as alignment
+from epa.workflow import chain, pipeline, settings
+from epa.workflow import discovery as cases
 
 POSES = "1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0 1\n3.0 2 1 0 0 0 0 1\n"
 

@@ -1,13 +1,15 @@
 """ROS bags: every supported message type in ROS 1, ROS 2 sqlite3 and MCAP bags read back exactly;
 TF chains composed; evo 1.38.1's reading of the shared bags reproduced; damage is one line."""
 
+import bag_fixture
 import numpy as np
 import pytest
 
-from epa import geometry, readers
-from epa.errors import EpaError
+from epa import readers
+from epa.core import geometry
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
 from epa.readers import bags
-from epa.trajectory import Trajectory
 
 TYPES = [
     "geometry_msgs/msg/PoseStamped",
@@ -37,7 +39,7 @@ def known(n=60, seed=0, cov=True):
 def test_every_message_type_reads_back_exactly(tmp_path, storage):
     traj = known()
     path = tmp_path / STORAGES[storage]
-    bags.write_bag(path, {f"/t{k}": (m, traj) for k, m in enumerate(TYPES)}, storage=storage)
+    bag_fixture.write_bag(path, {f"/t{k}": (m, traj) for k, m in enumerate(TYPES)}, storage=storage)
     assert bags.is_bag(path)
     listed = {i.topic: (i.msgtype, i.count) for i in bags.topics(path)}
     assert listed["/t0"] == (TYPES[0], 60) and listed["/t4"] == (TYPES[4], 1)
@@ -63,7 +65,7 @@ def test_every_message_type_reads_back_exactly(tmp_path, storage):
 
 def test_record_time_on_request(tmp_path):
     traj = known(cov=False)
-    bags.write_bag(tmp_path / "b.bag", {"/p": ("geometry_msgs/msg/PoseStamped", traj)})
+    bag_fixture.write_bag(tmp_path / "b.bag", {"/p": ("geometry_msgs/msg/PoseStamped", traj)})
     record = bags.read_bag(tmp_path / "b.bag", "/p", stamp="record")
     np.testing.assert_allclose(
         record.t, traj.t, rtol=0, atol=1e-6
@@ -207,7 +209,7 @@ def test_a_topic_on_a_text_file_is_refused(tmp_path):
 
 
 def test_per_source_settings_override_the_load_section():
-    from epa import settings
+    from epa.workflow import settings
 
     cfg = settings.resolve(
         {
@@ -243,7 +245,7 @@ def test_the_all_at_once_decoder_equals_message_by_message(tmp_path, storage, mo
     traj = known(200, seed=5)
     path = tmp_path / STORAGES[storage]
     kinds = TYPES[:4]
-    bags.write_bag(path, {f"/t{k}": (m, traj) for k, m in enumerate(kinds)}, storage=storage)
+    bag_fixture.write_bag(path, {f"/t{k}": (m, traj) for k, m in enumerate(kinds)}, storage=storage)
     fast = [bags.read_bag(path, f"/t{k}") for k in range(len(kinds))]
     monkeypatch.setattr(bags, "_decode_all", lambda *a, **k: None)
     for k, f in enumerate(fast):

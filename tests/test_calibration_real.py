@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 import yaml
 
-from epa import calibration, geometry, sync
+from epa.core import geometry
 from epa.readers import text
+from epa.steps import calibrate as calibration
+from epa.steps import sync
 
 
 @pytest.fixture(scope="module")

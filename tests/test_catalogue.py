@@ -10,12 +10,16 @@ import subprocess
 import sys
 from pathlib import Path
 
+import bag_fixture
 import catalogue
 import pytest
 
-from epa import cases, chain, cli, grid, settings
-from epa.errors import EpaError
+from epa.cli import main as cli
+from epa.core.errors import EpaError
 from epa.outputs import tables
+from epa.workflow import chain, settings
+from epa.workflow import discovery as cases
+from epa.workflow import jobs as grid
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -74,26 +78,25 @@ def _eval_paths(tmp: Path, b: catalogue.Bad) -> tuple[Path, Path, list[str]]:
 
 
 def _traj(t, p, q):
-    from epa.trajectory import Trajectory
+    from epa.core.trajectory import Trajectory
 
     return Trajectory(t, p, q)
 
 
 def _bag(tmp: Path, est: Path, setup: str) -> Path:
     """The catalogue's bag: /pose and /gt (PoseStamped), /tf (world -> body), /chatter (String), /empty."""
-    from epa.readers import bags
 
     good = _traj(catalogue.T, catalogue.P, catalogue.Q)
     storage = {"bag-sqlite3": "sqlite3", "bag-mcap": "mcap", "bag-no-db": "sqlite3"}.get(
         setup, "ros1"
     )
     if setup == "bag-one":
-        bags.write_bag(est, {"/pose": ("geometry_msgs/msg/PoseStamped", good)})
+        bag_fixture.write_bag(est, {"/pose": ("geometry_msgs/msg/PoseStamped", good)})
         return est
     if setup == "bag-repeated":
         t = catalogue.T.copy()
         t[10] = t[9]
-        bags.write_bag(
+        bag_fixture.write_bag(
             est, {"/pose": ("geometry_msgs/msg/PoseStamped", _traj(t, catalogue.P, catalogue.Q))}
         )
         return est
@@ -102,7 +105,7 @@ def _bag(tmp: Path, est: Path, setup: str) -> Path:
     string = get_typestore(Stores.ROS1_NOETIC if storage == "ros1" else Stores.ROS2_HUMBLE).types[
         "std_msgs/msg/String"
     ]
-    bags.write_bag(
+    bag_fixture.write_bag(
         est,
         {
             "/pose": ("geometry_msgs/msg/PoseStamped", good),
@@ -185,13 +188,11 @@ def _grid_folders(tmp: Path, setup: str) -> tuple[Path, Path, str | None]:
             _write(algs / "we ird&%" / "seq" / f"{name}.txt", good)
         bad = None
     elif setup in ("grid-bag-ref", "grid-bag-truncated"):
-        from epa.readers import bags
-
         good_traj = _traj(catalogue.T, catalogue.P, catalogue.Q)
         if setup == "grid-bag-ref":
             for ds in ("seq", "other"):
                 (truth / f"{ds}.txt").unlink()
-                bags.write_bag(
+                bag_fixture.write_bag(
                     truth / ds,
                     {"/gt": ("geometry_msgs/msg/PoseStamped", good_traj)},
                     storage="sqlite3",
@@ -199,7 +200,7 @@ def _grid_folders(tmp: Path, setup: str) -> tuple[Path, Path, str | None]:
             bad = None
         else:
             (algs / "bad" / "seq").mkdir(parents=True)
-            bags.write_bag(
+            bag_fixture.write_bag(
                 algs / "bad" / "seq" / "run1.bag",
                 {"/pose": ("geometry_msgs/msg/PoseStamped", good_traj)},
             )

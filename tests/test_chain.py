@@ -8,9 +8,11 @@ import pytest
 from conftest import run_stages
 from test_steps_sim import case as sim_case
 
-from epa import chain, grid, io, settings
-from epa.errors import EpaError
+from epa.artifacts import files as io
+from epa.core.errors import EpaError
 from epa.outputs import tables
+from epa.workflow import chain, settings
+from epa.workflow import jobs as grid
 
 
 @pytest.fixture

@@ -2,7 +2,9 @@ import json
 import subprocess
 import sys
 
-from epa import cli
+import bag_fixture
+
+from epa.cli import main as cli
 
 
 def test_eval_writes_metrics_json(tmp_path):
@@ -39,7 +41,16 @@ def test_bad_input_exits_nonzero_with_one_line(tmp_path):
     bad = tmp_path / "bad.txt"
     bad.write_text("1 2 3\n")
     r = subprocess.run(
-        [sys.executable, "-m", "epa.cli", "eval", str(bad), str(bad), "--out", str(tmp_path / "o")],
+        [
+            sys.executable,
+            "-m",
+            "epa.cli.main",
+            "eval",
+            str(bad),
+            str(bad),
+            "--out",
+            str(tmp_path / "o"),
+        ],
         capture_output=True,
         text=True,
     )
@@ -55,14 +66,14 @@ def test_bad_input_exits_nonzero_with_one_line(tmp_path):
 def test_traj_lists_a_bags_topics_and_exports_one(tmp_path, capsys):
     import numpy as np
 
-    from epa.readers import bags, text
-    from epa.trajectory import Trajectory
+    from epa.core.trajectory import Trajectory
+    from epa.readers import text
 
     t = 1_700_000_000 + np.arange(50) * 0.1
     traj = Trajectory(
         t, np.column_stack([t - t[0], np.zeros(50), np.zeros(50)]), np.tile([0, 0, 0, 1.0], (50, 1))
     )
-    bags.write_bag(
+    bag_fixture.write_bag(
         tmp_path / "b.bag",
         {"/odom": ("nav_msgs/msg/Odometry", traj), "/tf": ("tf2_msgs/msg/TFMessage", traj)},
         frames=("map", "base"),
@@ -117,16 +128,15 @@ def test_traj_lists_a_bags_topics_and_exports_one(tmp_path, capsys):
 def test_a_ros2_bag_folder_is_a_run(tmp_path):
     import numpy as np
 
-    from epa import cases
-    from epa.readers import bags
-    from epa.trajectory import Trajectory
+    from epa.core.trajectory import Trajectory
+    from epa.workflow import discovery as cases
 
     t = np.arange(20) * 0.1
     traj = Trajectory(t, np.zeros((20, 3)), np.tile([0, 0, 0, 1.0], (20, 1)))
     (tmp_path / "truth").mkdir()
     (tmp_path / "truth/seq.txt").write_text("1 0 0 0 0 0 0 1\n")
     (tmp_path / "algs/a/seq").mkdir(parents=True)
-    bags.write_bag(
+    bag_fixture.write_bag(
         tmp_path / "algs/a/seq/run1",
         {"/p": ("geometry_msgs/msg/PoseStamped", traj)},
         storage="mcap",
@@ -137,7 +147,7 @@ def test_a_ros2_bag_folder_is_a_run(tmp_path):
 
 
 def test_config_lists_defaults_and_marks_what_a_config_sets(tmp_path, capsys, caplog):
-    from epa import cli
+    from epa.cli import main as cli
 
     assert cli.main(["config"]) == 0
     defaults = capsys.readouterr().out.splitlines()
@@ -161,4 +171,4 @@ def test_epica_is_the_same_command():
     import importlib.metadata
 
     scripts = {e.name: e.value for e in importlib.metadata.entry_points(group="console_scripts")}
-    assert scripts["epica"] == scripts["epa"] == "epa.cli:main"
+    assert scripts["epica"] == scripts["epa"] == "epa.cli.main:main"

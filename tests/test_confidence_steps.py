@@ -4,8 +4,13 @@ directions flagged and not applied, ambiguous or out-of-window offsets refused, 
 import numpy as np
 import pytest
 
-from epa import calibration, chain, geometry, io, settings, simulate, sync
-from epa.trajectory import Trajectory
+from epa import simulate
+from epa.artifacts import files as io
+from epa.core import geometry
+from epa.core.trajectory import Trajectory
+from epa.steps import calibrate as calibration
+from epa.steps import sync
+from epa.workflow import chain, settings
 
 
 def simulated_trials(n: int):

@@ -10,9 +10,11 @@ import pytest
 from conftest import DATA, run_stages
 from scipy import stats
 
-from epa import cli, settings, simulate
+from epa import simulate
+from epa.cli import main as cli
 from epa.metrics import drift, statistics
 from epa.outputs import tables
+from epa.workflow import settings
 
 
 def test_spread_by_hand():
@@ -287,8 +289,9 @@ def test_selftest_command(capsys, data):
 
 
 def test_selftest_on_planar_motion_says_what_is_unobservable(tmp_path, capsys):
-    from epa import geometry, io
-    from epa.trajectory import Trajectory
+    from epa.artifacts import files as io
+    from epa.core import geometry
+    from epa.core.trajectory import Trajectory
 
     t = np.arange(0, 120, 0.01)
     yaw = 0.8 * np.sin(t / 2) + 0.3 * np.sin(1.3 * t)

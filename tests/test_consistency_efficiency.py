@@ -4,9 +4,13 @@ through Steps 1-3, the real OpenVINS runs, and a hand-computed EA-Drift."""
 import numpy as np
 import pytest
 
-from epa import chain, geometry, io, settings, simulate
+from epa import simulate
+from epa.artifacts import files as io
+from epa.core import geometry
+from epa.core.trajectory import Trajectory
 from epa.metrics import consistency, efficiency
-from epa.trajectory import Trajectory
+from epa.readers import timing
+from epa.workflow import chain, settings
 
 X_ROT = geometry.so3_exp(np.array([1.2092, -1.2092, 1.2092]))  # camera: 120° about (1,-1,1)
 X_TRANS = np.array([0.10, -0.05, 0.02])
@@ -132,13 +136,13 @@ def test_ea_drift_by_hand_on_three_poses():
 
 def test_timing_files_and_matching(tmp_path):
     (tmp_path / "a_timing.txt").write_text("10.00 12.5\n10.05 13\n10.10 70\n")
-    t, ms, what = efficiency.read_timing(tmp_path / "a_timing.txt")
+    t, ms, what = timing.read_timing(tmp_path / "a_timing.txt")
     assert what == "<timestamp> <ms>" and ms.tolist() == [12.5, 13, 70]
     (tmp_path / "ov.csv").write_text(
         "timestamp (sec),tracking,propagation,msckf update,slam update,slam delayed,"
         "re-tri & marg,total\n10.0,0.001,0.001,0.002,0,0,0.001,0.0052\n"
     )
-    t, ms, what = efficiency.read_timing(tmp_path / "ov.csv")
+    t, ms, what = timing.read_timing(tmp_path / "ov.csv")
     assert ms.tolist() == [pytest.approx(5.2)] and "total" in what
     idx = efficiency.match_nearest(
         np.array([10.001, 10.07, 11.0]), np.array([10.0, 10.05, 10.1]), 0.01

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from epa import chain, pipeline, settings
 from epa.metrics import drift
+from epa.workflow import chain, pipeline, settings
 
 CFG = settings.defaults()
 

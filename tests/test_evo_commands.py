@@ -14,7 +14,9 @@ from evo.core.sync_method import SyncMethod  # noqa: E402
 from evo.core.trajectory import Plane  # noqa: E402
 from evo.tools import file_interface  # noqa: E402
 
-from epa import cli, cli_evo, evo_protocol  # noqa: E402
+from epa.cli import main as cli
+from epa.evo import commands as cli_evo
+from epa.evo import protocol as evo_protocol  # noqa: E402
 
 # evo reads a TF chain (/tf:parent.child) only through tf2_py, which is not on PyPI; Debian's
 # python3-tf2 (ROS 1) and python3-geometry-msgs provide it (`.ci/run` installs them). Appended last,
@@ -421,8 +423,8 @@ def test_a_file_that_is_not_a_result_is_one_line(tmp_path, capsys):
 
 
 def test_projection_keeps_only_the_rotation_about_the_normal():
-    from epa import geometry
-    from epa.trajectory import Trajectory
+    from epa.core import geometry
+    from epa.core.trajectory import Trajectory
 
     r = geometry.so3_exp(np.array([[0.1, -0.2, 0.7]]))
     # static xyz Euler angles of r: yaw about z is atan2(r10, r00)

@@ -9,9 +9,10 @@ evo_sync = pytest.importorskip("evo.core.sync")
 from evo.core import metrics as em  # noqa: E402
 from evo.tools import file_interface  # noqa: E402
 
-from epa import alignment, sync  # noqa: E402
 from epa.metrics import accuracy  # noqa: E402
 from epa.readers import text  # noqa: E402
+from epa.steps import align as alignment  # noqa: E402
+from epa.steps import sync  # noqa: E402
 
 REL = 1e-6
 

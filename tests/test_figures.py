@@ -6,7 +6,8 @@ import struct
 
 import pytest
 
-from epa import cli, simulate
+from epa import simulate
+from epa.cli import main as cli
 
 
 def png_size(path) -> tuple[int, int]:
@@ -146,8 +147,8 @@ def euroc_grid(tmp_path_factory):
         pytest.skip(f"real data not found at {DATA} (CI keeps ../shared/data beside the checkout)")
     from conftest import run_stages
 
-    from epa import settings
     from epa.outputs import report, tables
+    from epa.workflow import settings
 
     gt = DATA / "rpng_open_vins/ov_data/euroc_mav"
     rpg = DATA / "uzh-rpg_rpg_trajectory_evaluation/results"
@@ -281,7 +282,7 @@ def test_a_rerun_recording_holds_the_case(case, tmp_path):
     import numpy as np
     from rerun.chunk import RrdReader
 
-    from epa import io
+    from epa.artifacts import files as io
 
     sim = case.parents[1] / "sim"
     out = tmp_path / "out"
@@ -318,9 +319,9 @@ def test_a_rerun_recording_holds_the_case(case, tmp_path):
 
 
 def test_report_rerun_without_the_extra_is_refused_at_config_time(monkeypatch):
-    from epa import settings
-    from epa.errors import EpaError
+    from epa.core.errors import EpaError
     from epa.outputs import recording
+    from epa.workflow import settings
 
     monkeypatch.setattr(recording, "available", lambda: False)
     with pytest.raises(EpaError, match=r'pip install "epica\[rerun\]"'):

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from epa.errors import EpaError
+from epa.core.errors import EpaError
 from epa.readers import text
 
 

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from conftest import run_stages
 
-from epa import chain, cli, settings
+from epa.cli import main as cli
 from epa.outputs import tables
+from epa.workflow import chain, settings
 
 
 def devkit(gt_file, result_file):
@@ -135,11 +136,11 @@ def test_kitti_metric_reaches_summary_and_its_table(kitti00, tmp_path):
 def test_kitti_metric_equals_the_devkit_exactly_on_orthonormal_poses(tmp_path, rng):
     """A 1.5 km drive with a drifting estimate, written as KITTI files at 17 digits (rotations orthonormal
     to 1e-16): the devkit transcription and epa agree to 1e-9."""
-    from epa import io
-    from epa.geometry import so3_exp
+    from epa.artifacts import files as io
+    from epa.core.geometry import so3_exp
+    from epa.core.trajectory import Trajectory
     from epa.metrics import kitti
     from epa.readers import text
-    from epa.trajectory import Trajectory
 
     n = 1500
     yaw = np.cumsum(rng.normal(0, 0.01, n))
@@ -161,8 +162,8 @@ def test_kitti_metric_equals_the_devkit_exactly_on_orthonormal_poses(tmp_path, r
 
 
 def test_kitti_metric_is_empty_with_a_note_on_a_short_path(tmp_path):
+    from epa.core.trajectory import Trajectory
     from epa.metrics import kitti
-    from epa.trajectory import Trajectory
 
     t = np.arange(100.0)
     p = np.column_stack([t * 0.5, np.zeros(100), np.zeros(100)])  # 49.5 m: no 100 m segment

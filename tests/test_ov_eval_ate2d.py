@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from epa import alignment, sync
 from epa.metrics import accuracy
 from epa.readers import text
+from epa.steps import align as alignment
+from epa.steps import sync
 
 
 def jpl_quat_2_rot(q_xyzw):
@@ -60,8 +61,8 @@ def test_ate_2d_matches_a_transcription_of_ov_eval(data):
 
 
 def test_ate_2d_of_a_pure_yaw_error_is_that_yaw_signed():
-    from epa import geometry
-    from epa.trajectory import Trajectory
+    from epa.core import geometry
+    from epa.core.trajectory import Trajectory
 
     t = np.arange(4.0)
     r = geometry.so3_exp(
@@ -78,8 +79,9 @@ def test_ate_2d_of_a_pure_yaw_error_is_that_yaw_signed():
 def test_mode_ov_eval_writes_ov_evals_layout(tmp_path):
     from conftest import run_stages
 
-    from epa import settings, simulate
+    from epa import simulate
     from epa.outputs import tables
+    from epa.workflow import settings
 
     simulate.simulate(tmp_path / "sim")
     cases = [

@@ -4,9 +4,10 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from epa import geometry, sync
+from epa.core import geometry
 from epa.metrics import accuracy
 from epa.readers import text
+from epa.steps import sync
 
 
 def brute_segment_pairs(d, length, tol=0.5):
@@ -133,7 +134,7 @@ def test_step1_recovers_injected_shifts_on_real_euroc_estimates(data):
 
 
 def test_step1_falls_back_without_motion():
-    from epa.trajectory import Trajectory
+    from epa.core.trajectory import Trajectory
 
     t = np.arange(0, 60, 0.05)
     still = Trajectory(t, np.c_[t, 0 * t, 0 * t], np.tile([0, 0, 0, 1.0], (len(t), 1)))
@@ -142,8 +143,8 @@ def test_step1_falls_back_without_motion():
 
 
 def test_step1_refuses_an_ambiguous_periodic_peak():
-    from epa import geometry
-    from epa.trajectory import Trajectory
+    from epa.core import geometry
+    from epa.core.trajectory import Trajectory
 
     t = np.arange(0, 60, 0.005)
     yaw = 0.5 * np.sin(2 * np.pi * t / 0.8)  # every 0.8 s the motion repeats exactly

@@ -5,11 +5,14 @@ from hypothesis import HealthCheck, given
 from hypothesis import settings as hsettings
 from hypothesis import strategies as st
 
-from epa import alignment, geometry, io, sync
-from epa.errors import EpaError
+from epa.artifacts import files as io
+from epa.core import geometry
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
 from epa.metrics import accuracy
 from epa.readers import text
-from epa.trajectory import Trajectory
+from epa.steps import align as alignment
+from epa.steps import sync
 
 FUZZ = hsettings(
     max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]

@@ -3,8 +3,12 @@
 import numpy as np
 import pytest
 
-from epa import alignment, calibration, geometry, simulate, sync
-from epa.trajectory import Trajectory
+from epa import simulate
+from epa.core import geometry
+from epa.core.trajectory import Trajectory
+from epa.steps import align as alignment
+from epa.steps import calibrate as calibration
+from epa.steps import sync
 
 
 def case(

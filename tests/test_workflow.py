@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import bag_fixture
 import pytest
 
 from epa import simulate
@@ -237,7 +238,7 @@ def test_batched_execution_writes_the_same_artifacts_and_tables(grid):
 
 
 def test_epa_eval_writes_the_workflow_metrics_json(grid, tmp_path):
-    from epa import cli
+    from epa.cli import main as cli
 
     case = "vio_camera/handheld_office/run1"
     assert (
@@ -268,7 +269,7 @@ def test_a_bug_in_one_case_is_only_that_cases_failure(grid):
     wrapper.write_text(
         f"include: {str(ROOT / 'Snakefile')!r}\n"
         + """
-import epa.chain as _chain
+import epa.workflow.chain as _chain
 _sync = _chain.BY_NAME["sync"].run
 def _buggy(case, *args):
     if "vio_body/handheld_office/run2" in str(case.root):
@@ -393,8 +394,7 @@ def test_bag_grid_with_per_source_settings(tmp_path):
     """References in bags (a ROS 2 folder; a ROS 1 bag whose second topic is an estimate), text
     estimates of another algorithm, settings per source; changing one algorithm's settings re-runs
     only its cases."""
-    from epa import io
-    from epa.readers import bags
+    from epa.artifacts import files as io
     from epa.readers import text as text_reader
 
     simulate.simulate(tmp_path / "sim")
@@ -402,7 +402,7 @@ def test_bag_grid_with_per_source_settings(tmp_path):
     ref = text_reader.read_trajectory(sim / "truth/handheld_office.txt")
     est = text_reader.read_trajectory(sim / "algorithms/vio_body/handheld_office/run1.txt")
     (tmp_path / "truth").mkdir()
-    bags.write_bag(
+    bag_fixture.write_bag(
         tmp_path / "truth/office_ros2",
         {"/vicon": ("geometry_msgs/msg/PoseStamped", ref)},
         storage="sqlite3",
@@ -410,7 +410,7 @@ def test_bag_grid_with_per_source_settings(tmp_path):
     # one ROS 1 bag holding ground truth and an estimate: the reference of one dataset and a run
     (tmp_path / "algs/bagged/office_ros1").mkdir(parents=True)
     both = tmp_path / "algs/bagged/office_ros1/run1.bag"
-    bags.write_bag(
+    bag_fixture.write_bag(
         both,
         {"/gt": ("geometry_msgs/msg/PoseStamped", ref), "/odom": ("nav_msgs/msg/Odometry", est)},
     )

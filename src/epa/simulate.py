@@ -12,8 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import geometry, io
-from epa.trajectory import Trajectory
+from epa.artifacts import files as io
+from epa.core import geometry
+from epa.core.trajectory import Trajectory
 
 TRUTH_RATE = 50.0
 EST_RATE = 20.0

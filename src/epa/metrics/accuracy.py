@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa import geometry
-from epa.errors import EpaError
-from epa.trajectory import Trajectory
+from epa.core import geometry
+from epa.core.errors import EpaError
+from epa.core.stamps import closest_pairs
+from epa.core.trajectory import Trajectory
 
 RPE_UNITS = ("frames", "m", "s", "deg", "rad")
 
@@ -39,36 +40,6 @@ def stats(x: np.ndarray) -> dict:
 
 
 # ----------------------------------------------------------------------------- pair selection
-def closest_pairs(
-    d: np.ndarray, delta: float, tol: float, *, strict: bool, skip: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """For every start i, the first j >= i + skip whose d[j] is closest to d[i] + delta.
-
-    ``d`` must be non-decreasing (cumulative path length or time). Kept when the gap is < tol
-    (strict, ov_eval) or <= tol (evo). Equivalent to the nested scans of ov_eval's
-    compute_comparison_indices_length and evo's filter_pairs_by_path(all_pairs=True), in O(N log N).
-    """
-    n = len(d)
-    i = np.arange(n)
-    target = d + delta
-    first = np.minimum(i + skip, n)
-    k = np.maximum(np.searchsorted(d, target, side="left"), first)  # first index with d >= target
-    has_up = k < n
-    up = np.minimum(k, n - 1)
-    lo = k - 1
-    has_lo = lo >= first
-    lo_c = np.maximum(lo, 0)
-    # the earliest index holding the same value as the lower candidate (scans keep the first best)
-    lo_first = np.minimum(np.maximum(np.searchsorted(d, d[lo_c], side="left"), first), n - 1)
-    err_up = np.where(has_up, np.abs(d[up] - target), np.inf)
-    err_lo = np.where(has_lo, np.abs(d[lo_first] - target), np.inf)
-    take_lo = err_lo <= err_up
-    j = np.where(take_lo, lo_first, up)
-    err = np.where(take_lo, err_lo, err_up)
-    ok = err < tol if strict else err <= tol
-    return i[ok], j[ok]
-
-
 def segment_pairs(d: np.ndarray, length: float, tol: float = 0.5):
     """ov_eval's distance-segment pairs: end = pose whose path distance is closest to start + L, within tol."""
     return closest_pairs(d, length, tol, strict=True, skip=0)

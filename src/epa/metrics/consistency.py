@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa import geometry
-from epa.alignment import Similarity
-from epa.trajectory import Trajectory
+from epa.core import geometry
+from epa.core.trajectory import Trajectory
+from epa.steps.align import Similarity
 
 
 def reference_in_estimate_frame(
@@ -107,7 +107,7 @@ def across_runs(runs: dict[str, dict]) -> tuple[dict, dict]:
     pose or None}. NEES(t) only when every run has covariance."""
     if not runs:
         return {"runs": 0}, {}
-    from epa.sync import nearest_from
+    from epa.core.stamps import nearest_from
 
     stamps = {k: np.asarray(r["t"], float) for k, r in runs.items()}
     grid = stamps[min(stamps)]

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa import geometry
-from epa.trajectory import Trajectory
+from epa.core import geometry
+from epa.core.trajectory import Trajectory
 
 LENGTHS_M = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
 STEP = 10

@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa import geometry
-from epa.errors import EpaError
+from epa.core import geometry
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
 from epa.metrics import accuracy
-from epa.trajectory import Trajectory
 
 RELATIONS = (
     "full",

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import io
-from epa.errors import EpaError
+from epa.artifacts import files as io
+from epa.core.errors import EpaError
 
 OKABE_ITO = ["#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000"]
 STYLES = {  # name: (width in, height in, base font pt)

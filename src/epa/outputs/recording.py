@@ -13,7 +13,7 @@ import uuid
 
 import numpy as np
 
-from epa.errors import EpaError
+from epa.core.errors import EpaError
 from epa.outputs.figures import OKABE_ITO
 
 INSTALL_HINT = 'report.rerun needs the rerun extra: pip install "epica[rerun]"'

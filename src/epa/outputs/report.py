@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import io
+from epa.artifacts import files as io
 from epa.outputs import figures, tables
 
 CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")

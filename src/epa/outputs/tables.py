@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import io
-from epa.chain import CaseFolder, case_dir, read_record
-from epa.errors import EpaError
+from epa.artifacts import files as io
+from epa.core.errors import EpaError
 from epa.metrics import statistics
 from epa.metrics.accuracy import segment_key
+from epa.workflow.chain import CaseFolder, case_dir, read_record
 
 log = logging.getLogger("epa")
 

@@ -15,10 +15,10 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from epa import geometry
-from epa.errors import EpaError
+from epa.core import geometry
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
 from epa.readers import bags, text
-from epa.trajectory import Trajectory
 
 log = logging.getLogger("epa")
 KEYS = (

@@ -1,8 +1,8 @@
 """Text trajectory files: TUM, KITTI 3x4, EuRoC/ASL CSV, OpenVINS (TUM + covariance) and any CSV
 whose header names its columns. Parsing, format detection and every reader live here.
 
-Every reader returns a :class:`~epa.trajectory.Trajectory` in seconds with unit quaternions, or
-raises :class:`~epa.errors.EpaError` naming the file, the line and what is wrong. A new format is
+Every reader returns a :class:`~epa.core.trajectory.Trajectory` in seconds with unit quaternions, or
+raises :class:`~epa.core.errors.EpaError` naming the file, the line and what is wrong. A new format is
 one reader function registered in ``READERS``.
 """
 
@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import geometry
-from epa.errors import EpaError
-from epa.trajectory import Trajectory
+from epa.core import geometry
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
 
 log = logging.getLogger("epa")
 
@@ -90,7 +90,7 @@ def _is_number(tok: str) -> bool:
         return False
 
 
-def _read_table(path: Path) -> _Table:
+def read_table(path: Path) -> _Table:
     try:
         if (
             not stat.S_ISREG(path.stat().st_mode) and not path.is_dir()
@@ -590,7 +590,7 @@ def read_trajectory(
         raise EpaError(
             f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}", path=str(path)
         )
-    tab = _read_table(path)
+    tab = read_table(path)
     detected = []  # a detected format is a note, not a warning: it is routine
     if fmt == "auto":
         fmt = detect_format(path, tab)
@@ -601,7 +601,7 @@ def read_trajectory(
     if fmt == "kitti":
         tpath = Path(kitti_times) if kitti_times else kitti_times_for(path)
         if tpath is not None:
-            times = _read_table(tpath).rows[:, 0]
+            times = read_table(tpath).rows[:, 0]
             tab.notes.append(f"KITTI stamps from {tpath.name}")
         else:
             tab.notes.append(f"KITTI stamps at {kitti_rate} Hz (no times file; load.kitti_rate)")

@@ -11,7 +11,7 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from epa.errors import EpaError
+from epa.core.errors import EpaError
 
 log = logging.getLogger("epa")
 SIDE_FILES = (

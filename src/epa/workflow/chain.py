@@ -1,7 +1,7 @@
 """The stage chain, defined once: what each stage reads, computes and writes for one case.
 
 ``epa eval`` runs :func:`run_case` (every stage in one process, values passed in memory); the
-workflow runs one stage for a batch of cases per job (:mod:`epa.grid`), each stage reading the
+workflow runs one stage for a batch of cases per job (:mod:`epa.workflow.jobs`), each stage reading the
 previous stage's artifacts from the case folder. Both call the same :data:`STAGES` entries, so the
 command line and the workflow write the same ``metrics.json``.
 
@@ -18,9 +18,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from epa import alignment, calibration, io, pipeline, readers
-from epa.errors import EpaError
+from epa import readers
+from epa.artifacts import files as io
+from epa.core.errors import EpaError
 from epa.metrics import consistency
+from epa.steps import align as alignment
+from epa.steps import calibrate as calibration
+from epa.workflow import pipeline
 
 log = logging.getLogger("epa")
 

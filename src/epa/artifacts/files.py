@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from epa.errors import EpaError
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
 from epa.readers.text import FORMATS, upper_to_full
-from epa.trajectory import Trajectory
 
 # ----------------------------------------------------------------------------- artifacts
 _UMASK = os.umask(0o022)

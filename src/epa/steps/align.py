@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from epa import geometry
-from epa.errors import EpaError
-from epa.trajectory import Trajectory
+from epa.core import geometry
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
 
 METHODS = ("se3", "sim3", "posyaw", "none")
 

@@ -24,8 +24,9 @@ import zlib
 from contextlib import contextmanager
 from pathlib import Path
 
-from epa import chain, io
-from epa.errors import EpaError
+from epa.artifacts import files as io
+from epa.core.errors import EpaError
+from epa.workflow import chain
 
 log = logging.getLogger("epa")
 
@@ -180,7 +181,7 @@ def _pool(workers: int):
 
             # forkserver: Snakemake's process has threads, which fork() must not copy
             ctx = multiprocessing.get_context("forkserver")
-            ctx.set_forkserver_preload(["epa.grid"])
+            ctx.set_forkserver_preload(["epa.workflow.jobs"])
             _POOL = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
         return _POOL
 

@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from epa import geometry
-from epa.metrics.accuracy import closest_pairs
-from epa.trajectory import Trajectory
+from epa.core import geometry
+from epa.core.stamps import closest_pairs
+from epa.core.trajectory import Trajectory
 
 # What Step 2 concluded; anything but "trusted" means the extrinsic was not applied.
 STEP2_STATUS = (

@@ -1,4 +1,4 @@
-"""The computation of each stage, on in-memory values (no files). :mod:`epa.chain` wires them into
+"""The computation of each stage, on in-memory values (no files). :mod:`epa.workflow.chain` wires them into
 the stage sequence that both ``epa eval`` and the workflow run."""
 
 from __future__ import annotations
@@ -8,11 +8,15 @@ from pathlib import Path
 
 import numpy as np
 
-from epa import alignment, calibration, readers, sync
-from epa.errors import EpaError
+from epa import readers
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
 from epa.metrics import accuracy, efficiency
 from epa.readers import bags, text
-from epa.trajectory import Trajectory
+from epa.readers import timing as timing_files
+from epa.steps import align as alignment
+from epa.steps import calibrate as calibration
+from epa.steps import sync
 
 log = logging.getLogger("epa")
 
@@ -68,7 +72,7 @@ def load(
     try:  # a bad timing file costs the case its efficiency, not its accuracy: the efficiency stage reports it
         timing_path = readers.timing_file(est_path, est_opts)
         if timing_path is not None:
-            t, ms, what = efficiency.read_timing(timing_path)
+            t, ms, what = timing_files.read_timing(timing_path)
             timing = {"t": t, "frame_ms": ms}
             info["timing"] = {"file": timing_path.name, "read_as": what, "frames": int(len(t))}
     except EpaError as exc:

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from epa import geometry
+from epa.core import geometry
 
 
 @dataclass(frozen=True)

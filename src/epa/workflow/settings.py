@@ -6,7 +6,7 @@ import copy
 from functools import lru_cache
 from pathlib import Path
 
-from epa.errors import EpaError
+from epa.core.errors import EpaError
 
 SCHEMA_PATH = Path(__file__).with_name("config.schema.yaml")
 

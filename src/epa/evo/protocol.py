@@ -6,7 +6,7 @@ trajectory at the sparser one's matched stamps), align (Umeyama SE(3), Sim(3), s
 first pose), project to a plane, then the pose relation and the statistics block. Steps 1 and 2 run
 only when asked for (``step1``: the offset found by Step 1 is added to ``t_offset``).
 
-Every formula is the library's: association (:mod:`epa.sync`), Umeyama (:mod:`epa.alignment`), pairs
+Every formula is the library's: association (:mod:`epa.steps.sync`), Umeyama (:mod:`epa.steps.align`), pairs
 (:func:`epa.metrics.accuracy.evo_pairs`), pose relations (:mod:`epa.metrics.relations`).
 """
 
@@ -16,10 +16,11 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from epa import alignment, sync
-from epa.errors import EpaError
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
 from epa.metrics import accuracy, relations
-from epa.trajectory import Trajectory
+from epa.steps import align as alignment
+from epa.steps import sync
 
 DELTA_UNITS = {
     "f": "frames",

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from epa import __version__
-from epa.errors import EpaError
+from epa.core.errors import EpaError
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -107,7 +107,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     c.add_argument("config", nargs="?", help="a config YAML (without it: the defaults)")
 
-    from epa import cli_evo
+    from epa.evo import commands as cli_evo
 
     cli_evo.add_parsers(sub)
     cli_evo.add_res_parser(sub)
@@ -136,7 +136,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _eval_config(args) -> dict:
-    from epa import settings
+    from epa.workflow import settings
 
     cfg: dict = {"truth_dir": ".", "algorithms_dir": "."}
     if args.config:
@@ -210,7 +210,7 @@ def _config_listing(path) -> str:
     changes are marked with their default."""
     import json
 
-    from epa import settings
+    from epa.workflow import settings
 
     defaults = _flat(settings.defaults())
     if path is None:
@@ -233,7 +233,7 @@ EVAL_ALGORITHM = "estimate"  # the name `epa eval` gives its one estimate in `so
 def _eval(args) -> None:
     import time
 
-    from epa import chain
+    from epa.workflow import chain
 
     cfg = _eval_config(args)
     out = chain.CaseFolder(args.out)
@@ -288,8 +288,10 @@ def _eval(args) -> None:
 
 
 def _traj(args) -> None:
-    from epa import io, readers, settings
+    from epa import readers
+    from epa.artifacts import files as io
     from epa.readers import bags
+    from epa.workflow import settings
 
     if bags.is_bag(args.source) and not args.topic and not args.frames:
         infos = bags.topics(args.source)
@@ -328,7 +330,8 @@ def _traj(args) -> None:
 
 
 def _selftest(args) -> None:
-    from epa import pipeline, selftest, settings
+    from epa.workflow import pipeline, settings
+    from epa.workflow import recovery as selftest
 
     cfg = {"truth_dir": ".", "algorithms_dir": "."}
     if args.config:
@@ -369,11 +372,11 @@ def main(argv=None) -> int:
         elif args.command == "traj":
             _traj(args)
         elif args.command in ("ape", "rpe"):
-            from epa import cli_evo
+            from epa.evo import commands as cli_evo
 
             cli_evo.run(args)
         elif args.command == "res":
-            from epa import cli_evo
+            from epa.evo import commands as cli_evo
 
             cli_evo.res(args)
         elif args.command == "config":

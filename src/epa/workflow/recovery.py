@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa import geometry, pipeline, simulate
-from epa.errors import EpaError
-from epa.trajectory import Trajectory
+from epa import simulate
+from epa.core import geometry
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
+from epa.workflow import pipeline
 
 # name: white orientation noise (deg), white position noise (m), random walks (deg, m per sqrt(s))
 NOISE_LEVELS = {

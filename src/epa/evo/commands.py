@@ -13,7 +13,7 @@ import json
 import zipfile
 from pathlib import Path
 
-from epa.errors import EpaError
+from epa.core.errors import EpaError
 
 FORMS = {
     "tum": ("ref_file", "est_file"),
@@ -148,7 +148,8 @@ def read_source(
 ):
     """One side of an evo command: a file of ``form`` or a bag topic, or a TF id ``/tf:parent.child``
     (optionally ``:/tf_static``) looked up at ``tf_rate`` Hz as evo does."""
-    from epa import readers, settings
+    from epa import readers
+    from epa.workflow import settings
 
     opts = readers.options(settings.defaults(), "reference")
     opts["unsorted"] = unsorted
@@ -182,7 +183,7 @@ def read_source(
 
 
 def run(args) -> None:
-    from epa import evo_protocol
+    from epa.evo import protocol as evo_protocol
 
     names = {"pose_relation": "relation"}
     fields = set(evo_protocol.EvoOptions.__dataclass_fields__)
@@ -219,7 +220,7 @@ def _source(args, which: str) -> str:
 def save(result, path, *, ref: str, est: str) -> None:
     """The result as JSON (``epica-result/1``: kind, title, stats, options, info, reference and
     estimate names, the error array), or a .zip holding ``result.json`` and ``errors.csv``."""
-    from epa import io
+    from epa.artifacts import files as io
     from epa.outputs import figures
 
     doc = {
@@ -301,7 +302,7 @@ def res(args) -> None:
     for line in [header, *table]:
         print("  ".join(str(x).ljust(w) for x, w in zip(line, widths)).rstrip())
     if args.save_table:
-        from epa import io
+        from epa.artifacts import files as io
 
         io.write_text(
             args.save_table,

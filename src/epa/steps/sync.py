@@ -10,25 +10,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from epa import geometry
-from epa.errors import EpaError
-from epa.trajectory import Trajectory
+from epa.core import geometry
+from epa.core.errors import EpaError
+from epa.core.stamps import nearest_from
+from epa.core.trajectory import Trajectory
 
 POLICIES = {"ov_eval": 0.02, "evo": 0.01}  # default max_diff (s) of each association policy
 
 
 # ----------------------------------------------------------------------------- association
-def nearest_from(stamps: np.ndarray, x: np.ndarray, lo: np.ndarray) -> np.ndarray:
-    """Index of the stamp nearest to each x among stamps[lo:], ties to the earlier one."""
-    n = len(stamps)
-    k = np.maximum(np.searchsorted(stamps, x, side="left"), lo)
-    upper = np.minimum(k, n - 1)
-    lower = np.maximum(k - 1, lo)
-    d_up = np.where(k < n, np.abs(stamps[upper] - x), np.inf)
-    d_lo = np.where(k - 1 >= lo, np.abs(x - stamps[lower]), np.inf)
-    return np.where(d_lo <= d_up, lower, upper)
-
-
 def associate_ov_eval(t_ref: np.ndarray, t_est: np.ndarray, max_diff: float, offset: float = 0.0):
     """ov_eval's greedy one-to-one association (AlignUtils::perform_association).
 

@@ -1,0 +1,3 @@
+"""The ``epa`` command (``main``)."""
+
+__all__ = ["main"]

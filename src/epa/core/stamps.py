@@ -1,0 +1,47 @@
+"""Index arithmetic on sorted stamps or path distances: nearest stamps and pairs a distance apart.
+Used by Step 1's association, Step 2's motion pairs, the RPE pairs and the timing match."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def nearest_from(stamps: np.ndarray, x: np.ndarray, lo: np.ndarray) -> np.ndarray:
+    """Index of the stamp nearest to each x among stamps[lo:], ties to the earlier one."""
+    n = len(stamps)
+    k = np.maximum(np.searchsorted(stamps, x, side="left"), lo)
+    upper = np.minimum(k, n - 1)
+    lower = np.maximum(k - 1, lo)
+    d_up = np.where(k < n, np.abs(stamps[upper] - x), np.inf)
+    d_lo = np.where(k - 1 >= lo, np.abs(x - stamps[lower]), np.inf)
+    return np.where(d_lo <= d_up, lower, upper)
+
+
+def closest_pairs(
+    d: np.ndarray, delta: float, tol: float, *, strict: bool, skip: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """For every start i, the first j >= i + skip whose d[j] is closest to d[i] + delta.
+
+    ``d`` must be non-decreasing (cumulative path length or time). Kept when the gap is < tol
+    (strict, ov_eval) or <= tol (evo). Equivalent to the nested scans of ov_eval's
+    compute_comparison_indices_length and evo's filter_pairs_by_path(all_pairs=True), in O(N log N).
+    """
+    n = len(d)
+    i = np.arange(n)
+    target = d + delta
+    first = np.minimum(i + skip, n)
+    k = np.maximum(np.searchsorted(d, target, side="left"), first)  # first index with d >= target
+    has_up = k < n
+    up = np.minimum(k, n - 1)
+    lo = k - 1
+    has_lo = lo >= first
+    lo_c = np.maximum(lo, 0)
+    # the earliest index holding the same value as the lower candidate (scans keep the first best)
+    lo_first = np.minimum(np.maximum(np.searchsorted(d, d[lo_c], side="left"), first), n - 1)
+    err_up = np.where(has_up, np.abs(d[up] - target), np.inf)
+    err_lo = np.where(has_lo, np.abs(d[lo_first] - target), np.inf)
+    take_lo = err_lo <= err_up
+    j = np.where(take_lo, lo_first, up)
+    err = np.where(take_lo, err_lo, err_up)
+    ok = err < tol if strict else err <= tol
+    return i[ok], j[ok]
