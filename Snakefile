@@ -7,19 +7,11 @@ min_version("8.0")
 configfile: "config/config.yaml"
 
 
-# validated against config/config.schema.yaml in rules/common.smk (errors name the key and the file)
+# validated against src/epa/workflow/config.schema.yaml in rules/common.smk (errors name the key and the file)
 include: "rules/common.smk"
-include: "rules/load.smk"
-include: "rules/crop.smk"
-include: "rules/sync.smk"
-include: "rules/calibrate.smk"
-include: "rules/align.smk"
-include: "rules/metrics.smk"
-include: "rules/drift.smk"
-include: "rules/consistency.smk"
-include: "rules/efficiency.smk"
+include: "rules/stages.smk"
 include: "rules/tables.smk"
-include: "rules/report.smk"
+include: "rules/figures.smk"
 
 
 rule all:

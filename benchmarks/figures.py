@@ -88,16 +88,16 @@ def run_example(cwd: Path, per_case: bool) -> tuple[float, dict[str, float]]:
 
 
 def in_process(results: Path) -> dict:
+    from epa.artifacts.case import CaseData, CaseFolder
     from epa.outputs import figures, report
-    from epa.workflow import chain
 
     figures._setup("paper")  # import matplotlib outside the timings
     build, draw, size = [], defaultdict(list), []
     with tempfile.TemporaryDirectory() as tmp:
         for case_root in sorted(results.glob("cases/*/*/*")):
-            case = chain.CaseFolder(case_root)
+            case = CaseFolder(case_root)
             t0 = time.perf_counter()
-            bundles = report.case_bundles(report.CaseArtifacts(case))
+            bundles = report.case_bundles(CaseData(case))
             build.append(time.perf_counter() - t0)
             for name, b in bundles.items():
                 t0 = time.perf_counter()

@@ -6,25 +6,27 @@ import os
 import epa
 from epa.core.errors import EpaError
 from snakemake.exceptions import WorkflowError
-from epa.workflow import discovery as epa_cases
-from epa.workflow import chain as epa_chain
-from epa.workflow import jobs as epa_grid
 from epa import readers as epa_readers
-from epa.workflow import settings as epa_settings
 from epa.outputs import report as epa_report, tables as epa_tables
 from epa.readers import bags as epa_bags
+from epa.workflow import chain as epa_chain, discovery as epa_discovery, jobs as epa_jobs
+from epa.workflow import settings as epa_settings
 
 try:  # a mistake in the config or the folders is one line, not a traceback
-    epa_settings.check_user_configs(workflow.overwrite_configfiles, workflow.config_settings.overwrite_config)
+    epa_settings.check_user_configs(
+        workflow.overwrite_configfiles, workflow.config_settings.overwrite_config
+    )
     CONFIG_SOURCE = ", ".join(map(str, workflow.configfiles)) or "config"
     EPA = epa_settings.resolve(config, source=CONFIG_SOURCE)
-    TRUTH, CASES = epa_cases.discover(EPA["truth_dir"], EPA["algorithms_dir"], source=CONFIG_SOURCE)
+    TRUTH, CASES = epa_discovery.discover(
+        EPA["truth_dir"], EPA["algorithms_dir"], source=CONFIG_SOURCE
+    )
 except EpaError as exc:
     raise WorkflowError("epa: error: " + exc.one_line()) from None
 EPA_VERSION = epa.__version__
 RESULTS = EPA["results_dir"]
 CASE_BY_KEY = {c.key: c for c in CASES}
-BATCHES = epa_grid.batches(sorted(CASE_BY_KEY), EPA["grid"]["max_batches"])
+BATCHES = epa_jobs.batches(sorted(CASE_BY_KEY), EPA["grid"]["max_batches"])
 
 
 wildcard_constraints:
@@ -48,8 +50,12 @@ def batch_sources(batch):
     """The user's files a load job reads. One that does not exist (a dangling link) is left out, so
     its case fails with "file not found" instead of stopping the whole grid; so is one whose path has
     braces, which Snakemake cannot take literally (it is still read; an edit to it is not noticed)."""
-    paths = {str(f) for k in BATCHES[batch] for p in (CASE_BY_KEY[k].truth, CASE_BY_KEY[k].estimate)
-             for f in epa_bags.bag_files(p)}  # a ROS 2 bag folder: its files
+    paths = {
+        str(f)
+        for k in BATCHES[batch]
+        for p in (CASE_BY_KEY[k].truth, CASE_BY_KEY[k].estimate)
+        for f in epa_bags.bag_files(p)  # a ROS 2 bag folder: its files
+    }
     paths |= {p for k in BATCHES[batch] if (p := timing_of(CASE_BY_KEY[k]))}
     return sorted(p for p in paths if os.path.exists(p) and "{" not in p and "}" not in p)
 
@@ -57,7 +63,8 @@ def batch_sources(batch):
 def timing_of(c):
     """A run's timing file (an edit re-runs its case); a configured one that is missing is the case's error."""
     try:
-        path = epa_readers.timing_file(c.estimate, epa_readers.options(EPA, "estimate", algorithm=c.algorithm))
+        options = epa_readers.options(EPA, "estimate", algorithm=c.algorithm)
+        path = epa_readers.timing_file(c.estimate, options)
     except EpaError:
         return None
     return None if path is None else str(path)
@@ -80,7 +87,19 @@ def stage_params(stage):
         cases = lambda wc: [load_case(CASE_BY_KEY[k]) for k in BATCHES[wc.batch]]
     else:
         cases = lambda wc: [{"key": k} for k in BATCHES[wc.batch]]
-    return {"cases": cases, "settings": epa_chain.settings_for(stage, EPA), "version": EPA_VERSION}
+    return {
+        "cases": cases,
+        "settings": epa_chain.settings_for(stage, EPA),
+        "version": EPA_VERSION,
+    }
+
+
+def stage_input(stage):
+    """A stage job's input: the user's files for load, the previous stage's manifest for the others."""
+    before = epa_chain.previous(stage)
+    if before is None:
+        return {"sources": lambda wc: batch_sources(wc.batch)}
+    return {"upstream": manifest(before)}
 
 
 # A stage job's scheduling data: one core; memory and run time grow with the batch.
@@ -98,27 +117,9 @@ def workers():
         return 1
 
 
-def run_stage(stage, params, output, log, upstream=None):
-    epa_grid.run_job(stage, params.cases, RESULTS, params.settings, output.manifest, upstream, log[0],
-                     workers=workers())
-
-
-def make_grid_figures(params, log):
-    written = epa_grid.call(workers(), epa_report.write_grid_figures, RESULTS, params.segments)
-    with open(log[0], "w") as fh:
-        fh.write("\n".join(map(str, written)) + "\n")
-
-
 def idle_truths():
     """mode ov_eval: the references no case uses (ov_eval lists every reference of the folder)."""
     if EPA["mode"] != "ov_eval":
         return {}
     used = {c.dataset for c in CASES}
     return {ds: str(path) for ds, path in sorted(TRUTH.items()) if ds not in used}
-
-
-def make_tables(params, log):
-    failed = epa_grid.call(workers(), epa_tables.make, params.cases, RESULTS, params.settings, params.idle_truths)
-    lines = [f"{len(params.cases)} cases, {len(failed)} without a result"] + [f"{k}: {r}" for k, r in failed]
-    with open(log[0], "w") as fh:
-        fh.write("\n".join(lines) + "\n")

@@ -1,21 +1,41 @@
-# error_comparison.txt, one .tex per LaTeX table, summary.csv: every case, failed ones marked.
+# error_comparison.txt, one .tex per LaTeX table, summary.csv, comparison, results/consistency/:
+# every case, failed ones marked (scripts/tables.py, which also runs on its own).
 rule tables:
     input:
         expand(manifest("efficiency"), batch=BATCHES),
         idle_truths=lambda wc: list(idle_truths().values()),
     output:
-        text=report(f"{RESULTS}/error_comparison.txt", caption="../docs/report_caption.rst", category="Tables"),
-        summary=report(f"{RESULTS}/summary.csv", caption="../docs/report_caption.rst", category="Tables"),
+        text=report(
+            f"{RESULTS}/error_comparison.txt",
+            caption="../docs/report_caption.rst",
+            category="Tables",
+        ),
+        summary=report(
+            f"{RESULTS}/summary.csv",
+            caption="../docs/report_caption.rst",
+            category="Tables",
+        ),
         tex=[f"{RESULTS}/tables/{name}.tex" for name in epa_tables.table_names(EPA)],
         across_runs=f"{RESULTS}/consistency/summary.csv",
-        comparison=report(f"{RESULTS}/comparison.txt", caption="../docs/report_caption.rst", category="Tables"),
+        comparison=report(
+            f"{RESULTS}/comparison.txt",
+            caption="../docs/report_caption.rst",
+            category="Tables",
+        ),
         comparison_tex=f"{RESULTS}/comparison.tex",
         success_curves=f"{RESULTS}/success_curves.csv",
     params:
         cases=lambda wc: sorted(CASE_BY_KEY),  # a function: braces in a name are not wildcards
         idle_truths=lambda wc: idle_truths(),
-        settings={"tables": EPA["tables"], "metrics": EPA["metrics"], "efficiency": EPA["efficiency"], "mode": EPA["mode"],
-                  "load": EPA["load"], "sources": EPA.get("sources")},
+        results=RESULTS,
+        settings={
+            "tables": EPA["tables"],
+            "metrics": EPA["metrics"],
+            "efficiency": EPA["efficiency"],
+            "mode": EPA["mode"],
+            "load": EPA["load"],
+            "sources": EPA.get("sources"),
+        },
         version=EPA_VERSION,
     log:
         f"{RESULTS}/logs/tables.log",
@@ -25,5 +45,5 @@ rule tables:
     resources:
         mem_mb=lambda wc: 1000 + len(CASE_BY_KEY) // 10,
         runtime=lambda wc: 2 + len(CASE_BY_KEY) // 2000,
-    run:
-        make_tables(params, log)
+    script:
+        "../scripts/tables.py"

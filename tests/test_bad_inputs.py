@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 
 from epa.artifacts import files as io
+from epa.artifacts.case import failure_of
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.readers import text
 from epa.steps import align as alignment
-from epa.workflow import chain, pipeline, settings
+from epa.workflow import chain, settings
 from epa.workflow import discovery as cases
+from epa.workflow.stages import load as load_stage
 
 POSES = "1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0 1\n3.0 2 1 0 0 0 0 1\n"
 
@@ -74,7 +76,7 @@ def test_a_static_reference_fails_the_case_instead_of_nan_success(tmp_path):
     with pytest.raises(EpaError, match="the reference does not move"):
         chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "out", cfg)
     # the alignment meets it first: with no motion its rotation is undetermined
-    assert chain.failure_of(tmp_path / "out/05_align/transform.json").startswith(
+    assert failure_of(tmp_path / "out/05_align/transform.json").startswith(
         "align: the reference does not move"
     )
 
@@ -163,5 +165,5 @@ def test_every_inference_is_a_note_in_load_json(tmp_path):
         "stamps read as nanoseconds (above 1e12, so not seconds)",
         "0 backward and 1 repeated timestamps: sorted, kept the first of each repeat",
     ]
-    _, _, info, _ = pipeline.load(tmp_path / "est.txt", tmp_path / "est.txt", cfg)
+    _, _, info, _ = load_stage.compute(tmp_path / "est.txt", tmp_path / "est.txt", cfg)
     assert info["est_notes"] == notes and info["ref_notes"] == notes

@@ -14,6 +14,7 @@ import bag_fixture
 import catalogue
 import pytest
 
+from epa.artifacts.case import Case, CaseFolder
 from epa.cli import main as cli
 from epa.core.errors import EpaError
 from epa.outputs import tables
@@ -234,8 +235,8 @@ def run_grid(truth: Path, algs: Path, results: Path) -> dict[str, str]:
     batch = [{"key": c.key, "truth": str(c.truth), "estimate": str(c.estimate)} for c in found]
     upstream = None
     for st in chain.STAGES:
-        manifest = results / "batches" / "all" / f"{st.name}.json"
-        grid.run_job(st.name, batch, results, cfg, manifest, upstream)
+        manifest = results / "batches" / "all" / f"{st.NAME}.json"
+        grid.run_job(st.NAME, batch, results, cfg, manifest, upstream)
         upstream = manifest
     tables.make([c.key for c in found], results, cfg)
     with open(results / "summary.csv", encoding="utf-8") as fh:
@@ -306,8 +307,9 @@ def test_snakemake(tmp_path, b):
 def test_case_names_cannot_leave_the_results_folder(tmp_path):
     for key in ("a/../..", "a/b/..", "../b/c", "a/b", "a/b/c/d", "a/./c"):
         with pytest.raises(EpaError, match="plain names"):
-            chain.case_dir(tmp_path, key)
-    assert chain.case_dir(tmp_path, "a b/ü&%/x..y") == tmp_path / "cases" / "a b/ü&%/x..y"
+            Case.from_key(key)
+    case = Case.from_key("a b/ü&%/x..y")
+    assert CaseFolder.of(tmp_path, case).root == tmp_path / "cases" / "a b/ü&%/x..y"
 
 
 def test_the_catalogue_page_is_current():

@@ -9,6 +9,7 @@ from conftest import run_stages
 from test_steps_sim import case as sim_case
 
 from epa.artifacts import files as io
+from epa.artifacts.case import failure_of
 from epa.core.errors import EpaError
 from epa.outputs import tables
 from epa.workflow import chain, settings
@@ -38,7 +39,7 @@ def test_untrusted_step2_drops_the_step1_offset_and_reassociates(offset_case, tm
     # an impossible residual bound: Step 2 is not trusted, so the case is evaluated the ov_eval way,
     # which means no offset either (the configured sync.offset, 0), not the Step 1 one
     cfg = resolved(calibrate={"max_trans_residual_m": 1e-6})
-    m = chain.run_case(*offset_case, tmp_path / "out", cfg, write_tables=True)["metrics"]
+    m = chain.run_case(*offset_case, tmp_path / "out", cfg, write_arrays=True)["metrics"]
     assert m["eval_source"] == "ov_eval" and m["calibrate"]["reason"].startswith(
         "Step 2 not trusted"
     )
@@ -103,14 +104,12 @@ def run_grid(tmp_path, cases, cfg):
 def test_a_bug_in_one_case_is_recorded_and_the_others_finish(tmp_path, three_cases, monkeypatch):
     real = chain.BY_NAME["align"].run
 
-    def buggy(case, *args):
-        if "/bug/" in str(case.root):
+    def buggy(data, *args):
+        if "/bug/" in str(data.folder.root):
             raise KeyError("injected")
-        return real(case, *args)
+        return real(data, *args)
 
-    monkeypatch.setitem(
-        chain.BY_NAME, "align", chain.Stage(**{**chain.BY_NAME["align"].__dict__, "run": buggy})
-    )
+    monkeypatch.setattr(chain.BY_NAME["align"], "run", buggy)
     out, manifests = run_grid(tmp_path, three_cases, resolved())
     status = grid.read_manifest(manifests["drift"])
     assert status["good/seq/run1"] == {"status": "ok"}
@@ -155,7 +154,7 @@ def test_epa_eval_failure_writes_markers_not_results(tmp_path):
     bad.write_text("1 2 3\n")
     with pytest.raises(EpaError):
         chain.run_case(bad, bad, tmp_path / "out", resolved())
-    assert chain.failure_of(tmp_path / "out/01_load/load.json").startswith("load: ")
+    assert failure_of(tmp_path / "out/01_load/load.json").startswith("load: ")
     assert not (tmp_path / "out/06_metrics").exists()
 
 

@@ -56,7 +56,7 @@ def run(tmp_path, ref, est, name):
         tmp_path / f"{name}_est.txt",
         tmp_path / name,
         cfg,
-        write_tables=True,
+        write_arrays=True,
     )
     calib = io.read_json(tmp_path / name / "04_calibrate/calibrate.json")
     assert calib["plan"]["apply_extrinsic"], "Step 2 must have found and applied the extrinsic"

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from epa.metrics import drift
-from epa.workflow import chain, pipeline, settings
+from epa.workflow import chain, settings
+from epa.workflow.stages import drift as drift_stage
 
 CFG = settings.defaults()
 
@@ -25,7 +26,7 @@ def run(t, ape, dist=None, cfg=CFG):
             "trans_m": np.abs(ape[j] - ape[i]),
         },
     }
-    return pipeline.drift_stage(tables, cfg)
+    return drift_stage.compute(tables, cfg)
 
 
 T = np.arange(0, 100, 0.05)

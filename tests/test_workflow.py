@@ -271,11 +271,11 @@ def test_a_bug_in_one_case_is_only_that_cases_failure(grid):
         + """
 import epa.workflow.chain as _chain
 _sync = _chain.BY_NAME["sync"].run
-def _buggy(case, *args):
-    if "vio_body/handheld_office/run2" in str(case.root):
+def _buggy(data, *args):
+    if "vio_body/handheld_office/run2" in str(data.folder.root):
         raise ZeroDivisionError("injected bug")
-    return _sync(case, *args)
-_chain.BY_NAME["sync"] = _chain.BY_NAME["sync"].__class__(**{**_chain.BY_NAME["sync"].__dict__, "run": _buggy})
+    return _sync(data, *args)
+_chain.BY_NAME["sync"].run = _buggy
 """
     )
     (grid / "bug.yaml").write_text(

@@ -233,11 +233,12 @@ EVAL_ALGORITHM = "estimate"  # the name `epa eval` gives its one estimate in `so
 def _eval(args) -> None:
     import time
 
+    from epa.artifacts.case import CaseFolder
     from epa.workflow import chain
 
     cfg = _eval_config(args)
-    out = chain.CaseFolder(args.out)
-    chain.clear_tables(out)
+    out = CaseFolder(args.out)
+    chain.clear_arrays(out)
     clock = {"stage": None, "t": time.perf_counter()}
     size_mb = sum(_input_bytes(p) for p in (args.ref, args.est)) / 1e6
     progress = args.verbose or size_mb >= LARGE_INPUT_MB
@@ -262,7 +263,7 @@ def _eval(args) -> None:
         args.est,
         args.out,
         cfg,
-        write_tables=args.artifacts or args.report or args.rerun,
+        write_arrays=args.artifacts or args.report or args.rerun,
         on_stage=on_stage,
         ref_source=readers.options(cfg, "reference"),
         est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM),
@@ -330,8 +331,9 @@ def _traj(args) -> None:
 
 
 def _selftest(args) -> None:
-    from epa.workflow import pipeline, settings
     from epa.workflow import recovery as selftest
+    from epa.workflow import settings
+    from epa.workflow.stages import load
 
     cfg = {"truth_dir": ".", "algorithms_dir": "."}
     if args.config:
@@ -339,7 +341,7 @@ def _selftest(args) -> None:
     if args.scale:
         cfg.setdefault("calibrate", {})["scale"] = True
     cfg = settings.resolve(cfg, source=args.config or "command line")
-    ref, _ = pipeline.load_reference(args.reference, cfg)
+    ref, _ = load.load_reference(args.reference, cfg)
     if args.trials < 1 or args.rate <= 0:
         raise EpaError("--trials must be at least 1 and --rate positive")
     print(

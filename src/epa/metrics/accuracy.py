@@ -134,15 +134,6 @@ def ape(
     return np.linalg.norm(est.p - ref.p, axis=1), np.degrees(geometry.quat_angle(d))
 
 
-def ate_2d(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
-    """ov_eval's ATE 2D (ResultTrajectory::calculate_ate_2d) per pose: the yaw error in degrees,
-    signed, as the z component of the rotation vector of R_est R_ref^T (the error in the world frame:
-    ov_eval's JPL quat_2_Rot(q_est)^T quat_2_Rot(q_gt) is this world-from-body product), and the
-    planar position error |xy_ref - xy_est| in metres."""
-    yaw = np.degrees(geometry.quat_log(geometry.quat_mul(est.q, geometry.quat_conj(ref.q)))[:, 2])
-    return yaw, np.linalg.norm(ref.p[:, :2] - est.p[:, :2], axis=1)
-
-
 def evaluate(
     ref: Trajectory,
     est: Trajectory,
@@ -165,19 +156,12 @@ def evaluate(
         "duration_s": float(ref.t[-1] - ref.t[0]),
         "ate": {"trans_m": stats(trans), "rot_deg": stats(rot)},
     }
-    yaw, trans_xy = ate_2d(ref, est)
-    summary["ate_2d"] = {
-        "yaw_deg": stats(yaw),
-        "trans_xy_m": stats(trans_xy),
-    }  # yaw signed: its rmse is ov_eval's
     tables = {
         "ape": {
             "t": ref.t,
             "dist_m": dist,
             "trans_m": trans,
             "rot_deg": rot,
-            "yaw_deg": yaw,
-            "trans_xy_m": trans_xy,
         }
     }
 

@@ -16,7 +16,22 @@ import numpy as np
 
 from epa.core import geometry
 from epa.core.trajectory import Trajectory
+from epa.metrics.spec import Table
 from epa.steps.align import Similarity
+
+KEY = "consistency"
+STAGE = "consistency"  # its own stage: records available false without covariance
+ARRAYS = ("nees.csv",)
+SUMMARY_COLUMNS = ("nees_rot_mean", "nees_pos_mean", "outside_3sigma_pct")
+
+
+def enabled(cfg: dict) -> bool:
+    return True
+
+
+def summary(record: dict) -> dict:
+    """Empty without covariance."""
+    return {k: record[k] for k in SUMMARY_COLUMNS} if record.get("available") else {}
 
 
 def reference_in_estimate_frame(
@@ -150,3 +165,14 @@ def across_runs(runs: dict[str, dict]) -> tuple[dict, dict]:
         else None,
     }
     return summary, table
+
+
+TABLES = (
+    Table(
+        "nees",
+        "NEES LATEX TABLE (ORI / POS, 3 = CONSISTENT)",
+        per_run=lambda r: (r["nees_rot_mean"], r["nees_pos_mean"]),
+        has=lambda r: bool(r.get("available")),
+        missing="no covariance",
+    ),
+)

@@ -21,6 +21,34 @@ from __future__ import annotations
 import numpy as np
 
 from epa.core.stamps import nearest_from
+from epa.metrics.spec import Table
+
+KEY = "efficiency"
+STAGE = "efficiency"  # its own stage: records available false without timing
+ARRAYS = ("frames.csv",)
+SUMMARY_COLUMNS = ("ea_drift", "frame_time_mean_ms")
+
+
+def enabled(cfg: dict) -> bool:
+    return True
+
+
+def summary(record: dict) -> dict:
+    """Empty without timing."""
+    return {k: record[k] for k in SUMMARY_COLUMNS} if record.get("available") else {}
+
+
+def pooled_runtime(records: list[dict]) -> tuple[float, float, float, float]:
+    """Frame times pooled over runs (each run's statistics, frame-weighted): mean, p95, max (ms) and
+    the share of frames over the sensor period (%)."""
+    frames = np.array([e["frames"] for e in records], float)
+    w = frames / frames.sum()
+    return (
+        float(np.sum(w * [e["frame_time_mean_ms"] for e in records])),
+        float(np.sum(w * [e["frame_time_p95_ms"] for e in records])),
+        float(max(e["frame_time_max_ms"] for e in records)),
+        float(np.sum(w * [e["frames_over_period_pct"] for e in records])),
+    )
 
 
 def match_nearest(t_pose: np.ndarray, t_timing: np.ndarray, max_diff: float) -> np.ndarray:
@@ -115,3 +143,23 @@ def evaluate(
         "err_m": err_m,
     }
     return summary, table
+
+
+TABLES = (
+    Table(
+        "ea_drift",
+        "EA-DRIFT LATEX TABLE (% PER-FRAME NORMALISED, SEE DOCS)",
+        pair=False,
+        per_run=lambda r: (r["ea_drift"],),
+        has=lambda r: bool(r.get("available")),
+        missing="no timing",
+    ),
+    Table(
+        "runtime",
+        "RUNTIME LATEX TABLE (FRAME TIME MS: MEAN, P95, MAX; % FRAMES OVER SENSOR PERIOD)",
+        pair=False,
+        has=lambda r: bool(r.get("available")),
+        per_algorithm=pooled_runtime,
+        header=("mean", "p95", "max", "over period %"),
+    ),
+)

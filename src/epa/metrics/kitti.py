@@ -18,6 +18,13 @@ import numpy as np
 
 from epa.core import geometry
 from epa.core.trajectory import Trajectory
+from epa.metrics.spec import Table
+
+KEY = "kitti"  # metrics.kitti: off by default
+STAGE = "metrics"
+AFTER = None
+ARRAYS = ("kitti_segments.csv",)
+SUMMARY_COLUMNS = ("kitti_trans_pct", "kitti_rot_deg_per_100m")
 
 LENGTHS_M = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
 STEP = 10
@@ -74,3 +81,37 @@ def odometry(ref: Trajectory, est: Trajectory) -> tuple[dict, dict]:
         },
     }
     return summary, table
+
+
+def enabled(cfg: dict) -> bool:
+    return bool(cfg["metrics"]["kitti"])
+
+
+def compute(ref: Trajectory, est: Trajectory, cfg: dict) -> tuple[dict, dict, list[str]]:
+    record, table = odometry(ref, est)
+    notes = []
+    if not record["n_segments"]:
+        notes.append(
+            f"no 100 m KITTI segment fits in the {ref.length():.3f} m matched path: the KITTI"
+            " metric is empty"
+        )
+    return record, {"kitti_segments": table}, notes
+
+
+def summary(record: dict) -> dict:
+    """Empty unless metrics.kitti is on."""
+    return {
+        "kitti_trans_pct": record.get("trans_pct"),
+        "kitti_rot_deg_per_100m": record.get("rot_deg_per_100m"),
+    }
+
+
+TABLES = (
+    Table(
+        "kitti",
+        "KITTI ODOMETRY LATEX TABLE (ROT DEG/100M / TRANS %, 100-800 M SEGMENTS)",
+        per_run=lambda r: (r["rot_deg_per_100m"], r["trans_pct"]),
+        has=lambda r: bool(r.get("n_segments")),
+        in_text=False,
+    ),
+)

@@ -27,13 +27,14 @@ def _rgb(hex_colour: str) -> list[int]:
     return [int(hex_colour[k : k + 2], 16) for k in (1, 3, 5)]
 
 
-def write_rrd(arts, name: str, out) -> None:
-    """Write ``out`` (.rrd) from a case's artifacts (``report.CaseArtifacts``); atomic like every artifact."""
+def write_rrd(data, name: str, out) -> None:
+    """Write ``out`` (.rrd) from a case's artifacts (:class:`epa.artifacts.case.CaseData`); atomic
+    like every artifact."""
     if not available():
         raise EpaError(INSTALL_HINT)
     import rerun as rr
 
-    ref, aligned, ape = arts.ref, arts.aligned, arts.ape
+    ref, aligned, ape = data.matched[0], data.aligned, data.ape
     # a recording id derived from the case name: the same case gives the same id on a re-run
     rec = rr.RecordingStream(
         "epica", recording_id=uuid.uuid5(uuid.NAMESPACE_URL, f"epica:{name}"), send_properties=False
@@ -42,7 +43,7 @@ def write_rrd(arts, name: str, out) -> None:
     rec.save(str(tmp))
     rec.log(
         "world/reference",
-        rr.LineStrips3D([arts.ref_cropped.p], colors=[[150, 150, 150]], radii=[0.02]),
+        rr.LineStrips3D([data.cropped[0].p], colors=[[150, 150, 150]], radii=[0.02]),
         static=True,
     )
     rec.log(
@@ -62,8 +63,8 @@ def write_rrd(arts, name: str, out) -> None:
         columns=rr.Points3D.columns(positions=ref.p).partition(np.ones(len(ref), int)),
     )
     series = {"errors/ape_m": ape["trans_m"], "errors/ape_rot_deg": ape["rot_deg"]}
-    n = arts.nees
-    if n is not None:
+    n = data.nees
+    if n:
         t_nees = rr.TimeColumn("time", duration=n["t"] - ref.t[0])
         for key in ("nees_pos", "nees_rot"):
             rec.send_columns(

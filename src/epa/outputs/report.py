@@ -13,12 +13,12 @@ import hashlib
 import io as _io
 import json
 import zipfile
-from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
 from epa.artifacts import files as io
+from epa.artifacts.case import CaseData, CaseFolder
 from epa.outputs import figures, tables
 
 CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")
@@ -26,55 +26,11 @@ GRID_FIGURES = ("ate", "success_rate", "success_curve", "drift_rate", "rmse_time
 
 
 # ----------------------------------------------------------------------------- case artifacts
-class CaseArtifacts:
-    """The artifacts a report reads, each read once and only when asked for: the figures, the Rerun
-    recording and the documents share them."""
-
-    def __init__(self, case):
-        self.case = case  # a chain.CaseFolder
-
-    @cached_property
-    def ref_cropped(self):
-        return io.read_tum_file(self.case.path("crop", "ref.tum"))
-
-    @cached_property
-    def pairs(self):
-        return io.read_pair_indices(self.case.path("calibrate", "pairs.csv"))
-
-    @cached_property
-    def ref(self):
-        """The reference at the matched poses (row k: match k, like ``aligned``)."""
-        return self.ref_cropped.select(self.pairs[0])
-
-    @cached_property
-    def est(self):
-        """The estimate as read, at the matched poses."""
-        return io.read_tum_file(self.case.path("crop", "est.tum")).select(self.pairs[1])
-
-    @cached_property
-    def aligned(self):
-        return io.read_tum_file(self.case.path("align", "aligned.tum"))
-
-    @cached_property
-    def ape(self):
-        return io.read_csv(self.case.path("metrics", "ape.csv"))
-
-    @cached_property
-    def fail(self):
-        return io.read_csv(self.case.path("drift", "fail_segments.csv"))
-
-    @cached_property
-    def nees(self):
-        """08_consistency/nees.csv, or None without covariance."""
-        path = self.case.path("consistency", "nees.csv")
-        return io.read_csv(path) if path.exists() else None
-
-
 # ----------------------------------------------------------------------------- case bundles
-def case_bundles(arts: CaseArtifacts) -> dict[str, dict]:
+def case_bundles(data: CaseData) -> dict[str, dict]:
     """Every per-case figure's bundle, from a case's artifacts."""
-    p = arts.case.path
-    ref, aligned, ape, fail = arts.ref, arts.aligned, arts.ape, arts.fail
+    p = data.folder.path
+    ref, aligned, ape, fail = data.matched[0], data.aligned, data.ape, data.fail_segments
     drift = io.read_json(p("drift", "drift.json"))
     sync = io.read_json(p("sync", "sync.json"))
     t0 = float(ref.t[0])
@@ -116,7 +72,7 @@ def case_bundles(arts: CaseArtifacts) -> dict[str, dict]:
             "reason": step1.get("reason", ""),
         },
     )
-    est_m = arts.est
+    est_m = data.matched[1]  # the estimate as read, at the matched poses
     # "before": the estimate as read, put on the reference by its first pose only
     r0 = ref.r[0] @ est_m.r[0].T
     before = (est_m.p - est_m.p[0]) @ r0.T + ref.p[0]
@@ -125,8 +81,8 @@ def case_bundles(arts: CaseArtifacts) -> dict[str, dict]:
         "Before and after Steps 1-3 (top view)",
         {"ref": ref.p[k], "before": before[k], "after": aligned.p[k]},
     )
-    n = arts.nees
-    if n is not None:
+    n = data.nees
+    if n:
         kk = figures.thin(len(n["t"]))  # noqa: the bound is drawn as a band, 1000 samples suffice
         out["sigma3"] = figures.bundle(
             "sigma3",
@@ -140,7 +96,7 @@ def case_bundles(arts: CaseArtifacts) -> dict[str, dict]:
 
 
 # ----------------------------------------------------------------------------- documents
-def case_document(case) -> dict:
+def case_document(case: CaseFolder) -> dict:
     """Every stage's record of a case, as one document."""
     doc = {}
     for stage, name in (
@@ -358,28 +314,31 @@ def case_zip(case_root: Path, out: Path) -> None:
     tmp.replace(out)
 
 
-def write_case_report(case, name: str, cfg: dict) -> dict:
-    """The report stage: documents, figures (unless ``report.figures`` is off) and the zip."""
+def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
+    """The report stage: documents, figures (unless ``report.figures`` is off) and the zip, from the
+    case's artifacts (``data`` reads them)."""
     c = cfg["report"]
+    case = data.folder
     folder = case.path("report", "report.json").parent
     doc = case_document(case)
     io.write_json(folder / "metrics.json", doc)
     io.write_text(folder / "metrics_summary.csv", summary_csv(doc))
-    arts = CaseArtifacts(case)
     drawn = []
     if c["figures"]:
-        for fig_name, b in case_bundles(arts).items():
+        for fig_name, b in case_bundles(data).items():
             figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b)
             figures.render(
                 b, folder / "figures" / fig_name, formats=("png", "pdf") if c["pdf"] else ("png",)
             )
             drawn.append(fig_name)
     for lang in ("en", "zh"):
-        io.write_text(folder / f"report_{lang}.md", report_md(doc, name, drawn, lang, arts.fail))
+        io.write_text(
+            folder / f"report_{lang}.md", report_md(doc, name, drawn, lang, data.fail_segments)
+        )
     if c["rerun"]:
         from epa.outputs import recording
 
-        recording.write_rrd(arts, name, folder / f"{name.replace('/', '_')}.rrd")
+        recording.write_rrd(data, name, folder / f"{name.replace('/', '_')}.rrd")
     if c["zip"]:  # last: it holds the other report files
         case_zip(case.root, folder / f"{name.replace('/', '_')}.zip")
     return {"figures": drawn, "zip": bool(c["zip"]), "rerun": bool(c["rerun"])}

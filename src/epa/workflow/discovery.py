@@ -8,9 +8,9 @@ stamps), ``<run>_timing.*`` (per-frame timing), and ``.yaml``, ``.yml``, ``.md``
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from pathlib import Path
 
+from epa.artifacts.case import Case
 from epa.core.errors import EpaError
 
 log = logging.getLogger("epa")
@@ -24,19 +24,6 @@ SIDE_FILES = (
     ".md",
     ".json",
 )  # not runs
-
-
-@dataclass(frozen=True)
-class Case:
-    algorithm: str
-    dataset: str
-    run: str
-    estimate: Path
-    truth: Path
-
-    @property
-    def key(self) -> str:
-        return f"{self.algorithm}/{self.dataset}/{self.run}"
 
 
 def _trajectory_files(folder: Path, skipped: list[Path]):
@@ -103,7 +90,7 @@ def discover(
                         path=str(run),
                     )
                 runs[run.stem] = run
-                cases.append(Case(alg.name, ds.name, run.stem, run, truth[ds.name]))
+                cases.append(Case(alg.name, ds.name, run.stem, truth[ds.name], run))
     if skipped:
         shown = ", ".join(str(p) for p in skipped[:5]) + (
             f" and {len(skipped) - 5} more" if len(skipped) > 5 else ""

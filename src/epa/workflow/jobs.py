@@ -25,6 +25,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from epa.artifacts import files as io
+from epa.artifacts.case import Case, CaseData, CaseFolder
 from epa.core.errors import EpaError
 from epa.workflow import chain
 
@@ -118,19 +119,14 @@ def case_log(path):
 def run_cases(
     stage: str, cases: list[dict], results_dir, cfg: dict, upstream: dict[str, str]
 ) -> dict[str, dict]:
-    """Run ``stage`` on each case ({key, truth, estimate}); never raises for a case's failure.
-    ``upstream``: key -> reason for cases whose previous stage failed. Returns key -> status."""
-    st = chain.BY_NAME[stage]
+    """Run ``stage`` on each case ({key, truth, estimate, truth_source, estimate_source}); never
+    raises for a case's failure. ``upstream``: key -> reason for cases whose previous stage failed.
+    Returns key -> status."""
     status: dict[str, dict] = {}
     for c in cases:
         key = c["key"]
-        case = chain.CaseFolder(
-            chain.case_dir(results_dir, key),
-            c.get("truth"),
-            c.get("estimate"),
-            c.get("truth_source"),
-            c.get("estimate_source"),
-        )
+        inputs = ("truth", "estimate", "truth_source", "estimate_source")
+        case = CaseFolder.of(results_dir, Case.from_key(key, **{k: c.get(k) for k in inputs}))
         reason = upstream.get(key)
         with case_log(case.log(stage)):
             if reason is not None:
@@ -139,20 +135,18 @@ def run_cases(
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("always")  # every case logs its own warnings
-                        chain.run_stage(stage, case, cfg)
+                        chain.run_stage(stage, CaseData(case), cfg)
                 except EpaError as exc:
                     reason = f"{stage}: {exc.one_line()}"
                     log.error("case failed: %s", reason)
-                except (
-                    Exception
-                ) as exc:  # a bug: this case's failure, with its traceback, not the grid's
+                except Exception as exc:  # a bug: this case's failure, not the grid's
                     reason = f"internal error: {type(exc).__name__}: {exc}".replace("\n", " ")
                     log.error("%s", traceback.format_exc().rstrip())
                     log.error("case failed: %s", reason)
         if reason is None:
             status[key] = {"status": "ok"}
         else:
-            chain.write_failure(case, st, reason)
+            chain.write_failure(case, stage, reason)
             status[key] = {"status": "failed", "reason": reason}
     return status
 

@@ -14,7 +14,7 @@ from epa import simulate
 from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
-from epa.workflow import pipeline
+from epa.workflow.stages import calibrate, sync
 
 # name: white orientation noise (deg), white position noise (m), random walks (deg, m per sqrt(s))
 NOISE_LEVELS = {
@@ -45,7 +45,7 @@ def trial(ref: Trajectory, cfg: dict, rng: np.random.Generator, level: str, rate
         walk_pos_m=pos_walk,
         margin=0.5,
     )
-    found = pipeline.offset_step(ref, est, cfg)
+    found = sync.offset_step(ref, est, cfg)
     out = {
         "level": level,
         "step1_status": found.status,
@@ -58,11 +58,11 @@ def trial(ref: Trajectory, cfg: dict, rng: np.random.Generator, level: str, rate
     # Step 2 on the offset Step 1 found (or, when it was not trusted, the true one: Step 2 alone)
     offset = found.offset if found.used else truth["offset"]
     try:
-        _, i_est, _ = pipeline.associate(ref, est, cfg["sync"], offset)
+        _, i_est, _ = sync.associate(ref, est, cfg["sync"], offset)
     except EpaError as exc:
         return {**out, "step2_status": "too little motion", "step2_reason": exc.message}
     matched = est.select(i_est)
-    ext = pipeline.extrinsic_step(
+    ext = calibrate.extrinsic_step(
         ref.at(matched.t + offset), matched, cfg, found.std if found.used else 0.0
     )
     out.update(step2_status=ext.status, step2_reason=ext.reason)

@@ -1,24 +1,5 @@
-# Per case, from the artifacts: metrics.json, metrics_summary.csv, report_en.md / report_zh.md,
-# figures/*.png (+ bundles for `epa fig`), <run>.zip: 10_report/. matplotlib is imported only here.
-rule report:
-    input:
-        upstream=manifest("efficiency"),
-    output:
-        manifest=manifest("report"),
-    params:
-        **stage_params("report"),
-    log:
-        batch_log("report"),
-    benchmark:
-        batch_benchmark("report")
-    threads: 1
-    resources:
-        **STAGE_RESOURCES,
-    run:
-        run_stage("report", params, output, log, input.upstream)
-
-
-# The grid's figures, from summary.csv and results/consistency/: vector PDF beside PNG.
+# The grid's figures, from summary.csv and results/consistency/: vector PDF beside PNG
+# (scripts/figures.py, which also runs on its own).
 rule figures:
     input:
         summary=rules.tables.output.summary,
@@ -35,6 +16,7 @@ rule figures:
             for fmt in ("png", "pdf")
         },
     params:
+        results=RESULTS,
         segments=EPA["metrics"]["segments"],
         version=EPA_VERSION,
     log:
@@ -45,5 +27,5 @@ rule figures:
     resources:
         mem_mb=1500,
         runtime=5,
-    run:
-        make_grid_figures(params, log)
+    script:
+        "../scripts/figures.py"

@@ -1,0 +1,34 @@
+# The stage rules, generated once from the stage list (epa.workflow.chain.STAGES): each runs one
+# stage for one batch of cases and declares only its batch manifest (every case's artifacts are
+# under results/cases/). The job body is epa.workflow.jobs.run_job, a plain function.
+for stage_name in epa_chain.NAMES:
+
+    rule:
+        name:
+            stage_name
+        input:
+            **stage_input(stage_name),
+        output:
+            manifest=manifest(stage_name),
+        params:
+            stage=stage_name,
+            **stage_params(stage_name),
+        log:
+            batch_log(stage_name),
+        benchmark:
+            batch_benchmark(stage_name)
+        threads: 1
+        resources:
+            **STAGE_RESOURCES,
+        run:
+            # params.stage, not the loop variable: the loop has moved on when the job runs
+            epa_jobs.run_job(
+                params.stage,
+                params.cases,
+                RESULTS,
+                params.settings,
+                output.manifest,
+                input.get("upstream"),
+                log[0],
+                workers=workers(),
+            )

@@ -1,0 +1,47 @@
+"""The figures rule's body: the grid's figures (PNG and vector PDF, with their plot bundles) from
+summary.csv, success_curves.csv and results/consistency/.
+
+Snakemake runs it for the ``figures`` rule (``script:``). It also runs on its own, on a results folder
+whose tables are written:
+
+    python scripts/figures.py [--configfile config/config.yaml]
+"""
+
+import argparse
+import sys
+
+from epa.outputs import report
+
+
+def write(results_dir, segments, log_path) -> list:
+    written = report.write_grid_figures(results_dir, segments)
+    with open(log_path, "w", encoding="utf-8") as fh:
+        fh.write("\n".join(map(str, written)) + "\n")
+    return written
+
+
+def main(argv=None) -> int:
+    """Without Snakemake: the results folder and segment lengths from the grid's config."""
+    from epa.core.errors import EpaError
+    from epa.workflow import settings
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--configfile", default="config/config.yaml")
+    args = parser.parse_args(argv)
+    try:
+        cfg = settings.resolve(settings.load_yaml(args.configfile), source=args.configfile)
+    except EpaError as exc:
+        print(f"epa: error: {exc.one_line()}", file=sys.stderr)
+        return 2
+    results = cfg["results_dir"]
+    written = write(results, cfg["metrics"]["segments"], f"{results}/logs/figures.log")
+    print(f"{len(written)} files in {results}/figures")
+    return 0
+
+
+if __name__ == "__main__":
+    if "snakemake" in globals():  # run by the figures rule
+        sm = globals()["snakemake"]
+        write(sm.params.results, sm.params.segments, sm.log[0])
+    else:
+        sys.exit(main())

@@ -1,0 +1,62 @@
+"""The tables rule's body: read every case's artifacts and write error_comparison.txt, the LaTeX
+tables, summary.csv, comparison.txt/.tex and results/consistency/.
+
+Snakemake runs it for the ``tables`` rule (``script:``). It also runs on its own, on a results folder
+a grid has filled, with the grid's config:
+
+    python scripts/tables.py [--configfile config/config.yaml]
+"""
+
+import argparse
+import sys
+
+from epa.core.errors import EpaError
+from epa.outputs import tables
+
+
+def write(cases, results_dir, settings, idle_truths, log_path) -> list[tuple[str, str]]:
+    failed = tables.make(cases, results_dir, settings, idle_truths)
+    lines = [f"{len(cases)} cases, {len(failed)} without a result"]
+    lines += [f"{key}: {reason}" for key, reason in failed]
+    with open(log_path, "w", encoding="utf-8") as fh:
+        fh.write("\n".join(lines) + "\n")
+    return failed
+
+
+def main(argv=None) -> int:
+    """Without Snakemake: resolve the config and discover the cases as the Snakefile does."""
+    from epa.workflow import discovery, settings
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--configfile", default="config/config.yaml")
+    args = parser.parse_args(argv)
+    try:
+        cfg = settings.resolve(settings.load_yaml(args.configfile), source=args.configfile)
+        truth, cases = discovery.discover(
+            cfg["truth_dir"], cfg["algorithms_dir"], source=args.configfile
+        )
+        used = {c.dataset for c in cases}
+        idle = (
+            {}
+            if cfg["mode"] != "ov_eval"
+            else {d: str(p) for d, p in sorted(truth.items()) if d not in used}
+        )
+        results = cfg["results_dir"]
+        failed = write(
+            sorted(c.key for c in cases), results, cfg, idle, f"{results}/logs/tables.log"
+        )
+    except EpaError as exc:
+        print(f"epa: error: {exc.one_line()}", file=sys.stderr)
+        return 2
+    print(f"{len(cases)} cases, {len(failed)} without a result: tables in {results}")
+    return 0
+
+
+if __name__ == "__main__":
+    if "snakemake" in globals():  # run by the tables rule
+        sm = globals()["snakemake"]
+        write(
+            sm.params.cases, sm.params.results, sm.params.settings, sm.params.idle_truths, sm.log[0]
+        )
+    else:
+        sys.exit(main())

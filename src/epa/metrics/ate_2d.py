@@ -1,0 +1,72 @@
+"""ATE 2D, ov_eval's ``ResultTrajectory::calculate_ate_2d``: the world-frame yaw error and the planar
+position error of each aligned matched pose."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from epa.core import geometry
+from epa.core.trajectory import Trajectory
+from epa.metrics.accuracy import stats
+from epa.metrics.spec import Table
+
+KEY = "ate_2d"
+STAGE = "metrics"
+AFTER = "ate"  # its record follows the ATE's in metrics.json
+ARRAYS = ()  # its per-pose columns (yaw_deg, trans_xy_m) extend ape.csv
+SUMMARY_COLUMNS = ()
+
+
+def enabled(cfg: dict) -> bool:
+    return True
+
+
+def errors(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """The yaw error in degrees, signed, as the z component of the rotation vector of
+    R_est R_ref^T (the error in the world frame: ov_eval's JPL quat_2_Rot(q_est)^T quat_2_Rot(q_gt)
+    is this world-from-body product), and the planar position error |xy_ref - xy_est| in metres.
+
+    Parameters
+    ----------
+    ref, est : Trajectory
+        Matched pose for pose, the estimate aligned.
+
+    Returns
+    -------
+    yaw_deg, trans_xy_m : ndarray
+    """
+    yaw = np.degrees(geometry.quat_log(geometry.quat_mul(est.q, geometry.quat_conj(ref.q)))[:, 2])
+    return yaw, np.linalg.norm(ref.p[:, :2] - est.p[:, :2], axis=1)
+
+
+def compute(ref: Trajectory, est: Trajectory, cfg: dict) -> tuple[dict, dict, list[str]]:
+    yaw, trans_xy = errors(ref, est)
+    record = {
+        "yaw_deg": stats(yaw),
+        "trans_xy_m": stats(trans_xy),
+    }  # yaw signed: its rmse is ov_eval's
+    return record, {"ape": {"yaw_deg": yaw, "trans_xy_m": trans_xy}}, []
+
+
+def _rmse(record: dict, key: str) -> float:
+    value = (record.get(key) or {}).get("rmse")
+    return np.nan if value is None else float(value)
+
+
+def per_run(record: dict) -> tuple[float, float]:
+    """One run's ATE 2D RMSE: yaw (deg), planar position (m)."""
+    return _rmse(record, "yaw_deg"), _rmse(record, "trans_xy_m")
+
+
+def summary(record: dict) -> dict:
+    return {}
+
+
+TABLES = (
+    Table(
+        "ate_2d",
+        "FULL TRAJECTORY ATE 2D LATEX TABLE (YAW DEG / XY M)",
+        per_run=per_run,
+        after="ate",
+    ),
+)

@@ -1,0 +1,160 @@
+"""Table cells and how each is aggregated over runs.
+
+An ATE cell is the mean over runs of each run's RMSE; an RPE / drift-rate / 1 s RPE cell is the mean
+of the errors pooled over runs (and, for the per-algorithm segment tables, over datasets); a
+success-rate cell is the mean over runs; the Average column is the mean over the datasets that have a
+number; a cell with no successful run prints ``- / -``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from epa.metrics import statistics
+
+
+def _num(x) -> float:
+    return np.nan if x is None else float(x)
+
+
+def _nanmean(values) -> float:
+    v = np.array([_num(x) for x in values], float)
+    v = v[~np.isnan(v)]
+    return float(v.mean()) if v.size else np.nan
+
+
+class _Cell:
+    """A table cell: missing (None: no successful run), or numbers that may be nan.
+    ``pair`` cells hold rot / trans; the others a single number. ``runs`` (runs x numbers) holds
+    each run's own value of those numbers, for the spread over runs."""
+
+    def __init__(self, values=None, pair: bool = True, runs=None):
+        self.values, self.pair = values, pair
+        self.runs = None if runs is None else np.atleast_2d(np.asarray(runs, float))
+
+    def fmt(self, decimals: int, spread: str = "none") -> str:
+        if self.values is None:
+            return "- / -" if self.pair else "-"
+        parts = []
+        for k, v in enumerate(self.values):
+            text = "nan" if np.isnan(v) else f"{v:.{decimals}f}"
+            if spread != "none" and self.runs is not None and not np.isnan(v):
+                pm = statistics.spread(self.runs[:, k], spread)
+                text += "" if np.isnan(pm) else f" $\\pm$ {pm:.{decimals}f}"
+            parts.append(text)
+        n = f" (n={len(self.runs)})" if spread != "none" and self.runs is not None else ""
+        return " / ".join(parts) + n
+
+
+def _average(cells: list[_Cell], pair=True) -> _Cell:
+    have = [c.values for c in cells if c.values is not None]
+    if not have:
+        return _Cell(None, pair)
+    arr = np.array(have, float)
+    return _Cell(tuple(_nanmean(arr[:, k]) for k in range(arr.shape[1])), pair)
+
+
+def _ok_runs(grid, alg, ds=None):
+    return [c for c in grid if c.algorithm == alg and (ds is None or c.dataset == ds) and c.ok]
+
+
+def _run_ate(c, valid: bool = False) -> tuple[float, float]:
+    """One run's ATE RMSE: rotation (deg), translation (m)."""
+    src = c.drift["drift_valid"]["ate"] if valid else c.metrics["ate"]
+    return src["rot_deg"]["rmse"], src["trans_m"]["rmse"]
+
+
+def _mean_over_runs(runs, of) -> _Cell:
+    """The cell of a per-run pair: its mean over the runs (ov_eval's ATE cells)."""
+    if not runs:
+        return _Cell(None)
+    per_run = [tuple(_num(x) for x in of(c)) for c in runs]
+    return _Cell(tuple(_nanmean(v) for v in zip(*per_run)), runs=per_run)
+
+
+def _ate(runs, valid: bool) -> _Cell:
+    return _mean_over_runs(runs, lambda c: _run_ate(c, valid))
+
+
+def _per_run(runs, table: str, valid: bool, length=None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each run's (rot, trans) errors of the pairs a pooled cell takes from it."""
+    out = []
+    for c in runs:
+        t = getattr(c, table)
+        sel = np.ones(len(t.get("rot_deg", [])), bool)
+        if length is not None:
+            sel &= t["length_m"] == float(length)
+        if valid:
+            sel &= t["valid"] > 0
+        out.append((t["rot_deg"][sel], t["trans_m"][sel]))
+    return out
+
+
+def _pooled(runs, table: str, valid: bool, length=None):
+    per_run = _per_run(runs, table, valid, length)
+    return tuple(
+        np.concatenate([r[k] for r in per_run]) if per_run else np.zeros(0) for k in (0, 1)
+    )
+
+
+def _pooled_cell(runs, table, valid, length, of, width: int) -> _Cell:
+    """A cell pooling the pairs of all runs, ``of(rot, trans)`` giving its ``width`` numbers; its
+    spread is over each run's own ``of`` (runs without pairs left out)."""
+    per_run = _per_run(runs, table, valid, length)
+    rot, trans = (np.concatenate([r[k] for r in per_run]) for k in (0, 1))
+    if _all_nan_valid(runs, valid) or rot.size == 0:
+        return _Cell((np.nan,) * width)
+    return _Cell(of(rot, trans), runs=[of(r, t) for r, t in per_run if r.size])
+
+
+def _mean_pair(runs, table, valid, length=None) -> _Cell:
+    if not runs:
+        return _Cell(None)
+    return _pooled_cell(
+        runs, table, valid, length, lambda rot, trans: (float(rot.mean()), float(trans.mean())), 2
+    )
+
+
+def _drift_rate(runs, valid, length) -> _Cell:
+    if not runs:
+        return _Cell(None, pair=False)
+    cell = _pooled_cell(
+        runs,
+        "segments",
+        valid,
+        length,
+        lambda _, trans: (float(np.mean(trans / float(length)) * 100),),
+        1,
+    )
+    cell.pair = False
+    return cell
+
+
+def _all_nan_valid(runs, valid):
+    return valid and all(
+        c.drift["global_failed"] or not (_num(c.drift["success_rate_distance_pct"]) > 0)
+        for c in runs
+    )
+
+
+def _single_over_runs(runs, of) -> _Cell:
+    """The cell of a per-run number: its mean over the runs."""
+    cell = _mean_over_runs(runs, lambda c: (of(c),))
+    cell.pair = False
+    return cell
+
+
+def _success(runs) -> _Cell:
+    return _single_over_runs(runs, lambda c: c.drift["success_rate_distance_pct"])
+
+
+def _success_auc(runs) -> _Cell:
+    return _single_over_runs(runs, lambda c: c.drift.get("success_auc_pct"))
+
+
+def _stat(d: dict, *keys):
+    for k in keys:
+        if not isinstance(d, dict) or k not in d:
+            return np.nan
+        d = d[k]
+    return _num(d)

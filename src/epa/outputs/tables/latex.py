@@ -1,0 +1,206 @@
+"""The paper tables: one LaTeX tabular per table (``tables/<name>.tex``), built from the base tables
+and the registered metrics' (:mod:`epa.metrics.registry`)."""
+
+from __future__ import annotations
+
+from epa.metrics.accuracy import segment_key
+from epa.outputs.tables.cells import (
+    _ate,
+    _average,
+    _Cell,
+    _drift_rate,
+    _mean_over_runs,
+    _mean_pair,
+    _ok_runs,
+    _success,
+    _success_auc,
+)
+from epa.outputs.tables.results import CaseResult
+
+_LATEX_SPECIAL = {
+    "\\": r"\textbackslash{}",
+    "&": r"\&",
+    "%": r"\%",
+    "$": r"\$",
+    "#": r"\#",
+    "_": r"\_",
+    "{": r"\{",
+    "}": r"\}",
+    "~": r"\textasciitilde{}",
+    "^": r"\textasciicircum{}",
+}
+
+
+def latex_escape(text: str) -> str:
+    return "".join(_LATEX_SPECIAL.get(ch, ch) for ch in str(text))
+
+
+def _latex_rows(
+    header: list[str], rows: list[tuple[str, list[_Cell]]], decimals: int, spread: str = "none"
+) -> list[str]:
+    lines = [
+        " & " + " & ".join(r"\textbf{" + latex_escape(h) + "}" for h in header) + r" \\ \hline"
+    ]
+    for name, cells in rows:
+        lines.append(
+            latex_escape(name) + " & " + " & ".join(c.fmt(decimals, spread) for c in cells) + r" \\"
+        )
+    return lines
+
+
+SPREAD_TITLE = {
+    "none": "",
+    "std": " [± SAMPLE STD OVER RUNS, n = RUNS]",
+    "ci": " [± HALF-WIDTH OF THE 95% CI OF THE MEAN OVER RUNS, STUDENT T, n = RUNS]",
+}
+
+
+def build_tables(
+    grid: list[CaseResult],
+    segments,
+    decimals: int = 3,
+    metrics=(),
+    spread: str = "none",
+    text: bool = False,
+) -> list[tuple[str, str, list[str], int]]:
+    """(file name, title, latex row lines, number of columns) for every table, in report order: the
+    base tables, each registered metric's (``metrics``: the enabled ones) after the base table it
+    names or at the end. With ``spread`` (std / ci) each cell with runs also shows its spread over
+    them and their number. ``text``: only the tables error_comparison.txt shows."""
+    algs = sorted({c.algorithm for c in grid})
+    datasets = sorted({c.dataset for c in grid})
+    seg_labels = [f"{segment_key(s)}m" for s in segments]
+    out = []
+
+    def rows_per_dataset(cell_of, pair=True, marked=lambda alg: None):
+        """A row per algorithm: a cell per dataset and their Average; an algorithm ``marked`` (by
+        what it lacks) is named so, its cells empty, never faked."""
+        rows = []
+        for a in algs:
+            missing = marked(a)
+            cells = [
+                _Cell(None, pair) if missing else cell_of(_ok_runs(grid, a, d)) for d in datasets
+            ]
+            rows.append((f"{a} ({missing})" if missing else a, cells + [_average(cells, pair)]))
+        return rows
+
+    def per_dataset(name, title, fn, pair=True, dec=decimals):
+        rows = rows_per_dataset(fn, pair)
+        header = datasets + ["Average"]
+        out.append(
+            (
+                name,
+                title + SPREAD_TITLE[spread],
+                _latex_rows(header, rows, dec, spread),
+                len(header) + 1,
+            )
+        )
+
+    def per_segment(name, title, fn):
+        # these pool an algorithm's datasets: the spread is over every run of every dataset
+        rows = [(a, [fn(_ok_runs(grid, a), s) for s in segments]) for a in algs]
+        out.append(
+            (
+                name,
+                title + SPREAD_TITLE[spread].replace("RUNS]", "RUNS OF ALL DATASETS]"),
+                _latex_rows(seg_labels, rows, decimals, spread),
+                len(segments) + 1,
+            )
+        )
+
+    for prefix, valid, tag in (
+        ("", False, "FULL TRAJECTORY"),
+        ("valid_", True, "DRIFT-VALID ONLY"),
+    ):
+        if valid:
+            per_dataset(
+                "success_rate",
+                "DRIFT-VALID SUCCESS RATE LATEX TABLE (% PATH LENGTH)",
+                _success,
+                pair=False,
+                dec=2,
+            )
+            per_dataset(
+                "success_auc",
+                "SUCCESS RATE AREA LATEX TABLE (% PATH, MEAN OVER DRIFT THRESHOLDS x0.1-x10)",
+                _success_auc,
+                pair=False,
+                dec=2,
+            )
+        per_dataset(
+            prefix + "ate",
+            f"{tag} ATE LATEX TABLE (ROT DEG / TRANS M)",
+            lambda r, valid=valid: _ate(r, valid),
+        )
+        per_segment(
+            prefix + "rpe_distance",
+            f"{tag} DISTANCE RPE LATEX TABLE (ROT DEG / TRANS M)",
+            lambda r, s, valid=valid: _mean_pair(r, "segments", valid, s),
+        )
+        per_segment(
+            prefix + "drift_rate",
+            f"{tag} DISTANCE DRIFT RATE LATEX TABLE (% TRANS / DIST)",
+            lambda r, s, valid=valid: _drift_rate(r, valid, s),
+        )
+        per_dataset(
+            prefix + "rpe_time_1s",
+            f"{tag} 1S TIME RPE LATEX TABLE (ROT DEG / TRANS M)",
+            lambda r, valid=valid: _mean_pair(r, "time", valid),
+        )
+
+    for metric in metrics:
+        for spec in metric.TABLES:
+            if text and not spec.in_text:
+                continue
+            table = _metric_table(
+                grid, algs, metric, spec, decimals, spread, rows_per_dataset, datasets
+            )
+            at = next((k + 1 for k, t in enumerate(out) if t[0] == spec.after), len(out))
+            out.insert(at, table)
+    return out
+
+
+def _metric_table(grid, algs, metric, spec, decimals, spread, rows_per_dataset, datasets):
+    """A registered metric's table (:class:`epa.metrics.spec.Table`)."""
+
+    def has(alg):
+        return any(c.algorithm == alg and spec.has(c.record_of(metric)) for c in grid)
+
+    if spec.per_algorithm is not None:  # one row per algorithm with the metric, over all its runs
+        rows = []
+        for a in algs:
+            records = [
+                c.record_of(metric)
+                for c in grid
+                if c.algorithm == a and spec.has(c.record_of(metric))
+            ]
+            if records:
+                rows.append((a, [_Cell((v,), pair=False) for v in spec.per_algorithm(records)]))
+        return (
+            spec.name,
+            spec.title,
+            _latex_rows(list(spec.header), rows, decimals, spread),
+            len(spec.header) + 1,
+        )
+
+    def cell_of(runs):
+        runs = [c for c in runs if spec.has(c.record_of(metric))]
+        cell = _mean_over_runs(runs, lambda c: spec.per_run(c.record_of(metric)))
+        cell.pair = spec.pair
+        return cell
+
+    marked = (lambda a: None if has(a) else spec.missing) if spec.missing else (lambda a: None)
+    rows = rows_per_dataset(cell_of, spec.pair, marked)
+    header = datasets + ["Average"]
+    return (
+        spec.name,
+        spec.title + SPREAD_TITLE[spread],
+        _latex_rows(header, rows, decimals, spread),
+        len(header) + 1,
+    )
+
+
+def tex_document(title: str, rows: list[str], ncols: int) -> str:
+    """A table that \\input's into a paper: a tabular with the report's rows, titled in a comment."""
+    spec = "l" + "c" * (ncols - 1)
+    return "\n".join([f"% {title}", r"\begin{tabular}{" + spec + "}", *rows, r"\end{tabular}", ""])

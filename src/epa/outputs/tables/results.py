@@ -1,0 +1,88 @@
+"""The records of every case as the tables read them (:class:`CaseResult`), read from the case folders."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from epa.artifacts.case import Case, CaseFolder
+
+
+def has_result(status: str) -> bool:
+    """Whether a case's status carries numbers (a globally failed case still has them)."""
+    return status == "ok" or status.startswith("globally failed")
+
+
+@dataclass
+class CaseResult:
+    """A case's records as the tables read them. ``records`` holds the records of the stages after
+    drift (consistency, efficiency), each ``{"available": False, "failed": reason}`` if that stage
+    failed; ``segments`` / ``time`` are the per-pair RPE errors with their drift validity."""
+
+    case: Case
+    status: str = "ok"
+    load: dict = field(default_factory=dict)
+    sync: dict = field(default_factory=dict)  # 03_sync/sync.json
+    metrics: dict = field(default_factory=dict)
+    drift: dict = field(default_factory=dict)
+    segments: dict = field(default_factory=dict)
+    time: dict = field(default_factory=dict)
+    records: dict = field(default_factory=dict)
+
+    algorithm = property(lambda self: self.case.algorithm)
+    dataset = property(lambda self: self.case.dataset)
+    run = property(lambda self: self.case.run)
+
+    @property
+    def ok(self) -> bool:
+        return has_result(self.status)
+
+    def record_of(self, metric) -> dict:
+        """A registered metric's record (:mod:`epa.metrics.registry`): ``metrics.json``'s entry for
+        one the metrics stage computes, else its own stage's record; {} when there is none."""
+        if metric.STAGE == "metrics":
+            return self.metrics.get(metric.KEY) or {}
+        return self.records.get(metric.STAGE, {})
+
+
+def collect(keys: list[str], results_dir) -> list[CaseResult]:
+    """Read every case's artifacts (``<results_dir>/cases/<algorithm>/<dataset>/<run>/``)."""
+    out = []
+    for key in keys:
+        folder = CaseFolder.of(results_dir, Case.from_key(key))
+        res = CaseResult(folder.case)
+        load, load_failed = folder.record_or_failure("load", "load.json")
+        if load_failed is None:
+            res.load = load
+        drift, reason = folder.record_or_failure("drift", "drift.json")
+        if reason is not None:
+            res.status = reason if reason.startswith("internal error") else "failed: " + reason
+        else:
+            res.sync = folder.record("sync", "sync.json")
+            res.metrics = folder.record("metrics", "metrics.json")
+            res.drift = drift
+            res.segments = {
+                **folder.table("metrics", "rpe_segments.csv"),
+                **folder.table("drift", "rpe_segments_valid.csv"),
+            }
+            res.time = {
+                **folder.table("metrics", "rpe_time.csv"),
+                **folder.table("drift", "rpe_time_valid.csv"),
+            }
+            if res.drift.get("status"):
+                res.status = res.drift["status"]
+            for stage in AFTER_DRIFT:
+                if folder.has(stage, f"{stage}.json"):
+                    record, failed = folder.record_or_failure(stage, f"{stage}.json")
+                    res.records[stage] = (
+                        record if failed is None else {"available": False, "failed": failed}
+                    )
+        out.append(res)
+    return out
+
+
+AFTER_DRIFT = ("consistency", "efficiency")  # stages whose failure leaves the accuracy standing
+
+
+def failed_cases(grid: list[CaseResult]) -> list[tuple[str, str]]:
+    """(case key, status) of every case without a result, for the end-of-run list."""
+    return [(f"{c.algorithm}/{c.dataset}/{c.run}", c.status) for c in grid if not c.ok]

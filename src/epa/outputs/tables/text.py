@@ -1,0 +1,91 @@
+"""error_comparison.txt in the seed's layout (mode epa)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from epa.metrics.accuracy import segment_key
+from epa.outputs.tables.cells import _ate, _nanmean, _pooled
+from epa.outputs.tables.latex import build_tables
+from epa.outputs.tables.results import CaseResult
+
+RULE_SHORT = "=" * 38
+
+RULE_LONG = "=" * 44
+
+
+def report_text(
+    grid: list[CaseResult], segments, decimals: int = 3, spread: str = "none", metrics=()
+) -> str:
+    """error_comparison.txt (mode epa): per dataset and algorithm, then every table."""
+    lines = []
+    datasets = sorted({c.dataset for c in grid})
+    for ds in datasets:
+        info = next((c.load for c in grid if c.dataset == ds and c.load), None)
+        if info:
+            lines.append(
+                f"[COMP]: {info['n_ref']} poses in {info['ref_file']} => length of {info['ref_length_m']:.2f} meters"
+            )
+        else:
+            lines.append(f"[COMP]: reference of {ds} could not be loaded")
+    lines.append(RULE_SHORT)
+    sources = {"epa": 0, "ov_eval": 0}
+    for alg in sorted({c.algorithm for c in grid}):
+        lines.append(f"[COMP]: processing {alg} algorithm")
+        for ds in datasets:
+            cases = [c for c in grid if c.algorithm == alg and c.dataset == ds]
+            if not cases:
+                continue
+            runs = [c for c in cases if c.ok]
+            lines.append(f"[COMP]: processing {alg} algorithm => {ds} dataset")
+            ate = _ate(runs, False)
+            if ate.values is None:
+                lines.append("        ATE: - / - (0 runs)")
+            else:
+                lines.append(
+                    f"        ATE: mean_ori = {ate.values[0]:.3f} | mean_pos = {ate.values[1]:.3f} ({len(runs)} runs)"
+                )
+            src = {"epa": 0, "ov_eval": 0}
+            for c in runs:
+                src[c.metrics.get("eval_source", "epa")] += 1
+            for k in sources:
+                sources[k] += src[k]
+            lines.append(f"        eval_source: epa={src['epa']}, ov_eval={src['ov_eval']}")
+            if runs:
+                for s in segments:
+                    rot, trans = _pooled(runs, "segments", False, s)
+                    if rot.size:
+                        lines.append(
+                            f"        RPE: seg {segment_key(s)} - median_ori = {np.median(rot):.4f} | "
+                            f"median_pos = {np.median(trans):.4f} ({rot.size} samples)"
+                        )
+                    else:
+                        lines.append(
+                            f"        RPE: seg {segment_key(s)} - no segment this long (0 samples)"
+                        )
+                rot, trans = _pooled(runs, "time", False)
+                if rot.size:
+                    lines.append(
+                        f"        RPE time 1s - mean_ori = {rot.mean():.3f} | mean_pos = {trans.mean():.3f}"
+                        f" ({rot.size} samples)"
+                    )
+                sr_d = _nanmean(c.drift["success_rate_distance_pct"] for c in runs)
+                sr_t = _nanmean(c.drift["success_rate_time_pct"] for c in runs)
+                lines.append(f"        SR - distance = {sr_d:.2f}% | time = {sr_t:.2f}%")
+            for c in cases:
+                if c.status != "ok":
+                    lines.append(f"        {c.run}: {c.status}")
+    lines += [
+        RULE_LONG,
+        f"TOOL SOURCE: epa={sources['epa']}, ov_eval={sources['ov_eval']}",
+        RULE_LONG,
+    ]
+    for _, title, rows, _ in build_tables(grid, segments, decimals, metrics, spread, text=True):
+        lines += [
+            RULE_LONG,
+            title,
+            RULE_LONG,
+            *(r.replace(" $\\pm$ ", " ± ") for r in rows),
+            RULE_LONG,
+        ]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,117 @@
+"""The tables rule: read every case, write every table."""
+
+from __future__ import annotations
+
+import csv
+import logging
+from pathlib import Path
+
+from epa import readers
+from epa.artifacts import files as io
+from epa.core.errors import EpaError
+from epa.metrics import registry
+from epa.outputs.tables.across_runs import write_across_runs
+from epa.outputs.tables.comparison import comparison_tex, comparison_text, comparisons
+from epa.outputs.tables.latex import build_tables, tex_document
+from epa.outputs.tables.ov_eval import ov_eval_text
+from epa.outputs.tables.results import CaseResult, collect, failed_cases, has_result
+from epa.outputs.tables.summary import (
+    SUCCESS_CURVE_COLUMNS,
+    records_csv,
+    success_curves,
+    summary_csv,
+)
+from epa.outputs.tables.text import report_text
+
+log = logging.getLogger("epa")
+
+
+BASE_TABLES = (
+    "ate",
+    "rpe_distance",
+    "drift_rate",
+    "rpe_time_1s",
+    "success_rate",
+    "success_auc",
+    "valid_ate",
+    "valid_rpe_distance",
+    "valid_drift_rate",
+    "valid_rpe_time_1s",
+)
+
+
+def enabled_metrics(cfg: dict) -> tuple:
+    return tuple(m for m in registry.REGISTRY if m.enabled(cfg))
+
+
+def table_names(cfg: dict) -> tuple[str, ...]:
+    """The .tex files the tables rule writes under these settings."""
+    return BASE_TABLES + tuple(t.name for m in enabled_metrics(cfg) for t in m.TABLES)
+
+
+def write_all(
+    grid: list[CaseResult], results_dir, cfg: dict, idle_truths: dict | None = None
+) -> None:
+    """error_comparison.txt, summary.csv and tables/<name>.tex under ``results_dir``."""
+    results_dir = Path(results_dir)
+    segments = cfg["metrics"]["segments"]
+    decimals = cfg["tables"]["decimals"]
+    spread = cfg["tables"]["spread"]
+    text = (
+        ov_eval_text(grid, segments, idle_truths)
+        if cfg.get("mode") == "ov_eval"
+        else report_text(grid, segments, decimals, spread, enabled_metrics(cfg))
+    )
+    io.write_text(results_dir / "error_comparison.txt", text)
+    io.write_text(results_dir / "summary.csv", summary_csv(grid, segments))
+    for name, title, rows, n in build_tables(
+        grid, segments, decimals, metrics=enabled_metrics(cfg), spread=spread
+    ):
+        io.write_text(results_dir / "tables" / f"{name}.tex", tex_document(title, rows, n))
+    io.write_text(
+        results_dir / "success_curves.csv", records_csv(SUCCESS_CURVE_COLUMNS, success_curves(grid))
+    )
+    pairs = comparisons(grid, segments)
+    io.write_text(results_dir / "comparison.txt", comparison_text(pairs))
+    io.write_text(results_dir / "comparison.tex", comparison_tex(pairs))
+    write_across_runs(grid, results_dir)
+
+
+def make(
+    keys: list[str], results_dir, cfg: dict, idle_truths: dict | None = None
+) -> list[tuple[str, str]]:
+    """The tables rule: read every case, write every table; returns the failed cases.
+    ``idle_truths`` ({dataset: path}, mode ov_eval): references without any run, read here for the
+    [COMP] line ov_eval prints for every reference."""
+    grid = collect(keys, results_dir)
+    idle = {}
+    for ds, path in (idle_truths or {}).items():
+        try:
+            idle[ds] = reference_info(path, cfg, ds)
+        except EpaError as exc:  # no case needs it: a warning, not a failed grid
+            log.warning(
+                "reference %s without runs left out of error_comparison.txt: %s", ds, exc.one_line()
+            )
+    write_all(grid, results_dir, cfg, idle)
+    return failed_cases(grid)
+
+
+def reference_info(path, cfg: dict, dataset: str) -> dict:
+    """A reference's pose count and path length, as the load stage records them."""
+
+    ref = readers.read(path, readers.options(cfg, "reference", dataset=dataset))
+    return {"ref_file": Path(path).name, "n_ref": len(ref), "ref_length_m": ref.length()}
+
+
+def failure_report(summary_path, most: int = 20) -> str:
+    """A short end-of-run list of the cases without a result (empty when every case has one)."""
+    with open(summary_path, encoding="utf-8", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    bad = [r for r in rows if not has_result(r["status"])]
+    if not bad:
+        return ""
+    lines = [f"epica: {len(bad)} of {len(rows)} cases have no result (see {summary_path}):"]
+    lines += [f"  {r['algorithm']}/{r['dataset']}/{r['run']}: {r['status']}" for r in bad[:most]]
+    if len(bad) > most:
+        lines.append(f"  ... and {len(bad) - most} more")
+    return "\n".join(lines)

@@ -1,0 +1,40 @@
+"""The evaluation plan: which of Steps 1-2's results a case is evaluated with, and Step 3's method.
+The one place that decides the ov_eval fallback."""
+
+from __future__ import annotations
+
+from epa.steps.calibrate import Extrinsic
+
+
+def evaluation_plan(cfg: dict, step1: dict, extrinsic: Extrinsic | None = None) -> dict:
+    """How a case is evaluated: the one place that decides the ov_eval fallback.
+
+    An untrusted Step 1 or Step 2 means the case is evaluated the ov_eval way: the configured
+    ``sync.offset`` (default 0) instead of an estimated one, no extrinsic, SE3 alignment on all
+    poses (see :func:`alignment_of`); it is marked ``eval_source: ov_eval``. ``mode: ov_eval`` is
+    that evaluation by choice, with the configured alignment."""
+    fallback = {
+        "eval_source": "ov_eval",
+        "fallback": True,
+        "offset_s": cfg["sync"]["offset"],
+        "apply_extrinsic": False,
+    }
+    if cfg["mode"] == "ov_eval":
+        return {**fallback, "fallback": False, "reason": "ov_eval mode"}
+    if cfg["sync"]["estimate_offset"] and not step1.get("used", False):
+        return {**fallback, "reason": f"Step 1 not trusted: {step1.get('reason')}"}
+    if extrinsic is not None and not extrinsic.trusted:
+        return {**fallback, "reason": f"Step 2 not trusted: {extrinsic.reason}"}
+    applied = extrinsic is not None
+    return {
+        "eval_source": "epa",
+        "fallback": False,
+        "offset_s": step1.get("offset", cfg["sync"]["offset"]),
+        "apply_extrinsic": applied,
+        "reason": "Steps 1 and 2 applied" if applied else "Step 2 disabled",
+    }
+
+
+def alignment_of(plan: dict, cfg: dict) -> tuple[str, int]:
+    """Step 3 method and first_n under an evaluation plan: the fallback aligns SE3 on all poses."""
+    return ("se3", -1) if plan["fallback"] else (cfg["align"]["method"], cfg["align"]["first_n"])

@@ -1,0 +1,35 @@
+"""Step 3: the world-frame fit of the calibrated estimate onto the reference (05_align/).
+Row k of ``aligned.tum`` is matched with row k of ``04_calibrate/pairs.csv``."""
+
+from __future__ import annotations
+
+from epa.artifacts.case import CaseData
+from epa.core.trajectory import Trajectory
+from epa.steps import align as alignment
+from epa.steps.plan import alignment_of
+
+NAME = "align"
+SETTINGS = ("mode", "align")
+RECORDS = ("transform.json",)
+ARRAYS = ("aligned.tum",)
+
+
+def compute(ref: Trajectory, est: Trajectory, cfg: dict, calib_info: dict):
+    plan = calib_info["plan"]
+    method, first_n = alignment_of(plan, cfg)
+    fit = alignment.fit(ref, est, method=method, first_n=first_n)
+    return fit.apply(est), {
+        "method": method,
+        "first_n": first_n,
+        "fallback_se3": plan["fallback"],
+        **fit.to_dict(),
+    }
+
+
+def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
+    ref, est = data.calibrated
+    aligned, info = compute(ref, est, cfg, data.calibrate_record)
+    data.aligned, data.transform = aligned, info
+    data.folder.write_record(NAME, "transform.json", info)
+    if write_arrays:
+        data.folder.write_tum(NAME, "aligned.tum", aligned)

@@ -1,0 +1,33 @@
+"""Consistency: NEES and ±3σ of the estimate's own covariance, in its own frames (08_consistency/).
+Without covariance the record says ``"available": false``."""
+
+from __future__ import annotations
+
+import logging
+
+from epa.artifacts.case import CaseData
+from epa.metrics import consistency
+from epa.steps.align import Similarity
+from epa.steps.calibrate import Extrinsic
+
+log = logging.getLogger("epa")
+
+NAME = "consistency"
+SETTINGS = ()
+RECORDS = ("consistency.json",)
+ARRAYS = ("nees.csv",)
+
+
+def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
+    # the estimate as read: its covariance is in its own frames
+    ref, est = data.matched
+    calib = data.calibrate_record
+    extrinsic = (
+        Extrinsic.from_dict(calib["extrinsic"]) if calib["plan"]["apply_extrinsic"] else None
+    )
+    summary, table = consistency.evaluate(ref, est, Similarity.from_dict(data.transform), extrinsic)
+    if summary.get("available") is False and summary.get("reason"):
+        log.info("consistency: %s", summary["reason"])
+    data.consistency_record, data.nees = summary, table
+    data.folder.write_optional_table(NAME, "nees.csv", table if write_arrays else None)
+    data.folder.write_record(NAME, "consistency.json", summary)

@@ -1,0 +1,81 @@
+"""Drift detection: fail segments, success rate, the global gate and the drift-valid metrics, from
+the metrics stage's per-pose and per-pair errors (07_drift/)."""
+
+from __future__ import annotations
+
+from epa.artifacts.case import CaseData
+from epa.metrics import drift
+
+NAME = "drift"
+SETTINGS = ("drift", "metrics")
+RECORDS = ("drift.json",)
+ARRAYS = ("fail_segments.csv", "pose_valid.csv", "rpe_segments_valid.csv", "rpe_time_valid.csv")
+
+
+def compute(tables: dict, cfg: dict):
+    ape, seg, tp = tables["ape"], tables["rpe_segments"], tables["rpe_time"]
+    det = drift.detect(
+        ape["t"],
+        ape["dist_m"],
+        ape["trans_m"],
+        ape["rot_deg"],
+        tp["i"].astype(int),
+        tp["j"].astype(int),
+        tp["trans_m"],
+        cfg["drift"],
+    )
+    valid, seg_valid, time_valid = drift.valid_metrics(
+        det, ape["trans_m"], ape["rot_deg"], seg, tp, cfg["metrics"]["segments"]
+    )
+    fs = det["fail_segments"]
+    curve = drift.success_curve(
+        ape["t"],
+        ape["dist_m"],
+        ape["trans_m"],
+        tp["i"].astype(int),
+        tp["j"].astype(int),
+        tp["trans_m"],
+        det["thresholds"],
+    )
+    summary = {
+        "thresholds": det["thresholds"],
+        "success_rate_distance_pct": det["success_rate_distance_pct"],
+        "success_auc_pct": curve.pop("auc_pct"),
+        "success_curve": curve,
+        "success_rate_time_pct": det["success_rate_time_pct"],
+        "global_failed": det["global_failed"],
+        "ape_p5_m": det["ape_p5_m"],
+        "knee": det["knee"],
+        "n_fail_segments": int(len(fs["index_start"])),
+        "first_fail_t": float(fs["t_start"][0] - ape["t"][0]) if len(fs["t_start"]) else None,
+        # a fail segment that reaches the last pose: the run never recovered from there
+        "diverged_at_s": (
+            float(fs["t_start"][-1] - ape["t"][0])
+            if len(fs["t_start"]) and fs["index_end"][-1] == len(ape["t"]) - 1
+            else None
+        ),
+        "drift_valid": valid,
+    }
+    if det["global_failed"]:
+        summary["status"] = (
+            f"globally failed: 5th percentile APE {det['ape_p5_m']:.3g} m >"
+            f" {cfg['drift']['global_fail_p5_m']} m"
+        )
+    artifacts = {
+        "fail_segments": fs,
+        "pose_valid": {"t": ape["t"], "valid": ~det["invalid"]},
+        # row k: whether pair k of 06_metrics/rpe_segments.csv (rpe_time.csv) is drift-valid
+        "rpe_segments_valid": {"valid": seg_valid},
+        "rpe_time_valid": {"valid": time_valid},
+    }
+    return summary, artifacts
+
+
+def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
+    tables = {"ape": data.ape, "rpe_segments": data.rpe_segments, "rpe_time": data.rpe_time}
+    summary, artifacts = compute(tables, cfg)
+    data.drift_record, data.fail_segments = summary, artifacts["fail_segments"]
+    if write_arrays:
+        for name in ARRAYS:
+            data.folder.write_table(NAME, name, artifacts[name.removesuffix(".csv")])
+    data.folder.write_record(NAME, "drift.json", summary)

@@ -1,0 +1,115 @@
+"""Load: read the reference and the estimate in any supported format, and the run's timing file
+(01_load/)."""
+
+from __future__ import annotations
+
+import os
+from collections import OrderedDict
+from pathlib import Path
+
+from epa import readers
+from epa.artifacts.case import CaseData, remember
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
+from epa.readers import bags, text
+from epa.readers import timing as timing_files
+
+NAME = "load"
+SETTINGS = (
+    "load",
+)  # a change re-runs this stage onward (the sources' settings travel with each case)
+RECORDS = ("load.json",)
+ARRAYS = ("ref.tum", "est.tum", "timing.csv")
+
+# reference source -> (Trajectory, notes) parsed from the user's file, shared by a dataset's cases
+_LOADED: OrderedDict = OrderedDict()
+
+
+def load_reference(ref_path, cfg: dict, opts: dict | None = None) -> tuple[Trajectory, list[str]]:
+    notes: list[str] = []
+    opts = readers.options(cfg, "reference") if opts is None else opts
+    return readers.read(ref_path, opts, notes=notes), notes
+
+
+def compute(
+    ref_path,
+    est_path,
+    cfg: dict,
+    reference: tuple[Trajectory, list[str]] | None = None,
+    *,
+    ref_opts: dict | None = None,
+    est_opts: dict | None = None,
+):
+    """Read the reference (unless already read: ``reference``, as load_reference returns it) and the
+    estimate, each with its source settings (:func:`epa.readers.options`). ``ref_notes`` /
+    ``est_notes`` in the record list what was inferred rather than read."""
+    ref_opts = readers.options(cfg, "reference") if ref_opts is None else ref_opts
+    est_opts = readers.options(cfg, "estimate") if est_opts is None else est_opts
+    ref, ref_notes = load_reference(ref_path, cfg, ref_opts) if reference is None else reference
+    # KITTI estimates rarely ship their own times file: they are index-aligned with the reference's.
+    est_times = None
+    if not bags.is_bag(est_path):
+        est_times = text.kitti_times_for(Path(est_path)) or (
+            None if bags.is_bag(ref_path) else text.kitti_times_for(Path(ref_path))
+        )
+    est_notes: list[str] = []
+    est = readers.read(est_path, est_opts, notes=est_notes, kitti_times=est_times)
+    info = {
+        "ref_file": Path(ref_path).name,
+        "est_file": Path(est_path).name,
+        "est_path": str(est_path),
+        "n_ref": len(ref),
+        "n_est": len(est),
+        "ref_length_m": ref.length(),
+        "est_length_m": est.length(),
+        "ref_span_s": [float(ref.t[0]), float(ref.t[-1])],
+        "est_span_s": [float(est.t[0]), float(est.t[-1])],
+        "ref_notes": ref_notes,
+        "est_notes": est_notes,
+    }
+    info["sources"] = {
+        "reference": ref_opts,
+        "estimate": est_opts,
+    }  # the settings each side was read with
+    info["covariance"] = est.cov_rot is not None
+    timing = None
+    try:  # a bad timing file costs the case its efficiency, not its accuracy: the efficiency stage reports it
+        timing_path = readers.timing_file(est_path, est_opts)
+        if timing_path is not None:
+            t, ms, what = timing_files.read_timing(timing_path)
+            timing = {"t": t, "frame_ms": ms}
+            info["timing"] = {"file": timing_path.name, "read_as": what, "frames": int(len(t))}
+    except EpaError as exc:
+        info["timing_error"] = {"path": exc.path, "line": exc.line, "message": exc.message}
+    return ref, est, info, timing
+
+
+def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
+    case, folder = data.folder.case, data.folder
+    ref_opts = case.truth_source or readers.options(cfg, "reference")
+    est_opts = case.estimate_source or readers.options(cfg, "estimate")
+    try:
+        st = os.stat(case.truth)
+    except OSError:  # the reader says what is wrong with it, in its words
+        st = None
+    source = st and (os.path.abspath(case.truth), st.st_mtime_ns, st.st_size, repr(ref_opts))
+    if source and source not in _LOADED:
+        remember(_LOADED, source, load_reference(case.truth, cfg, ref_opts))
+    ref, est, info, timing = compute(
+        case.truth,
+        case.estimate,
+        cfg,
+        reference=_LOADED.get(source) if source else None,
+        ref_opts=ref_opts,
+        est_opts=est_opts,
+    )
+    data.loaded, data.load_record, data.timing = (ref, est), info, timing
+    if write_arrays:
+        # the efficiency stage reads the run's timing from here, never from the user's folder
+        if timing is not None:
+            folder.write_table(NAME, "timing.csv", timing)
+        else:
+            folder.remove(NAME, "timing.csv")
+        folder.write_shared_tum(NAME, "ref.tum", ref, source or None)
+        folder.write_tum(NAME, "est.tum", est)
+    folder.write_record(NAME, "load.json", info)

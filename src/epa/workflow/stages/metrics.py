@@ -1,0 +1,115 @@
+"""Metrics: ATE, distance and time RPE, drift rate, evo-style RPE and the registered metrics of
+:mod:`epa.metrics.registry` computed here, on the aligned matched poses (06_metrics/). ``metrics.json``
+also holds what load and Steps 1-3 found, so one file tells the whole case."""
+
+from __future__ import annotations
+
+import logging
+
+from epa.artifacts.case import CaseData
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
+from epa.metrics import accuracy, registry
+
+log = logging.getLogger("epa")
+
+NAME = "metrics"
+SETTINGS = ("metrics",)
+RECORDS = ("metrics.json",)
+BASE_ARRAYS = ("ape.csv", "rpe_segments.csv", "rpe_time.csv")
+ARRAYS = BASE_ARRAYS + tuple(a for m in registry.computed_in(NAME) for a in m.ARRAYS)
+
+# A matched reference shorter than this has no distance metrics (RPE per metre, drift rate,
+# distance success rate would all be 0/0).
+MIN_PATH_M = 0.01
+
+
+def _insert(record: dict, key: str, value, after: str | None) -> dict:
+    """``record`` with ``key`` placed right after ``after`` (None: last), keeping its key order."""
+    if after is None:
+        return {**record, key: value}
+    out = {}
+    for k, v in record.items():
+        out[k] = v
+        if k == after:
+            out[key] = value
+    return out
+
+
+def compute(ref: Trajectory, est: Trajectory, cfg: dict):
+    c = cfg["metrics"]
+    length = ref.length()
+    if length < MIN_PATH_M:
+        raise EpaError(
+            f"the reference does not move ({length:.3g} m over the matched poses): distance RPE,"
+            " drift rate and success rate are undefined"
+        )
+    summary, tables = accuracy.evaluate(
+        ref,
+        est,
+        segments=c["segments"],
+        segment_tol=c["segment_tol"],
+        time_delta=c["time_delta"],
+        time_tol=c["time_tol"],
+        rpe=c["rpe"],
+    )
+    summary["est_length_m"] = est.length()  # the aligned estimate's matched path (EA-Drift's L)
+    # an empty segment length is shown as empty, never as a number; say why once, here
+    summary["notes"] = [
+        f"no {key} m segment fits in the {length:.3f} m matched path: its RPE and drift rate are empty"
+        for key, rpe in summary["rpe_distance"].items()
+        if rpe["trans_m"]["n"] == 0
+    ]
+    for metric in registry.computed_in(NAME):
+        if metric.enabled(cfg):
+            record, arrays, notes = metric.compute(ref, est, cfg)
+            summary = _insert(summary, metric.KEY, record, after=metric.AFTER)
+            for name, columns in arrays.items():
+                tables.setdefault(name, {}).update(columns)
+            summary["notes"] += notes
+    for note in summary["notes"]:
+        log.warning("%s", note)
+    return summary, tables
+
+
+def case_record(
+    load_info: dict, sync_info: dict, calib_info: dict, align_info: dict, summary: dict
+) -> dict:
+    """metrics.json: the metrics plus what loading and Steps 1-3 did, so one file tells the whole case."""
+    ext = calib_info.get("extrinsic") or {}
+    applied = bool(calib_info.get("plan", {}).get("apply_extrinsic"))
+    offset = calib_info.get("reassociated", sync_info)["offset_s"]
+    return {
+        "n_matched": summary["n_matched"],
+        "eval_source": calib_info.get("eval_source", "epa"),
+        "time_offset_s": offset,
+        "extrinsic_rot_deg": ext.get("rotation_deg") if applied else None,
+        "extrinsic_trans_m": ext.get("translation_norm_m") if applied else None,
+        "alignment": align_info,
+        **{k: v for k, v in summary.items() if k != "n_matched"},
+        # the estimate's path as invoked stays in load.json: metrics.json is the same from `epa eval` and the grid
+        "load": {k: v for k, v in load_info.items() if k != "est_path"},
+        "sync": sync_info,
+        "calibrate": calib_info,
+    }
+
+
+def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
+    folder = data.folder
+    summary, tables = compute(data.matched[0], data.aligned, cfg)
+    record = case_record(
+        data.load_record, data.sync_record, data.calibrate_record, data.transform, summary
+    )
+    data.metrics_record = record
+    data.ape, data.rpe_segments, data.rpe_time = (
+        tables["ape"],
+        tables["rpe_segments"],
+        tables["rpe_time"],
+    )
+    for name in ARRAYS:
+        table = tables.get(name.removesuffix(".csv"))
+        if write_arrays and table is not None:
+            folder.write_table(NAME, name, table)
+        elif name not in BASE_ARRAYS:  # from a run with that metric on
+            folder.remove(NAME, name)
+    folder.write_record(NAME, "metrics.json", record)

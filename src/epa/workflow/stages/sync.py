@@ -1,0 +1,111 @@
+"""Step 1: the time offset by cross-correlating angular speed, then association (03_sync/)."""
+
+from __future__ import annotations
+
+import logging
+
+from epa.artifacts.case import CaseData
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
+from epa.steps import sync
+
+log = logging.getLogger("epa")
+
+NAME = "sync"
+SETTINGS = ("mode", "sync")
+RECORDS = ("sync.json",)
+ARRAYS = ("pairs.csv", "xcorr.csv")
+
+
+def compute(ref: Trajectory, est: Trajectory, cfg: dict):
+    """Step 1 (when ``sync.estimate_offset``), then association. Returns the matched indices
+    (i_ref, i_est), the record and the correlation curve."""
+    c = cfg["sync"]
+    info: dict = {"mode": cfg["mode"], "policy": c["policy"]}
+    curve = None
+    if c["estimate_offset"]:
+        est_off = offset_step(ref, est, cfg)
+        if not est_off.used:
+            log.warning(
+                "Step 1 not used: %s; using the configured offset %.6f s",
+                est_off.reason,
+                c["offset"],
+            )
+        info["step1"] = est_off.to_dict()
+        offset = est_off.offset
+        curve = {"lag_s": est_off.curve_lag, "corr": est_off.curve_corr}
+    else:
+        info["step1"] = {
+            "used": False,
+            "status": "disabled",
+            "reason": "disabled",
+            "offset": c["offset"],
+            "estimated": None,
+            "std": None,
+        }
+        offset = c["offset"]
+    i_ref, i_est, assoc = associate(ref, est, c, offset)
+    info.update(assoc)
+    # ov_eval warns on these (a bad length ratio, a coarse reference): mode ov_eval prints what it prints
+    info["matched_length_m"] = {
+        "ref": ref.select(i_ref).length(),
+        "est": est.select(i_est).length(),
+    }
+    return (i_ref, i_est), info, curve
+
+
+def offset_step(ref: Trajectory, est: Trajectory, cfg: dict) -> sync.OffsetEstimate:
+    """Step 1 under the ``sync`` settings."""
+    c = cfg["sync"]
+    return sync.estimate_offset(
+        ref,
+        est,
+        window=c["window"],
+        resample_dt=c["resample_dt"],
+        min_motion=c["min_motion"],
+        min_corr=c["min_corr"],
+        min_peak_ratio=c["min_peak_ratio"],
+        max_std=c["max_offset_std"],
+        speed_interval=c["speed_interval"],
+        fallback=c["offset"],
+    )
+
+
+def associate(ref: Trajectory, est: Trajectory, c: dict, offset: float):
+    """Matched indices under the ``sync`` settings ``c`` and a time offset; too few pairs is an error."""
+    i_ref, i_est = sync.associate(
+        ref, est, policy=c["policy"], max_diff=c["max_diff"], offset=offset
+    )
+    max_diff = sync.POLICIES[c["policy"]] if c["max_diff"] is None else c["max_diff"]
+    if len(i_ref) < c["min_pairs"]:
+        lo, hi = max(ref.t[0], est.t[0] + offset), min(ref.t[-1], est.t[-1] + offset)
+        why = (
+            f"the stamps do not overlap: reference {ref.t[0]:.3f}..{ref.t[-1]:.3f} s,"
+            f" estimate {est.t[0] + offset:.3f}..{est.t[-1] + offset:.3f} s"
+            if lo >= hi
+            else f"they overlap for {hi - lo:.3f} s"
+        )
+        raise EpaError(
+            f"only {len(i_ref)} poses matched within {max_diff} s (offset {offset:.6f} s);"
+            f" {c['min_pairs']} needed; {why} (check the time unit, sync.offset or the files)"
+        )
+    info = {
+        "offset_s": offset,
+        "max_diff_s": max_diff,
+        "n_matched": int(len(i_ref)),
+        "n_ref": len(ref),
+        "n_est": len(est),
+    }
+    return i_ref, i_est, info
+
+
+def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
+    folder = data.folder
+    ref, est = data.cropped
+    (i_ref, i_est), info, curve = compute(ref, est, cfg)
+    data.sync_pairs, data.sync_record = (i_ref, i_est), info
+    data.sync_matched = (ref.select(i_ref), est.select(i_est))
+    folder.write_record(NAME, "sync.json", info)
+    if write_arrays:
+        folder.write_pairs(NAME, i_ref, i_est, ref.t, est.t)
+        folder.write_table(NAME, "xcorr.csv", curve or {"lag_s": [], "corr": []})
