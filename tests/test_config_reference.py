@@ -1,0 +1,72 @@
+"""The documentation is current: config/README.md is what scripts/config_reference.py writes from the
+schema, and every relative link in the README, config/README.md and docs/*.md reaches a file (and, with
+``#anchor``, a heading of it)."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+GENERATOR = ROOT / "scripts" / "config_reference.py"
+
+
+def _generator():
+    spec = importlib.util.spec_from_file_location("config_reference", GENERATOR)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_config_reference_is_current():
+    gen = _generator()
+    assert gen.SCHEMA.exists(), f"{gen.SCHEMA} not found: update SCHEMA at the top of {GENERATOR.name}"
+    current = gen.OUTPUT.read_text(encoding="utf-8")
+    assert current == gen.render(), f"config/README.md is stale: run `{gen.COMMAND}`"
+
+
+def test_config_reference_lists_every_default():
+    gen = _generator()
+    text = gen.OUTPUT.read_text(encoding="utf-8")
+    schema = gen.load_schema()
+    for section, sub in schema["properties"].items():
+        for key, prop in sub.get("properties", {}).items():
+            if "default" in prop:
+                assert f"| `{section}.{key}" in text, f"{section}.{key} missing: run `{gen.COMMAND}`"
+    assert "snakemake --cores 2 --configfile my.yaml" in text
+
+
+LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)\)")
+PAGES = [ROOT / "README.md", ROOT / "config" / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def _anchors(page: Path) -> set[str]:
+    """GitHub's heading anchors: lower case, punctuation dropped, spaces as hyphens."""
+    out = set()
+    in_code = False
+    for line in page.read_text(encoding="utf-8").splitlines():
+        if line.startswith("```"):
+            in_code = not in_code
+        if in_code or not line.startswith("#"):
+            continue
+        title = line.lstrip("#").strip().lower()
+        out.add(re.sub(r"[^\w\- ]", "", title).replace(" ", "-"))
+    return out
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_relative_links_resolve(page):
+    text = re.sub(r"```.*?```", "", page.read_text(encoding="utf-8"), flags=re.DOTALL)
+    broken = []
+    for target in LINK.findall(text):
+        if re.match(r"[a-z][a-z0-9+.-]*:", target):  # https:, mailto:, ...
+            continue
+        path, _, anchor = target.partition("#")
+        dest = (page.parent / path).resolve() if path else page
+        missing_anchor = bool(anchor) and dest.suffix == ".md" and anchor not in _anchors(dest)
+        if not dest.exists() or missing_anchor:
+            broken.append(target)
+    assert not broken, f"{page.relative_to(ROOT)}: broken links {broken}"
