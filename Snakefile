@@ -15,11 +15,11 @@ include: "rules/figures.smk"
 
 
 rule all:
+    default_target: True
     input:
         rules.tables.output,
         rules.figures.output,
         expand(manifest("report"), batch=BATCHES),
-    default_target: True
 
 
 onsuccess:

@@ -9,7 +9,11 @@ from snakemake.exceptions import WorkflowError
 from epa import readers as epa_readers
 from epa.outputs import report as epa_report, tables as epa_tables
 from epa.readers import bags as epa_bags
-from epa.workflow import chain as epa_chain, discovery as epa_discovery, jobs as epa_jobs
+from epa.workflow import (
+    chain as epa_chain,
+    discovery as epa_discovery,
+    jobs as epa_jobs,
+)
 from epa.workflow import settings as epa_settings
 
 try:  # a mistake in the config or the folders is one line, not a traceback
@@ -49,7 +53,8 @@ def batch_benchmark(stage):
 def batch_sources(batch):
     """The user's files a load job reads. One that does not exist (a dangling link) is left out, so
     its case fails with "file not found" instead of stopping the whole grid; so is one whose path has
-    braces, which Snakemake cannot take literally (it is still read; an edit to it is not noticed)."""
+    braces, which Snakemake cannot take literally (it is still read; an edit to it is not noticed).
+    """
     paths = {
         str(f)
         for k in BATCHES[batch]
@@ -57,7 +62,9 @@ def batch_sources(batch):
         for f in epa_bags.bag_files(p)  # a ROS 2 bag folder: its files
     }
     paths |= {p for k in BATCHES[batch] if (p := timing_of(CASE_BY_KEY[k]))}
-    return sorted(p for p in paths if os.path.exists(p) and "{" not in p and "}" not in p)
+    return sorted(
+        p for p in paths if os.path.exists(p) and "{" not in p and "}" not in p
+    )
 
 
 def timing_of(c):
@@ -83,7 +90,9 @@ def load_case(c):
 
 def stage_params(stage):
     """Everything a stage's result depends on, so a change re-runs exactly what it affects."""
-    if stage == "load":  # only load reads the user's files: a moved file or a source's settings re-run load onward
+    if (
+        stage == "load"
+    ):  # only load reads the user's files: a moved file or a source's settings re-run load onward
         cases = lambda wc: [load_case(CASE_BY_KEY[k]) for k in BATCHES[wc.batch]]
     else:
         cases = lambda wc: [{"key": k} for k in BATCHES[wc.batch]]

@@ -15,17 +15,19 @@ rule figures:
             for name in epa_report.GRID_FIGURES
             for fmt in ("png", "pdf")
         },
-    params:
-        results=RESULTS,
-        segments=EPA["metrics"]["segments"],
-        version=EPA_VERSION,
     log:
         f"{RESULTS}/logs/figures.log",
     benchmark:
         f"{RESULTS}/benchmarks/figures.tsv"
+    conda:
+        "../envs/epica.yaml"
     threads: 1
     resources:
         mem_mb=1500,
         runtime=5,
+    params:
+        results=lambda wc, input: os.path.dirname(input.summary),
+        segments=EPA["metrics"]["segments"],
+        version=EPA_VERSION,
     script:
         "../scripts/figures.py"

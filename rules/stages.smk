@@ -10,9 +10,6 @@ for stage_name in epa_chain.NAMES:
             **stage_input(stage_name),
         output:
             manifest=manifest(stage_name),
-        params:
-            stage=stage_name,
-            **stage_params(stage_name),
         log:
             batch_log(stage_name),
         benchmark:
@@ -20,6 +17,9 @@ for stage_name in epa_chain.NAMES:
         threads: 1
         resources:
             **STAGE_RESOURCES,
+        params:
+            **stage_params(stage_name),
+            stage=stage_name,
         run:
             # params.stage, not the loop variable: the loop has moved on when the job runs
             epa_jobs.run_job(

@@ -24,10 +24,20 @@ rule tables:
         ),
         comparison_tex=f"{RESULTS}/comparison.tex",
         success_curves=f"{RESULTS}/success_curves.csv",
+    log:
+        f"{RESULTS}/logs/tables.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/tables.tsv"
+    conda:
+        "../envs/epica.yaml"
+    threads: 1
+    resources:
+        mem_mb=lambda wc: 1000 + len(CASE_BY_KEY) // 10,
+        runtime=lambda wc: 2 + len(CASE_BY_KEY) // 2000,
     params:
         cases=lambda wc: sorted(CASE_BY_KEY),  # a function: braces in a name are not wildcards
         idle_truths=lambda wc: idle_truths(),
-        results=RESULTS,
+        results=lambda wc, output: os.path.dirname(output.summary),
         settings={
             "tables": EPA["tables"],
             "metrics": EPA["metrics"],
@@ -37,13 +47,5 @@ rule tables:
             "sources": EPA.get("sources"),
         },
         version=EPA_VERSION,
-    log:
-        f"{RESULTS}/logs/tables.log",
-    benchmark:
-        f"{RESULTS}/benchmarks/tables.tsv"
-    threads: 1
-    resources:
-        mem_mb=lambda wc: 1000 + len(CASE_BY_KEY) // 10,
-        runtime=lambda wc: 2 + len(CASE_BY_KEY) // 2000,
     script:
         "../scripts/tables.py"

@@ -17,7 +17,9 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-SCHEMA = ROOT / "src" / "epa" / "config.schema.yaml"  # the schema's one location (epa.settings.SCHEMA_PATH)
+SCHEMA = (
+    ROOT / "src" / "epa" / "workflow" / "config.schema.yaml"
+)  # epa.workflow.settings.SCHEMA_PATH
 OUTPUT = ROOT / "config" / "README.md"
 COMMAND = "python scripts/config_reference.py"
 
@@ -195,7 +197,12 @@ def default_of(key: str, node: dict, required: bool, fallback: str | None = None
 
 
 def rows(
-    node: dict, root: dict, prefix: str, required=(), fallbacks: dict | None = None, parent: str = ""
+    node: dict,
+    root: dict,
+    prefix: str,
+    required=(),
+    fallbacks: dict | None = None,
+    parent: str = "",
 ) -> list[tuple]:
     """(key, type, default, allowed, description) for every setting under ``node``, in schema order."""
     out = []
@@ -215,13 +222,14 @@ def rows(
         elif is_object and isinstance(extra, dict):
             placeholder = _placeholder(name)
             if _ref_name(extra):
+                ref = _ref_name(extra)
                 out.append(
                     (
                         f"{key}.{placeholder}",
                         type_of(extra, root),
                         "—",
                         "",
-                        f"One {name.removesuffix('s')}'s settings: see [{_ref_name(extra)}](#{_ref_name(extra)}-settings).",
+                        f"One {name.removesuffix('s')}'s settings: see [{ref}](#{ref}-settings).",
                     )
                 )
             else:
@@ -295,7 +303,9 @@ def render(schema: dict | None = None) -> str:
             fallbacks = {k: f"`load.{k}`" for k in sub.get("properties", {}) if k in load}
         elif sub.get("description"):
             text += " ".join(sub["description"].split()) + "\n\n"
-        parts.append(text + table(rows(sub, schema, f"<{name}>.", sub.get("required", ()), fallbacks)))
+        parts.append(
+            text + table(rows(sub, schema, f"<{name}>.", sub.get("required", ()), fallbacks))
+        )
     return "".join(parts)
 
 

@@ -23,7 +23,9 @@ def _generator():
 
 def test_config_reference_is_current():
     gen = _generator()
-    assert gen.SCHEMA.exists(), f"{gen.SCHEMA} not found: update SCHEMA at the top of {GENERATOR.name}"
+    assert gen.SCHEMA.exists(), (
+        f"{gen.SCHEMA} not found: update SCHEMA at the top of {GENERATOR.name}"
+    )
     current = gen.OUTPUT.read_text(encoding="utf-8")
     assert current == gen.render(), f"config/README.md is stale: run `{gen.COMMAND}`"
 
@@ -35,7 +37,9 @@ def test_config_reference_lists_every_default():
     for section, sub in schema["properties"].items():
         for key, prop in sub.get("properties", {}).items():
             if "default" in prop:
-                assert f"| `{section}.{key}" in text, f"{section}.{key} missing: run `{gen.COMMAND}`"
+                assert f"| `{section}.{key}" in text, (
+                    f"{section}.{key} missing: run `{gen.COMMAND}`"
+                )
     assert "snakemake --cores 2 --configfile my.yaml" in text
 
 

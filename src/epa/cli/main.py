@@ -1,5 +1,7 @@
-"""The ``epa`` command: ``epa eval`` (one case, every stage in one process), ``epa ape|rpe|res`` (evo's
-command lines, in cli_evo), ``epa traj``, ``epa fig``, ``epa config``, ``epa selftest`` and ``epa simulate``."""
+"""The ``epa`` command: ``epa eval`` (one case, every stage in one process), ``epa ape|rpe|res``
+(evo's command lines, in epa.evo), ``epa rpg`` (rpg_trajectory_evaluation's), ``epa traj``,
+``epa fig``, ``epa config``, ``epa selftest``, ``epa stage`` (one stage of one grid case) and
+``epa simulate``."""
 
 from __future__ import annotations
 
@@ -128,6 +130,15 @@ def _parser() -> argparse.ArgumentParser:
     st.add_argument("--trials", type=int, default=5, help="trials per noise level")
     st.add_argument("--scale", action="store_true", help="simulate and solve a scale (monocular)")
     st.add_argument("--seed", type=int, default=0)
+
+    sg = sub.add_parser(
+        "stage", help="run one stage of one grid case from the previous stage's artifacts"
+    )
+    sg.add_argument("name", help="the stage: load, crop, sync, calibrate, align, metrics, ...")
+    sg.add_argument("case_dir", help="the case folder, results/cases/<algorithm>/<dataset>/<run>")
+    sg.add_argument(
+        "--configfile", default="config/config.yaml", help="the grid's config (its settings apply)"
+    )
 
     s = sub.add_parser("simulate", help="write the deterministic example grid")
     s.add_argument("out", help="folder to write truth/, algorithms/ and manifest.json into")
@@ -385,6 +396,11 @@ def main(argv=None) -> int:
             print(_config_listing(args.config), end="")
         elif args.command == "selftest":
             _selftest(args)
+        elif args.command == "stage":
+            from epa.workflow import one_stage
+
+            elapsed, written = one_stage.run(args.name, args.case_dir, args.configfile)
+            print(f"{args.name}: {elapsed:.3f} s, wrote " + ", ".join(map(str, written)))
         elif args.command == "simulate":
             from epa import simulate
 

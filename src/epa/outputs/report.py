@@ -83,7 +83,7 @@ def case_bundles(data: CaseData) -> dict[str, dict]:
     )
     n = data.nees
     if n:
-        kk = figures.thin(len(n["t"]))  # noqa: the bound is drawn as a band, 1000 samples suffice
+        kk = figures.thin(len(n["t"]))  # drawn as a band: 1000 samples suffice
         out["sigma3"] = figures.bundle(
             "sigma3",
             "Per-axis error and its ±3σ bound",

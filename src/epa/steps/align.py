@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 
@@ -10,7 +11,17 @@ from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 
-METHODS = ("se3", "sim3", "posyaw", "none")
+
+class Method(StrEnum):
+    """Step 3's fit: rigid, rigid with scale, position and yaw (4-DoF), or none."""
+
+    SE3 = "se3"
+    SIM3 = "sim3"
+    POSYAW = "posyaw"
+    NONE = "none"
+
+
+METHODS = tuple(Method)
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ rejection). Translation: (R_A - I) t_X - s R_X t_B = -t_A, linear in t_X and the
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
@@ -16,16 +17,18 @@ from epa.core import geometry
 from epa.core.stamps import closest_pairs
 from epa.core.trajectory import Trajectory
 
-# What Step 2 concluded; anything but "trusted" means the extrinsic was not applied.
-STEP2_STATUS = (
-    "trusted",
-    "disabled",
-    "not run",
-    "too little motion",
-    "unobservable",
-    "large residual",
-    "uncertain",
-)
+
+class Step2Status(StrEnum):
+    """What Step 2 concluded; anything but trusted means the extrinsic was not applied. The values are
+    the strings calibrate.json and summary.csv hold."""
+
+    TRUSTED = "trusted"
+    DISABLED = "disabled"
+    NOT_RUN = "not run"
+    TOO_LITTLE_MOTION = "too little motion"
+    UNOBSERVABLE = "unobservable"
+    LARGE_RESIDUAL = "large residual"
+    UNCERTAIN = "uncertain"
 
 
 @dataclass
@@ -35,7 +38,7 @@ class Extrinsic:
     scale: float = 1.0
     trusted: bool = False
     reason: str = ""
-    status: str = "trusted"  # one of STEP2_STATUS
+    status: str = "trusted"  # a Step2Status
     info: dict = field(default_factory=dict)
 
     def apply(self, est: Trajectory) -> Trajectory:
@@ -170,7 +173,7 @@ def _fit(
             Extrinsic(
                 trusted=False,
                 reason=f"only {len(i)} motion pairs ({min_pairs} needed)",
-                status="too little motion",
+                status=Step2Status.TOO_LITTLE_MOTION,
                 info=info,
             ),
             None,
@@ -192,7 +195,7 @@ def _fit(
                 trusted=False,
                 reason=f"too little rotation: {int(use.sum())} pairs rotate more than"
                 f" {min_rotation_deg} deg ({min_pairs} needed)",
-                status="too little motion",
+                status=Step2Status.TOO_LITTLE_MOTION,
                 info=info,
             ),
             None,
@@ -289,15 +292,14 @@ def _verdict(
         + residual
         + uncertain
     )
-    ext.status = (
-        "unobservable"
-        if unobservable
-        else "large residual"
-        if residual
-        else "uncertain"
-        if uncertain
-        else "trusted"
-    )
+    if unobservable:
+        ext.status = Step2Status.UNOBSERVABLE
+    elif residual:
+        ext.status = Step2Status.LARGE_RESIDUAL
+    elif uncertain:
+        ext.status = Step2Status.UNCERTAIN
+    else:
+        ext.status = Step2Status.TRUSTED
     ext.trusted = not problems
     ext.reason = "; ".join(problems) if problems else "solved"
     return ext

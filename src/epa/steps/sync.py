@@ -7,6 +7,7 @@ reference clock (``t_ref = t_est + offset``), as evo's ``offset_2``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
@@ -14,8 +15,6 @@ from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.stamps import nearest_from
 from epa.core.trajectory import Trajectory
-
-POLICIES = {"ov_eval": 0.02, "evo": 0.01}  # default max_diff (s) of each association policy
 
 
 # ----------------------------------------------------------------------------- association
@@ -96,7 +95,7 @@ class OffsetEstimate:
     estimated: float | None  # what the correlation found (None when it could not run)
     used: bool  # whether the estimate was trusted and used
     reason: str  # why it was (not) used
-    status: str = "trusted"  # one of STEP1_STATUS
+    status: str = "trusted"  # a Step1Status
     std: float | None = None  # standard deviation of the estimate (s), delete-one-block jackknife
     peak_corr: float = float("nan")
     peak_ratio: float = float("nan")
@@ -113,18 +112,29 @@ class OffsetEstimate:
         return {k: v for k, v in self.__dict__.items() if not k.startswith("curve_")}
 
 
-# What Step 1 concluded; anything but "trusted" means the estimate was not used.
-STEP1_STATUS = (
-    "trusted",
-    "disabled",
-    "too little motion",
-    "no overlap",
-    "at window edge",
-    "outside window",
-    "weak peak",
-    "ambiguous",
-    "uncertain",
-)
+class Step1Status(StrEnum):
+    """What Step 1 concluded; anything but trusted means the estimate was not used. The values are
+    the strings sync.json and summary.csv hold."""
+
+    TRUSTED = "trusted"
+    DISABLED = "disabled"
+    TOO_LITTLE_MOTION = "too little motion"
+    NO_OVERLAP = "no overlap"
+    AT_WINDOW_EDGE = "at window edge"
+    OUTSIDE_WINDOW = "outside window"
+    WEAK_PEAK = "weak peak"
+    AMBIGUOUS = "ambiguous"
+    UNCERTAIN = "uncertain"
+
+
+class Policy(StrEnum):
+    """How poses are associated by stamp: ov_eval's greedy one-to-one, or evo's nearest with reuse."""
+
+    OV_EVAL = "ov_eval"
+    EVO = "evo"
+
+
+POLICIES = {Policy.OV_EVAL: 0.02, Policy.EVO: 0.01}  # default max_diff (s) of each policy
 JACKKNIFE_BLOCKS = 10
 
 
@@ -235,6 +245,62 @@ def _jackknife_std(
     return float(np.hypot(jack, dt / np.sqrt(12.0)))
 
 
+def _speed_signals(ref: Trajectory, est: Trajectory, speed_interval: float):
+    """Each side's angular speed over the same interval: the coarser trajectory only sees chord rates
+    over its own sample interval, so the finer one is measured over that interval too (the magnitude
+    of a mean rate is not the mean of magnitudes), and over at least ``speed_interval``: differencing
+    consecutive noisy orientations turns white orientation noise into speed noise that grows with the
+    rate and biases a gentle motion's peak."""
+    dt_ref, dt_est = np.median(np.diff(ref.t)), np.median(np.diff(est.t))
+    interval = max(dt_ref, dt_est, speed_interval)
+    t_a, w_a = angular_speed(ref, max(1, int(round(interval / dt_ref))))
+    t_b, w_b = angular_speed(est, max(1, int(round(interval / dt_est))))
+    return t_a, w_a, t_b, w_b
+
+
+def _on_grid(grid: np.ndarray, ts: np.ndarray, w: np.ndarray):
+    """A signal on the correlation grid, zero-mean inside its support, exactly zero outside it, of
+    unit energy; and its support."""
+    inside = (grid >= ts[0]) & (grid <= ts[-1])
+    s = np.interp(grid, ts, w)
+    s = np.where(inside, s - w.mean(), 0.0)
+    return s / (np.sqrt(np.sum(s * s)) + 1e-300), inside
+
+
+def _normalised_correlation(a, in_a, b, in_b):
+    """Every lag the FFT gives without wrapping (|lag| < n), so a better match beyond the window is
+    seen rather than a lesser one inside it reported, and the correlation at each: corr[k] = sum_m
+    a[m + k] b[m] (the estimate signal shifted later by k samples matches the reference), divided by
+    the energy of both signals under the overlap. The estimate usually covers only part of the
+    reference, so that slice's energy changes with the lag and, for slow motion, would tilt the peak
+    by tens of ms. Supports are index intervals: the energies are prefix-sum differences. Lags where
+    less than half the shorter signal overlaps get -1."""
+    n = len(a)
+    nfft = 1 << int(np.ceil(np.log2(2 * n)))
+    full = np.fft.irfft(np.fft.rfft(a, nfft) * np.conj(np.fft.rfft(b, nfft)), nfft)
+    lags = np.arange(-(n - 1), n)
+    corr = full[lags % nfft]
+    (a0, a1), (b0, b1) = _span(in_a), _span(in_b)
+    energy_a = _window_sums(a * a, b0 + lags, b1 + lags)  # a under the shifted support of b
+    energy_b = _window_sums(b * b, a0 - lags, a1 - lags)  # b under the shifted support of a
+    overlap = np.minimum(b1, a1 - lags) - np.maximum(b0, a0 - lags) + 1
+    enough = overlap >= 0.5 * (min(a1 - a0, b1 - b0) + 1)
+    corr = np.where(enough, corr / np.sqrt(np.maximum(energy_a * energy_b, 1e-300)), -1.0)
+    return lags, corr, (b0, b1)
+
+
+def _main_lobe(corr: np.ndarray, k: int) -> tuple[int, int, float]:
+    """The main lobe around the peak ``k`` (from the nearest local minimum on its left to the nearest
+    on its right) and the second-best peak: the highest local maximum outside it (0 when none)."""
+    inner = corr[1:-1]
+    minima = np.flatnonzero((inner <= corr[:-2]) & (inner <= corr[2:])) + 1
+    maxima = _local_maxima(corr)
+    left = minima[minima < k].max(initial=0)
+    right = minima[minima > k].min(initial=len(corr) - 1)
+    outside = maxima[(maxima < left) | (maxima > right)]
+    return left, right, float(corr[outside].max()) if len(outside) else 0.0
+
+
 def estimate_offset(
     ref: Trajectory,
     est: Trajectory,
@@ -255,6 +321,25 @@ def estimate_offset(
     deviation comes from a delete-one-block jackknife (:func:`_jackknife_std`). When the motion is
     too weak, the peak weak, ambiguous, on the edge of the window or its deviation above
     ``max_std``, the fallback offset is returned with the status and the reason.
+
+    Parameters
+    ----------
+    ref, est : Trajectory
+        The reference and the estimate, each on its own clock.
+    window : float
+        Offsets searched, ±s; a clearly better match beyond it is named, never used.
+    resample_dt, max_samples
+        The correlation grid's step (s), coarsened so the grid has at most ``max_samples``.
+    min_motion, min_corr, min_peak_ratio, max_std
+        The thresholds of the statuses (rad/s, correlation, best/second peak, s).
+    speed_interval : float
+        Angular speed is measured over at least this interval (s).
+    fallback : float
+        The offset returned when the estimate is not trusted.
+
+    Returns
+    -------
+    OffsetEstimate
     """
 
     def fail(status, reason, **kw):
@@ -268,74 +353,36 @@ def estimate_offset(
         )
 
     if len(ref) < 4 or len(est) < 4:
-        return fail("too little motion", "too few poses for a correlation")
-    # The coarser trajectory only sees chord rates over its own sample interval: measure the finer
-    # one over the same interval (the magnitude of a mean rate is not the mean of magnitudes).
-    dt_ref, dt_est = np.median(np.diff(ref.t)), np.median(np.diff(est.t))
-    # and over at least speed_interval: differencing consecutive noisy orientations turns white
-    # orientation noise into speed noise that grows with the rate and biases a gentle motion's peak.
-    interval = max(dt_ref, dt_est, speed_interval)
-    t_a, w_a = angular_speed(ref, max(1, int(round(interval / dt_ref))))
-    t_b, w_b = angular_speed(est, max(1, int(round(interval / dt_est))))
-    motion_a, motion_b = float(np.std(w_a)), float(np.std(w_b))
-    if min(motion_a, motion_b) < min_motion:
+        return fail(Step1Status.TOO_LITTLE_MOTION, "too few poses for a correlation")
+    t_a, w_a, t_b, w_b = _speed_signals(ref, est, speed_interval)
+    motion = dict(ref_motion_rad_s=float(np.std(w_a)), est_motion_rad_s=float(np.std(w_b)))
+    weakest = min(motion.values())
+    if weakest < min_motion:
         return fail(
-            "too little motion",
-            f"too little rotational motion (std of angular speed {min(motion_a, motion_b):.3g}"
+            Step1Status.TOO_LITTLE_MOTION,
+            f"too little rotational motion (std of angular speed {weakest:.3g}"
             f" rad/s < {min_motion})",
-            ref_motion_rad_s=motion_a,
-            est_motion_rad_s=motion_b,
+            **motion,
         )
     if t_b[0] > t_a[-1] + window or t_b[-1] < t_a[0] - window:
         return fail(
-            "no overlap",
+            Step1Status.NO_OVERLAP,
             f"the stamps do not overlap within the ±{window} s search window",
-            ref_motion_rad_s=motion_a,
-            est_motion_rad_s=motion_b,
+            **motion,
         )
     w_a, w_b = _clip_spikes(w_a), _clip_spikes(w_b)
     start = min(t_a[0], t_b[0]) - window
     end = max(t_a[-1], t_b[-1]) + window
     dt = max(resample_dt, (end - start) / max_samples)
     grid = start + dt * np.arange(int(np.ceil((end - start) / dt)) + 1)
-
-    def on_grid(ts, w):
-        inside = (grid >= ts[0]) & (grid <= ts[-1])
-        s = np.interp(grid, ts, w)
-        s = np.where(inside, s - w.mean(), 0.0)
-        return s / (np.sqrt(np.sum(s * s)) + 1e-300), inside
-
-    a, in_a = on_grid(t_a, w_a)
-    b, in_b = on_grid(t_b, w_b)
+    a, in_a = _on_grid(grid, t_a, w_a)
+    b, in_b = _on_grid(grid, t_b, w_b)
     if in_a.sum() < 4 or in_b.sum() < 4:
         return fail(
-            "no overlap",
-            f"too few samples on the {dt:.3g} s correlation grid",
-            ref_motion_rad_s=motion_a,
-            est_motion_rad_s=motion_b,
+            Step1Status.NO_OVERLAP, f"too few samples on the {dt:.3g} s correlation grid", **motion
         )
-    n = len(grid)
-    nfft = 1 << int(np.ceil(np.log2(2 * n)))
-    # corr[k] = sum_m a[m + k] b[m]: the estimate signal shifted later by k samples matches the reference.
-    spec = np.fft.rfft(a, nfft) * np.conj(np.fft.rfft(b, nfft))
-    full = np.fft.irfft(spec, nfft)
+    lags_all, corr_all, span_b = _normalised_correlation(a, in_a, b, in_b)
     kmax = int(round(window / dt))
-    # Every lag the FFT gives without wrapping (|lag| < n), so a better match beyond the window is
-    # seen rather than a lesser one inside it reported.
-    lags_all = np.arange(-(n - 1), n)
-    corr_all = full[lags_all % nfft]
-    # Normalised cross-correlation: divide each lag by the energy of both signals under the overlap.
-    # The estimate usually covers only part of the reference, so that slice's energy changes with
-    # the lag and, for slow motion, would tilt the peak by tens of ms. Supports are index intervals:
-    # the energies are prefix-sum differences.
-    (a0, a1), (b0, b1) = _span(in_a), _span(in_b)
-    energy_a = _window_sums(a * a, b0 + lags_all, b1 + lags_all)  # a under the shifted support of b
-    energy_b = _window_sums(b * b, a0 - lags_all, a1 - lags_all)  # b under the shifted support of a
-    overlap = np.minimum(b1, a1 - lags_all) - np.maximum(b0, a0 - lags_all) + 1
-    enough = overlap >= 0.5 * (
-        min(a1 - a0, b1 - b0) + 1
-    )  # at least half the shorter signal overlaps
-    corr_all = np.where(enough, corr_all / np.sqrt(np.maximum(energy_a * energy_b, 1e-300)), -1.0)
     maxima_all = _local_maxima(corr_all)
     beyond = maxima_all[np.abs(lags_all[maxima_all]) > kmax]
     best_beyond = float(corr_all[beyond].max()) if len(beyond) else -1.0
@@ -344,34 +391,24 @@ def estimate_offset(
     k, frac = _peak(corr)
     peak = float(corr[k])
     estimated = float((lags[k] + frac) * dt)
-    # Second-best peak: the highest local maximum of the window's curve outside the main lobe, the
-    # lobe reaching from the nearest local minimum on the left of the peak to the nearest on the right.
-    inner = corr[1:-1]
-    minima = np.flatnonzero((inner <= corr[:-2]) & (inner <= corr[2:])) + 1
-    maxima = _local_maxima(corr)
-    left = minima[minima < k].max(initial=0)
-    right = minima[minima > k].min(initial=len(corr) - 1)
-    outside = maxima[(maxima < left) | (maxima > right)]
-    second = float(corr[outside].max()) if len(outside) else 0.0
+    left, right, second = _main_lobe(corr, k)
     ratio = peak / second if second > 0 else float("inf")
-    curve = dict(
+    found = dict(
         curve_lag=lags * dt,
         curve_corr=corr,
         peak_corr=peak,
         peak_ratio=ratio,
         beyond_window_corr=best_beyond,
-        ref_motion_rad_s=motion_a,
-        est_motion_rad_s=motion_b,
+        **motion,
         dt=dt,
+        estimated=estimated,
     )
-    at_edge = abs(lags[k]) >= kmax - 1
-    if at_edge:  # never clamped: the true offset may lie beyond the window
+    if abs(lags[k]) >= kmax - 1:  # never clamped: the true offset may lie beyond the window
         return fail(
-            "at window edge",
+            Step1Status.AT_WINDOW_EDGE,
             f"correlation peak at the edge of the ±{window} s search window"
             " (the offset may lie outside it: widen sync.window)",
-            estimated=estimated,
-            **curve,
+            **found,
         )
     # Beyond the window only a clearly better and itself strong match counts: quasi-periodic motion (a
     # figure-8, a pendulum) repeats itself tens of seconds later almost as well, and that is not this
@@ -379,38 +416,30 @@ def estimate_offset(
     if best_beyond > max(peak * min_peak_ratio, min_corr):
         lag_beyond = float(lags_all[beyond[np.argmax(corr_all[beyond])]] * dt)
         return fail(
-            "outside window",
+            Step1Status.OUTSIDE_WINDOW,
             f"a better match ({best_beyond:.3f} at {lag_beyond:+.3f} s) lies outside the"
             f" ±{window} s search window than inside it ({peak:.3f}): widen sync.window",
-            estimated=estimated,
-            **curve,
+            **found,
         )
     if peak < min_corr:
-        return fail(
-            "weak peak",
-            f"correlation peak {peak:.3f} below {min_corr}",
-            estimated=estimated,
-            **curve,
-        )
+        return fail(Step1Status.WEAK_PEAK, f"correlation peak {peak:.3f} below {min_corr}", **found)
     if ratio < min_peak_ratio:
         return fail(
-            "ambiguous",
+            Step1Status.AMBIGUOUS,
             f"ambiguous peak: best/second = {ratio:.3f} < {min_peak_ratio}",
-            estimated=estimated,
-            **curve,
+            **found,
         )
     # the jackknife looks for replicate peaks within the main lobe, at most 0.25 s either side
     reach = max(3, min(k - left, right - k, int(round(0.25 / dt))))
-    std = _jackknife_std(a, b, (b0, b1), int(lags[k]), reach, dt)
-    curve["std"] = std
+    found["std"] = std = _jackknife_std(a, b, span_b, int(lags[k]), reach, dt)
     if not std <= max_std:
         return fail(
-            "uncertain",
+            Step1Status.UNCERTAIN,
             f"offset {estimated * 1000:.1f} ms too uncertain: std {std * 1000:.3g} ms >"
             f" {max_std * 1000:.3g} ms",
-            estimated=estimated,
-            **curve,
+            **found,
         )
+    found.pop("estimated")
     return OffsetEstimate(
-        offset=estimated, estimated=estimated, used=True, reason="estimated", **curve
+        offset=estimated, estimated=estimated, used=True, reason="estimated", **found
     )

@@ -13,7 +13,7 @@ from epa.metrics.drift import CURVE_FACTORS
 from epa.outputs.tables.cells import _num, _ok_runs, _stat
 from epa.outputs.tables.results import CaseResult
 
-SUMMARY_FIXED = [
+BASE_COLUMNS = [
     "algorithm",
     "dataset",
     "run",
@@ -39,9 +39,17 @@ SUMMARY_FIXED = [
     "knee_threshold_m",
     "fail_segments",
     "diverged_at_s",
-    *(column for metric in registry.REGISTRY for column in metric.SUMMARY_COLUMNS),
-    "notes",
 ]
+
+
+def columns(segments) -> list[str]:
+    """summary.csv's columns: the base ones, each registered metric's, notes, then per segment length."""
+    metric_cols = [col for metric in registry.REGISTRY for col in metric.SUMMARY_COLUMNS]
+    seg_cols = []
+    for s in segments:
+        L = segment_key(s)
+        seg_cols += [f"rpe_{L}m_trans_mean_m", f"rpe_{L}m_rot_mean_deg", f"drift_rate_{L}m_pct"]
+    return BASE_COLUMNS + metric_cols + ["notes"] + seg_cols
 
 
 def _largest(values):
@@ -63,10 +71,6 @@ def _confidence(m: dict) -> dict:
 
 
 def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict]]:
-    seg_cols = []
-    for s in segments:
-        L = segment_key(s)
-        seg_cols += [f"rpe_{L}m_trans_mean_m", f"rpe_{L}m_rot_mean_deg", f"drift_rate_{L}m_pct"]
     rows = []
     for c in grid:
         m, d = c.metrics, c.drift
@@ -101,7 +105,7 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
                 row[f"rpe_{L}m_rot_mean_deg"] = _stat(m, "rpe_distance", L, "rot_deg", "mean")
                 row[f"drift_rate_{L}m_pct"] = _stat(m, "drift_rate_pct", L)
         rows.append(row)
-    return SUMMARY_FIXED + seg_cols, rows
+    return columns(segments), rows
 
 
 def records_csv(cols: list[str], rows: list[dict]) -> str:

@@ -52,7 +52,11 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict, croppe
     info: dict = {
         "mode": cfg["mode"],
         "extrinsic": None,
-        "step2_status": "disabled" if cfg["mode"] == "ov_eval" or not c["enabled"] else "not run",
+        "step2_status": (
+            calibration.Step2Status.DISABLED
+            if cfg["mode"] == "ov_eval" or not c["enabled"]
+            else calibration.Step2Status.NOT_RUN
+        ),
     }
     ext = None
     if plan["eval_source"] == "epa" and c["enabled"]:

@@ -37,7 +37,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict):
     else:
         info["step1"] = {
             "used": False,
-            "status": "disabled",
+            "status": sync.Step1Status.DISABLED,
             "reason": "disabled",
             "offset": c["offset"],
             "estimated": None,
