@@ -78,7 +78,7 @@ def associate(first, second, offset: float = 0.0, max_difference: float = MAX_DI
 def quaternion_matrix(q: np.ndarray) -> np.ndarray:
     """rpg's ``quaternion_matrix`` for each row of an (N, 4) array: (N, 4, 4), normalising; ~0 -> identity."""
     q = np.array(q, dtype=float, copy=True).reshape(-1, 4)
-    nq = np.einsum("ij,ij->i", q, q)
+    nq = np.sum(q * q, 1)
     small = nq < EPS
     q = q * np.sqrt(2.0 / np.where(small, 1.0, nq))[:, None]
     o = q[:, :, None] * q[:, None, :]
@@ -176,8 +176,8 @@ def align(p_es, p_gt, q_es, q_gt, method: str, n_aligned: int = -1):
 
 def apply_alignment(s, r, t, p_es, q_es):
     """rpg's ``Trajectory.align_trajectory`` loop: p -> s R p + t, q -> q(R R(q)) through its 4x4 forms."""
-    p_al = s * np.dot(p_es, r.T) + t
-    rot = np.einsum("ij,njk->nik", r, quaternion_matrix(q_es)[:, :3, :3])
+    p_al = s * np.matmul(r, p_es[:, :, None])[:, :, 0] + t
+    rot = np.matmul(r, quaternion_matrix(q_es)[:, :3, :3])
     m = np.zeros((len(q_es), 4, 4))
     m[:, :3, :3] = rot
     m[:, 3, 3] = 1.0
