@@ -110,7 +110,7 @@ def read_eval_cfg(case_dir: Path) -> tuple[str, int]:
     kind, n = cfg["align_type"], cfg["align_num_frames"]
     if kind not in P.ALIGN_TYPES:
         raise EpaError(f"align_type {kind!r} is not one of {', '.join(P.ALIGN_TYPES)}", path=path)
-    if isinstance(n, bool) or not isinstance(n, int) or not (n == -1 or n >= 1):
+    if isinstance(n, bool) or not isinstance(n, int) or not (n == -1 or n >= 1 or kind == "none"):
         raise EpaError(f"align_num_frames {n!r} must be -1 (all) or a positive integer", path=path)
     if kind == "sim3" and n == 1:
         raise EpaError("align_type sim3 needs align_num_frames >= 2 or -1", path=path)
