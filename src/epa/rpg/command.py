@@ -213,7 +213,7 @@ def _savetxt_column(path: Path, values, fmt: str) -> None:
 
 def run_case(case_dir, est_type: str = "traj_est", mul_trials: int | None = None) -> dict:
     """Evaluate one rpg folder for one estimate type and write rpg's files. Returns ``trials``
-    {index: evaluate() result}, ``success`` (indices), ``mt`` (multi-trial statistics or None) and
+    {index: evaluate() result}, ``success`` and ``skipped`` (indices), ``mt`` (multi-trial statistics or None) and
     ``written`` (paths)."""
     case = Path(case_dir)
     if not case.is_dir():
@@ -275,6 +275,7 @@ def run_case(case_dir, est_type: str = "traj_est", mul_trials: int | None = None
     return {
         "trials": trials,
         "success": success,
+        "skipped": [i for i in range(n_trials) if i not in trials],
         "mt": mt,
         "written": list(dict.fromkeys(written)),
         "align_str": align_str,
@@ -367,3 +368,7 @@ def run(args) -> None:
             f"epa rpg: {est_type} {res['align_str']}: {len(res['success'])} trial(s) evaluated "
             f"(first: translation RMSE {first:.6f} m); wrote {len(res['written'])} files to {res['save_dir']}"
         )
+        if res["skipped"]:
+            print(
+                f"epa rpg: {est_type}: trials {res['skipped']} skipped (estimate missing or no matched pose)"
+            )
