@@ -1,4 +1,4 @@
-"""``epa rpg CASE_DIR``: rpg_trajectory_evaluation's ``analyze_trajectory_single.py`` on its own folder layout.
+"""``epa rpg CASE_DIR``: rpg_trajectory_evaluation's ``analyze_trajectory_single.py`` on rpg's folder layout.
 
 Reads ``stamped_groundtruth.txt``, ``stamped_traj_estimate.txt`` (``--mul_trials N``:
 ``stamped_traj_estimate0.txt`` .. ``N-1``; other ``--est_types`` use rpg's other names), ``eval_cfg.yaml``
@@ -213,7 +213,8 @@ def _savetxt_column(path: Path, values, fmt: str) -> None:
 
 def run_case(case_dir, est_type: str = "traj_est", mul_trials: int | None = None) -> dict:
     """Evaluate one rpg folder for one estimate type and write rpg's files. Returns ``trials``
-    {index: evaluate() result}, ``success`` and ``skipped`` (indices), ``mt`` (multi-trial statistics or None) and
+    {index: evaluate() result}, ``success`` and ``skipped`` (indices), ``mt`` (multi-trial statistics or
+    None) and
     ``written`` (paths)."""
     case = Path(case_dir)
     if not case.is_dir():
@@ -330,7 +331,7 @@ def write_multi_trial(save: Path, align_str: str, mt: dict, success: list[int]) 
 
 
 def add_parser(sub) -> None:
-    """``epa rpg``: rpg's ``analyze_trajectory_single.py`` command line (plotting options accepted, ignored)."""
+    """``epa rpg``: rpg's ``analyze_trajectory_single.py`` command line (plot options accepted, ignored)."""
     r = sub.add_parser(
         "rpg", help="rpg_trajectory_evaluation's analyze_trajectory_single.py on an rpg folder"
     )

@@ -29,7 +29,8 @@ The quirks kept on purpose (each is rpg's behaviour, not an oversight here):
 * relative errors use the *unaligned* estimate; only the Sim3 scale (1 for the other alignments) multiplies
   the estimate's relative translation. The error ``inv(T_gt1_gt2) * T_es1_es2`` is conjugated by the
   estimate's end orientation; yaw and gravity (pitch/roll norm) are its 'rzyx' Euler angles in degrees,
-  ``rot`` its angle (arccos of the clipped trace), ``trans_perc = |t| / d * 100``, ``rot_deg_per_m = rot / d``.
+  ``rot`` its angle (arccos of the clipped trace), ``trans_perc = |t| / d * 100``,
+  ``rot_deg_per_m = rot / d``.
 * statistics (``results_writer.compute_statistics``): population std, and integer zeros with
   ``num_samples: 0`` for an empty vector.
 
@@ -204,12 +205,13 @@ def truncate(number: float, decimals: int = 0) -> float:
 
 
 def boxplot_distances(traj_length: float, percentages=BOXPLOT_PERCENTAGES) -> list[float]:
-    """rpg's ``compute_boxplot_distances``: each percentage of the groundtruth length, truncated to 2 decimals."""
+    """rpg's ``compute_boxplot_distances``: each percentage of the groundtruth length, truncated to 2
+    decimals."""
     return [truncate(pct * traj_length, 2) for pct in percentages]
 
 
 def comparison_indices(distances: np.ndarray, dist: float, max_dist_diff: float) -> list[int]:
-    """rpg's ``compute_comparison_indices_length``: the end index for each start that has one (see module doc).
+    """rpg's ``compute_comparison_indices_length``: the end index of each start that has one (module doc).
 
     rpg scans i >= start for the first minimum of |distances[i] - (d_start + dist)| below max_dist_diff;
     distances never decrease, so that minimum is found by bisection (first index of the value just below or
