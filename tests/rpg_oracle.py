@@ -15,7 +15,14 @@ import numpy as np
 import yaml
 
 _EPS = np.finfo(float).eps * 4.0
-kRelMetrics = ["rel_trans", "rel_trans_perc", "rel_yaw", "rel_rot", "rel_gravity", "rel_rot_deg_per_m"]
+kRelMetrics = [
+    "rel_trans",
+    "rel_trans_perc",
+    "rel_yaw",
+    "rel_rot",
+    "rel_gravity",
+    "rel_rot_deg_per_m",
+]
 kRelMetricLables = ["trans", "trans_perc", "yaw", "rot", "gravity", "rot_deg_per_m"]
 kNsToEstFnMapping = {
     "traj_est": "stamped_traj_estimate",
@@ -159,7 +166,7 @@ def associate(first_stamps, second_stamps, offset, max_difference):
     matches = []
     first_free = set(range(len(first_stamps)))
     second_free = set(range(len(second_stamps)))
-    for diff, idx_a, idx_b in potential_matches:
+    for _diff, idx_a, idx_b in potential_matches:
         if idx_a in first_free and idx_b in second_free:
             first_free.remove(idx_a)
             second_free.remove(idx_b)
@@ -312,7 +319,9 @@ def compute_angle(transform):
 
 
 # --- compute_trajectory_errors.py ---
-def compute_relative_error(p_es, q_es, p_gt, q_gt, T_cm, dist, max_dist_diff, accum_distances=(), scale=1.0):
+def compute_relative_error(
+    p_es, q_es, p_gt, q_gt, T_cm, dist, max_dist_diff, accum_distances=(), scale=1.0
+):
     if len(accum_distances) == 0:
         accum_distances = get_distance_from_start(p_gt)
     comparisons = compute_comparison_indices_length(accum_distances, dist, max_dist_diff)
@@ -456,7 +465,15 @@ def trajectory(results_dir, nm_est, preset_boxplot_distances=()):
         if rel_errors and subtraj_len in rel_errors:
             continue
         _, e_tr, e_tr_perc, e_yaw, e_grav, e_r, e_r_m = compute_relative_error(
-            p_es, q_es, p_gt, q_gt, np.identity(4), subtraj_len, 0.2 * subtraj_len, accum_distances, scale
+            p_es,
+            q_es,
+            p_gt,
+            q_gt,
+            np.identity(4),
+            subtraj_len,
+            0.2 * subtraj_len,
+            accum_distances,
+            scale,
         )
         rel_errors[subtraj_len] = {
             "rel_trans": e_tr,

@@ -13,12 +13,17 @@ import pytest
 import rpg_oracle
 import yaml
 
-from epa.errors import EpaError
+from epa.core.errors import EpaError
 from epa.rpg import command, protocol
 
 EXPECTED = Path(__file__).with_name("rpg_expected.yaml")
 RPG = "uzh-rpg_rpg_trajectory_evaluation/results"
-GT = {"MH_01": "MH_01_easy", "MH_03": "MH_03_medium", "MH_04": "MH_04_difficult", "MH_05": "MH_05_difficult"}
+GT = {
+    "MH_01": "MH_01_easy",
+    "MH_03": "MH_03_medium",
+    "MH_04": "MH_04_difficult",
+    "MH_05": "MH_05_difficult",
+}
 
 
 def _src(alg: str, seq: str) -> str:
@@ -26,7 +31,9 @@ def _src(alg: str, seq: str) -> str:
     return f"{RPG}/{group}/laptop/{alg}/laptop_{alg}_{seq}"
 
 
-def make_case(data: Path, root: Path, alg: str, seq: str, ests: dict, align_type, n, window=None) -> Path:
+def make_case(
+    data: Path, root: Path, alg: str, seq: str, ests: dict, align_type, n, window=None
+) -> Path:
     """An rpg folder in root: symlinks to the shared data (groundtruth = OpenVINS's EuRoC body GT, the
     same EuRoC state the upstream stamped_groundtruth.txt holds), eval_cfg.yaml, start_end_time.yaml."""
     case = root / f"{alg}_{seq}_{align_type}_{n}"
@@ -38,7 +45,9 @@ def make_case(data: Path, root: Path, alg: str, seq: str, ests: dict, align_type
         (case / dst).symlink_to(data / _src(alg, seq) / src)
     (case / "eval_cfg.yaml").write_text(f"align_type: {align_type}\nalign_num_frames: {n}\n")
     if window:
-        (case / "start_end_time.yaml").write_text(f"start_time_sec: {window[0]}\nend_time_sec: {window[1]}\n")
+        (case / "start_end_time.yaml").write_text(
+            f"start_time_sec: {window[0]}\nend_time_sec: {window[1]}\n"
+        )
     return case
 
 
@@ -106,7 +115,9 @@ def test_rpg_multi_trial_matches_oracle(data, tmp_path):
     for i in ref["success"]:
         for lab in ("trans", "rot", "scale"):
             assert_stats(
-                ours["trials"][i]["abs_stats"][lab], ref["trials"][i]["abs_stats"][lab], f"{i} {lab}"
+                ours["trials"][i]["abs_stats"][lab],
+                ref["trials"][i]["abs_stats"][lab],
+                f"{i} {lab}",
             )
     for et in ("rmse_trans", "rmse_rot", "rmse_scale"):
         assert_stats(ours["mt"]["abs_stats"][et], ref["mt"]["abs_stats"][et], et)
@@ -229,7 +240,9 @@ def transformed(traj, s, r, t):
     out[:, 1:4] = (traj[:, 1:4] - t) @ r / s
     rq = protocol.quaternion_matrix(traj[:, 4:8])[:, :3, :3]
     out[:, 4:8] = [
-        protocol.quaternion_from_matrix(np.block([[r.T @ m, np.zeros((3, 1))], [np.zeros((1, 3)), 1]]))
+        protocol.quaternion_from_matrix(
+            np.block([[r.T @ m, np.zeros((3, 1))], [np.zeros((1, 3)), 1]])
+        )
         for m in rq
     ]
     return out
@@ -237,7 +250,15 @@ def transformed(traj, s, r, t):
 
 @pytest.mark.parametrize(
     "kind,n",
-    [("posyaw", -1), ("se3", -1), ("sim3", -1), ("none", -1), ("se3", 1), ("posyaw", 1), ("sim3", 10)],
+    [
+        ("posyaw", -1),
+        ("se3", -1),
+        ("sim3", -1),
+        ("none", -1),
+        ("se3", 1),
+        ("posyaw", 1),
+        ("sim3", 10),
+    ],
 )
 def test_rpg_trajectory_against_itself_is_zero(tmp_path, kind, n):
     gt = helix()
@@ -268,9 +289,9 @@ def test_rpg_recovers_injected_sim3_and_offset(tmp_path):
     for d in sim3["distances"]:  # the Sim3 scale enters the relative translation
         assert sim3["rel"][d]["rel_trans_stats"]["max"] < 1e-8
     # a yaw and an offset: posyaw recovers both
-    posyaw = command.run_case(write_case(tmp_path / "posyaw", gt, transformed(gt, 1.0, r, t), "posyaw"))[
-        "trials"
-    ][0]
+    posyaw = command.run_case(
+        write_case(tmp_path / "posyaw", gt, transformed(gt, 1.0, r, t), "posyaw")
+    )["trials"][0]
     assert np.allclose(posyaw["rot"], r, atol=1e-9) and np.allclose(posyaw["trans"], t, atol=1e-8)
     assert posyaw["abs_stats"]["trans"]["max"] < 1e-8
     # a pure offset with no alignment: every position error is |offset|, relative errors vanish
@@ -302,7 +323,9 @@ def test_rpg_relative_pairs_quirk():
 def test_rpg_pair_search_and_association_match_rpg_on_random_input():
     rng = np.random.default_rng(3)
     for _ in range(30):
-        steps = rng.choice([0.0, 0.01, 0.05, 0.1, 0.25], size=200)  # repeated values: stationary phases
+        steps = rng.choice(
+            [0.0, 0.01, 0.05, 0.1, 0.25], size=200
+        )  # repeated values: stationary phases
         acc = np.concatenate(([0], np.cumsum(steps)))
         for d in (0.0, 0.3, 1.0, 2.5):
             assert protocol.comparison_indices(
@@ -315,7 +338,9 @@ def test_rpg_pair_search_and_association_match_rpg_on_random_input():
 
 def test_rpg_truncated_distances_and_file_names():
     assert protocol.boxplot_distances(91.79999) == [9.17, 18.35, 27.53, 36.71, 45.89]
-    assert protocol.truncate(0.29 * 100, 2) == 28.99  # truncation, not rounding (0.29 * 100 = 28.999...)
+    assert (
+        protocol.truncate(0.29 * 100, 2) == 28.99
+    )  # truncation, not rounding (0.29 * 100 = 28.999...)
     assert command.dist_str(9.17) == "9_2" and command.dist_str(45.89) == "45_9"
 
 
@@ -325,9 +350,13 @@ def test_rpg_single_trial_names_and_update_quirk(tmp_path):
     save = case / "saved_results/traj_est"
     save.mkdir(parents=True)
     (save / "absolute_err_statistics_se3_-1.yaml").write_text("kept: 1\ntrans: 2\n")
-    command.run_case(case, mul_trials=1)  # --mul_trials 1 is a single run: no index 0, no _#0, no mt_ files
+    command.run_case(
+        case, mul_trials=1
+    )  # --mul_trials 1 is a single run: no index 0, no _#0, no mt_ files
     written = sorted(p.name for p in save.iterdir())
-    assert "stamped_est_gt_matches.txt" in written and not any("mt_" in w or "_#" in w for w in written)
+    assert "stamped_est_gt_matches.txt" in written and not any(
+        "mt_" in w or "_#" in w for w in written
+    )
     merged = yaml.safe_load((save / "absolute_err_statistics_se3_-1.yaml").read_text())
     assert merged["kept"] == 1 and set(merged) == {"kept", "rot", "scale", "trans"}
     assert merged["trans"]["num_samples"] == len(gt)
@@ -339,7 +368,9 @@ def test_rpg_cli_parser_and_run(tmp_path, capsys):
     case = write_case(tmp_path, gt, ests, "posyaw")
     p = argparse.ArgumentParser(prog="epa")
     command.add_parser(p.add_subparsers(dest="command"))
-    args = p.parse_args(["rpg", str(case), "--mul_trials", "3", "--no_plot", "--recalculate_errors"])
+    args = p.parse_args(
+        ["rpg", str(case), "--mul_trials", "3", "--no_plot", "--recalculate_errors"]
+    )
     command.run(args)
     assert "3 trial(s) evaluated" in capsys.readouterr().out
     save = case / "saved_results/traj_est"
@@ -396,11 +427,15 @@ def test_rpg_bad_inputs(tmp_path):
         command.run_case(case)
     _one_line(e, "start_end_time.yaml")
     (case / "start_end_time.yaml").unlink()
-    (case / "stamped_traj_estimate.txt").write_text("# time x y z qx qy qz qw\n1000.0 0 0 0 0 0 0 1\n")
+    (case / "stamped_traj_estimate.txt").write_text(
+        "# time x y z qx qy qz qw\n1000.0 0 0 0 0 0 0 1\n"
+    )
     with pytest.raises(EpaError) as e:
         command.run_case(case)
     _one_line(e, "stamped_traj_estimate.txt")  # too few poses
-    (case / "stamped_traj_estimate.txt").write_text("1000.0 0 0 0 0 0 0 1\n1000.05 0 zero 0 0 0 0 1\n")
+    (case / "stamped_traj_estimate.txt").write_text(
+        "1000.0 0 0 0 0 0 0 1\n1000.05 0 zero 0 0 0 0 1\n"
+    )
     with pytest.raises(EpaError) as e:
         command.run_case(case)
     assert "stamped_traj_estimate.txt:2" in _one_line(e, "stamped_traj_estimate.txt")

@@ -114,6 +114,10 @@ def _parser() -> argparse.ArgumentParser:
     cli_evo.add_parsers(sub)
     cli_evo.add_res_parser(sub)
 
+    from epa.rpg import command as rpg_command
+
+    rpg_command.add_parser(sub)
+
     st = sub.add_parser(
         "selftest",
         help="how well Steps 1-2 recover known offsets and extrinsics on a reference's own motion",
@@ -392,6 +396,10 @@ def main(argv=None) -> int:
             from epa.evo import commands as cli_evo
 
             cli_evo.res(args)
+        elif args.command == "rpg":
+            from epa.rpg import command as rpg_command
+
+            rpg_command.run(args)
         elif args.command == "config":
             print(_config_listing(args.config), end="")
         elif args.command == "selftest":

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from epa.errors import EpaError
+from epa.core.errors import EpaError
 from epa.rpg import protocol as P
 
 GT_NAME = "stamped_groundtruth.txt"
@@ -72,9 +72,13 @@ def read_stamped(path: Path) -> np.ndarray:
         if width is None:
             width = len(fields)
             if width < 8:
-                raise EpaError(f"{width} columns, expected 8 (time x y z qx qy qz qw)", path=path, line=no)
+                raise EpaError(
+                    f"{width} columns, expected 8 (time x y z qx qy qz qw)", path=path, line=no
+                )
         elif len(fields) != width:
-            raise EpaError(f"{len(fields)} columns where the first row has {width}", path=path, line=no)
+            raise EpaError(
+                f"{len(fields)} columns where the first row has {width}", path=path, line=no
+            )
         try:
             rows.append([float(x) for x in fields])
         except ValueError:
@@ -155,7 +159,8 @@ def evaluate(
         return out
     if len(kept) < 2:
         raise EpaError(
-            "only 1 pose matches the groundtruth within 0.02 s; at least 2 are needed", path=est_path
+            "only 1 pose matches the groundtruth within 0.02 s; at least 2 are needed",
+            path=est_path,
         )
     ie, ig = np.array(kept).T
     p_es, q_es, p_gt, q_gt = est[ie, 1:4], est[ie, 4:8], gt[ig, 1:4], gt[ig, 4:8]
@@ -202,7 +207,9 @@ def update_and_save(path: Path, labels: dict) -> None:
     if path.exists():
         stats = _read_yaml(path)
         if not isinstance(stats, dict):
-            raise EpaError("an existing statistics file rpg would update is not a mapping", path=path)
+            raise EpaError(
+                "an existing statistics file rpg would update is not a mapping", path=path
+            )
     stats.update(labels)
     path.write_text(yaml.dump(stats, default_flow_style=False))
 
@@ -242,14 +249,17 @@ def run_case(case_dir, est_type: str = "traj_est", mul_trials: int | None = None
             if n_trials == 1:
                 raise EpaError("estimate file missing", path=est_path)
             continue
-        res = evaluate(gt, read_stamped(est_path), align_type, n_frames, start, end, distances, est_path)
+        res = evaluate(
+            gt, read_stamped(est_path), align_type, n_frames, start, end, distances, est_path
+        )
         match_path = save / f"{MATCH_NAMES[est_type]}{suffix}.txt"
         _savetxt_column(match_path, res["matches"], "%d %d")
         written.append(match_path)
         if res["n_matched"] == 0:
             if n_trials == 1:
                 raise EpaError(
-                    "no pose matches the groundtruth within 0.02 s (and the time window)", path=est_path
+                    "no pose matches the groundtruth within 0.02 s (and the time window)",
+                    path=est_path,
                 )
             continue
         trials[i] = res
@@ -261,7 +271,9 @@ def run_case(case_dir, est_type: str = "traj_est", mul_trials: int | None = None
         written.append(abs_path)
         for d, e in res["rel"].items():
             rel_path = save / f"relative_error_statistics_{dist_str(d)}{tag}.yaml"
-            update_and_save(rel_path, {lab: e[m + "_stats"] for m, lab in zip(P.REL_METRICS, P.REL_LABELS)})
+            update_and_save(
+                rel_path, {lab: e[m + "_stats"] for m, lab in zip(P.REL_METRICS, P.REL_LABELS)}
+            )
             written.append(rel_path)
     if not success:
         raise EpaError(
@@ -335,7 +347,9 @@ def add_parser(sub) -> None:
     r = sub.add_parser(
         "rpg", help="rpg_trajectory_evaluation's analyze_trajectory_single.py on an rpg folder"
     )
-    r.add_argument("result_dir", help="folder with stamped_groundtruth.txt, the estimate(s), eval_cfg.yaml")
+    r.add_argument(
+        "result_dir", help="folder with stamped_groundtruth.txt, the estimate(s), eval_cfg.yaml"
+    )
     r.add_argument(
         "--mul_trials",
         type=int,
@@ -355,8 +369,12 @@ def add_parser(sub) -> None:
         help="accepted for rpg's command line; errors are always recomputed",
     )
     for flag in ("--png", "--plot_scale_traj", "--plot", "--no_plot"):
-        r.add_argument(flag, action="store_true", help="accepted for rpg's command line; no plots are drawn")
-    r.add_argument("--plots_dir", default="", help="accepted for rpg's command line; no plots are drawn")
+        r.add_argument(
+            flag, action="store_true", help="accepted for rpg's command line; no plots are drawn"
+        )
+    r.add_argument(
+        "--plots_dir", default="", help="accepted for rpg's command line; no plots are drawn"
+    )
     r.add_argument("--mul_plot_idx", type=int, nargs="*", default=[0], help="accepted, ignored")
 
 

@@ -50,11 +50,20 @@ MAX_DIFF = 0.02
 BOXPLOT_PERCENTAGES = (0.1, 0.2, 0.3, 0.4, 0.5)
 ALIGN_TYPES = ("posyaw", "se3", "sim3", "none")
 STAT_KEYS = ("rmse", "mean", "median", "std", "min", "max", "num_samples")
-REL_METRICS = ("rel_trans", "rel_trans_perc", "rel_yaw", "rel_rot", "rel_gravity", "rel_rot_deg_per_m")
+REL_METRICS = (
+    "rel_trans",
+    "rel_trans_perc",
+    "rel_yaw",
+    "rel_rot",
+    "rel_gravity",
+    "rel_rot_deg_per_m",
+)
 REL_LABELS = ("trans", "trans_perc", "yaw", "rot", "gravity", "rot_deg_per_m")
 
 
-def associate(first, second, offset: float = 0.0, max_difference: float = MAX_DIFF) -> list[tuple[int, int]]:
+def associate(
+    first, second, offset: float = 0.0, max_difference: float = MAX_DIFF
+) -> list[tuple[int, int]]:
     """rpg's ``associate``: greedy one-to-one matching of two stamp lists, closest first; sorted pairs."""
     a = np.asarray(first, dtype=float)
     b = np.asarray(second, dtype=float) + offset
@@ -174,8 +183,12 @@ def align(p_es, p_gt, q_es, q_gt, method: str, n_aligned: int = -1):
     elif 1 <= n_aligned <= len(p_es):
         idx = slice(0, n_aligned)
     else:
-        raise ValueError(f"align_num_frames {n_aligned} must be -1 or 1..{len(p_es)} (the matched poses)")
-    s, r, t = umeyama(p_gt[idx], p_es[idx], known_scale=method != "sim3", yaw_only=method == "posyaw")
+        raise ValueError(
+            f"align_num_frames {n_aligned} must be -1 or 1..{len(p_es)} (the matched poses)"
+        )
+    s, r, t = umeyama(
+        p_gt[idx], p_es[idx], known_scale=method != "sim3", yaw_only=method == "posyaw"
+    )
     return s, r, np.asarray(t).reshape(3)
 
 
@@ -250,9 +263,13 @@ def _logmap_so3_one(r: np.ndarray) -> np.ndarray:
     tr = np.trace(r)
     if abs(tr + 1.0) < 1e-10:
         if abs(r[2, 2] + 1.0) > 1e-10:
-            return (np.pi / np.sqrt(2.0 + 2.0 * r[2, 2])) * np.array([r[0, 2], r[1, 2], 1.0 + r[2, 2]])
+            return (np.pi / np.sqrt(2.0 + 2.0 * r[2, 2])) * np.array(
+                [r[0, 2], r[1, 2], 1.0 + r[2, 2]]
+            )
         if abs(r[1, 1] + 1.0) > 1e-10:
-            return (np.pi / np.sqrt(2.0 + 2.0 * r[1, 1])) * np.array([r[0, 1], 1.0 + r[1, 1], r[2, 1]])
+            return (np.pi / np.sqrt(2.0 + 2.0 * r[1, 1])) * np.array(
+                [r[0, 1], 1.0 + r[1, 1], r[2, 1]]
+            )
         return (np.pi / np.sqrt(2.0 + 2.0 * r[0, 0])) * np.array([1.0 + r[0, 0], r[1, 0], r[2, 0]])
     tr_3 = tr - 3.0
     if tr_3 < -1e-7:
@@ -279,7 +296,13 @@ def absolute_errors(p_es_aligned, q_es_aligned, p_gt, q_gt) -> dict:
     dist_gt = np.sqrt(np.sum(p_gt * p_gt, 1))
     dist_es = np.sqrt(np.sum(p_es_aligned * p_es_aligned, 1))
     e_scale_perc = np.abs((dist_es / dist_gt - 1.0) * 100)
-    return {"trans": e_trans, "trans_vec": e_trans_vec, "rot": e_rot, "ypr": e_ypr, "scale": e_scale_perc}
+    return {
+        "trans": e_trans,
+        "trans_vec": e_trans_vec,
+        "rot": e_rot,
+        "ypr": e_ypr,
+        "scale": e_scale_perc,
+    }
 
 
 def _rigid(q, p) -> np.ndarray:
@@ -330,7 +353,9 @@ def relative_errors(
         "rel_yaw": np.abs(ypr[:, 0]) * 180.0 / np.pi,
         "rel_rot": e_rot,
         # rpg squares Python floats: x ** 2 is pow(x, 2), which is not always x * x
-        "rel_gravity": np.sqrt([float(a) ** 2 + float(b) ** 2 for a, b in ypr[:, 1:]]) * 180.0 / np.pi,
+        "rel_gravity": np.sqrt([float(a) ** 2 + float(b) ** 2 for a, b in ypr[:, 1:]])
+        * 180.0
+        / np.pi,
         "rel_rot_deg_per_m": e_rot / dist,
         "pairs": np.stack([i1, i2], axis=1),
     }
