@@ -248,3 +248,24 @@ def test_rmse_across_runs_pairs_stamps_within_half_a_pose_spacing():
         {"run1": a, "run2": {**a, "trans_m": np.array([3.0, 2, 1, 0])}}
     )
     np.testing.assert_allclose(table["rmse_pos_m"], [np.sqrt(5), 2.0, np.sqrt(5), np.sqrt(8)])
+
+
+def test_m2ud_matching_is_the_patchs_all_pairs_rule():
+    """The linear matching gives, for every reference stamp, the first timing entry in file order
+    strictly within ±0.15 s, exactly as the M2UD patch's all-pairs comparison does (its own
+    expression is the oracle), including stamps exactly on the window's edge."""
+    rng = np.random.default_rng(3)
+
+    def patch(t_ref, t_timing, window=0.15):
+        inside = np.abs(t_timing[None, :] - t_ref[:, None]) < window
+        return np.where(inside.any(axis=1), np.argmax(inside, axis=1), -1)
+
+    for _ in range(500):
+        n, m = rng.integers(0, 40), rng.integers(1, 40)
+        t_ref = np.sort(rng.uniform(0, 3, n)).round(rng.integers(1, 4)) + rng.choice([0, 1e9])
+        t_timing = (
+            rng.uniform(-0.2, 3.2, m).round(rng.integers(1, 4)) + t_ref[:1].sum() // 1e9 * 1e9
+        )
+        if n and rng.random() < 0.5:  # entries exactly on the edge, repeated, out of order
+            t_timing = np.concatenate([t_timing, t_ref[rng.integers(0, n, 5)] + 0.15])[::-1]
+        assert np.array_equal(efficiency.match_m2ud(t_ref, t_timing), patch(t_ref, t_timing))

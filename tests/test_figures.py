@@ -168,7 +168,11 @@ def euroc_grid(tmp_path_factory):
     truth = {"MH_01": gt / "MH_01_easy.txt", "MH_04": gt / "MH_04_difficult.txt"}
     out = tmp_path_factory.mktemp("euroc") / "results"
     cfg = settings.resolve(
-        {"truth_dir": str(gt), "algorithms_dir": str(rpg), "report": {"pdf": True}}
+        {
+            "truth_dir": str(gt),
+            "algorithms_dir": str(rpg),
+            "report": {"pdf": True, "figures": "all"},
+        }
     )
     cases = [
         {"key": "/".join(k), "truth": str(truth[k[1]]), "estimate": str(v)}
@@ -326,3 +330,46 @@ def test_report_rerun_without_the_extra_is_refused_at_config_time(monkeypatch):
     monkeypatch.setattr(recording, "available", lambda: False)
     with pytest.raises(EpaError, match=r'pip install "epica\[rerun\]"'):
         settings.resolve({"truth_dir": "t", "algorithms_dir": "a", "report": {"rerun": True}})
+
+
+def test_figures_are_drawn_for_flagged_cases_and_one_command_draws_the_rest(tmp_path):
+    """report.figures: flagged (the default) draws a case's figures only when drift detection or
+    Steps 1-2 flagged it; every case keeps its bundles, and its report names the command that draws
+    the rest: `epa fig --case` then gives the figures `report.figures: all` gives."""
+    from epa.artifacts.case import CaseData, CaseFolder
+    from epa.outputs import report as report_module
+    from epa.workflow import chain
+    from epa.workflow import settings as settings_module
+
+    simulate.simulate(tmp_path / "sim")
+    cases = {
+        "clean": ("handheld_office", "vio_body", "run1"),
+        "diverged": ("urban_drive", "vo_drifty", "run2"),  # fail segments, globally failed
+    }
+    base = settings_module.resolve({"truth_dir": str(tmp_path), "algorithms_dir": str(tmp_path)})
+    base["efficiency"]["sensor_rate_hz"] = 20
+    folders = {}
+    for label, (ds, alg, run) in cases.items():
+        est = next((tmp_path / f"sim/algorithms/{alg}/{ds}").glob(f"{run}.*"))
+        out = tmp_path / label
+        chain.run_case(tmp_path / f"sim/truth/{ds}.txt", est, out, base, write_arrays=True)
+        folders[label] = out
+    for label, out in folders.items():
+        report_module.write_case_report(CaseData(CaseFolder(out)), label, base)
+        md = (out / "10_report/report_en.md").read_text()
+        drawn = {p.stem for p in (out / "10_report/figures").glob("*.png")}
+        bundles = {p.stem for p in (out / "10_report/bundles").glob("*.json")}
+        assert {"trajectory", "ape_time", "xcorr"} <= bundles
+        if label == "diverged":
+            assert drawn == bundles and "Not drawn" not in md
+        else:
+            assert drawn == set() and "`epa fig --case .` in the case folder" in md
+    clean = folders["clean"]
+    assert cli.main(["fig", "--case", str(clean)]) == 0
+    by_command = {p.name: p.read_bytes() for p in (clean / "10_report/figures").glob("*.png")}
+    everything = {**base, "report": {**base["report"], "figures": "all"}}
+    report_module.write_case_report(CaseData(CaseFolder(clean)), "clean", everything)
+    assert {
+        p.name: p.read_bytes() for p in (clean / "10_report/figures").glob("*.png")
+    } == by_command
+    assert cli.main(["fig"]) == 2  # neither a bundle nor a case

@@ -156,12 +156,11 @@ def test_mode_ov_eval_prints_ov_evals_warnings_and_errors(tmp_path):
     pose) and error_comparison's missing-dataset error, with ov_eval's colour codes as it prints them."""
     import copy
 
+    from epa.artifacts.case import Case
     from epa.outputs import tables
 
     ok = tables.CaseResult(
-        "vio_body",
-        "MH_01",
-        "run1",
+        Case("vio_body", "MH_01", "run1"),
         load={
             "n_ref": 10,
             "ref_file": "MH_01.txt",
@@ -180,13 +179,13 @@ def test_mode_ov_eval_prints_ov_evals_warnings_and_errors(tmp_path):
         },
     )
     coarse = copy.deepcopy(ok)
-    coarse.run, coarse.sync = (
-        "run2",
+    coarse.case, coarse.sync = (
+        Case("vio_body", "MH_01", "run2"),
         {"n_matched": 100, "matched_length_m": {"ref": 60.0, "est": 84.0}},
     )  # 0.6 m/pose
     coarse.load["est_path"] = "algorithms/vio_body/MH_01/run2.txt"
     other = copy.deepcopy(ok)
-    other.algorithm, other.dataset, other.load = "vo", "V1_01", {**ok.load, "ref_file": "V1_01.txt"}
+    other.case, other.load = Case("vo", "V1_01", "run1"), {**ok.load, "ref_file": "V1_01.txt"}
     other.sync = {"n_matched": 100, "matched_length_m": {"ref": 50.0, "est": 50.0}}
     idle = {
         "V2_01": {"ref_file": "V2_01.txt", "n_ref": 7, "ref_length_m": 3.0}

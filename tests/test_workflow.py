@@ -156,16 +156,19 @@ def test_grid_figures_and_case_reports_are_written(grid):
         assert (res / "figures" / f"{name}.png").stat().st_size > 5000
         assert (res / "figures" / f"{name}.pdf").read_bytes()[:5] == b"%PDF-"
     report = res / "cases/vio_body/handheld_office/run1/10_report"
-    assert (report / "figures/trajectory.png").exists() and (report / "report_en.md").exists()
+    # a clean case: its bundles and documents, its figures one command away (report.figures: flagged)
+    assert (report / "bundles/trajectory.json").exists() and (report / "report_en.md").exists()
+    assert "epa fig --case" in (report / "report_en.md").read_text()
     # a broken case has no report, only the reason
     assert "failed" in (res / "cases/broken/handheld_office/run1/10_report/report.json").read_text()
 
 
 def test_every_tex_table_parses_strictly(grid):
     from epa.outputs import tables
+    from epa.workflow import settings
 
     files = sorted((grid / "results/tables").glob("*.tex"))
-    assert [f.stem for f in files] == sorted(tables.TABLE_NAMES)  # metrics.kitti is off here
+    assert [f.stem for f in files] == sorted(tables.table_names(settings.defaults()))  # no kitti
     for f in files:
         strict_parse_tex(f.read_text())
 

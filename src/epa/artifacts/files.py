@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import tempfile
 import warnings
 from pathlib import Path
@@ -92,6 +93,26 @@ COV_HEADER = [
 EXACT = "%.17g"
 
 
+def savetxt(fh, data, fmt: str = EXACT, delimiter: str = " ", header: str = "", comments="# "):
+    """np.savetxt's bytes for a table of floats, 4-5x faster: the rows are formatted by one ``%``
+    per block of rows instead of one Python call and one write per row (measured on the example:
+    40 % of a stage job was np.savetxt)."""
+    data = np.asarray(data, dtype=float)
+    if data.ndim == 1:
+        data = data[:, None]
+    if data.ndim != 2 or data.shape[1] == 0:
+        return np.savetxt(fh, data, fmt=fmt, delimiter=delimiter, header=header, comments=comments)
+    if header:
+        fh.write(comments + header.replace("\n", "\n" + comments) + "\n")
+    row = delimiter.join([fmt] * data.shape[1]) + "\n"
+    for lo in range(0, len(data), ROWS_PER_BLOCK):
+        block = data[lo : lo + ROWS_PER_BLOCK]
+        fh.write((row * len(block)) % tuple(block.ravel().tolist()))
+
+
+ROWS_PER_BLOCK = 8192  # a few MB of text at a time
+
+
 def _cov_columns(traj: Trajectory) -> np.ndarray | None:
     """The orientation then position covariance upper triangles (N, 12), or None without covariance."""
     if traj.cov_rot is None or traj.cov_pos is None:
@@ -107,7 +128,7 @@ def write_tum(path, traj: Trajectory) -> None:
     cov = _cov_columns(traj)
     data = np.column_stack([traj.t, traj.p, traj.q] + ([] if cov is None else [cov]))
     header = TUM_HEADER[2:] + ("" if cov is None else " " + " ".join(COV_HEADER))
-    _atomic_write(path, lambda fh: np.savetxt(fh, data, fmt=EXACT, header=header))
+    _atomic_write(path, lambda fh: savetxt(fh, data, header=header))
 
 
 def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
@@ -132,10 +153,8 @@ def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
         return write_tum(path, traj)
     if fmt == "kitti":
         m = np.concatenate([traj.r, traj.p[:, :, None]], axis=2).reshape(len(traj), 12)
-        _atomic_write(
-            path.with_name(path.stem + "_times.txt"), lambda fh: np.savetxt(fh, traj.t, fmt=EXACT)
-        )
-        return _atomic_write(path, lambda fh: np.savetxt(fh, m, fmt=EXACT))
+        _atomic_write(path.with_name(path.stem + "_times.txt"), lambda fh: savetxt(fh, traj.t))
+        return _atomic_write(path, lambda fh: savetxt(fh, m))
     if fmt == "euroc":
         ns = np.round(traj.t * 1e9).astype(np.int64)
         rows = np.column_stack([traj.p, traj.q[:, [3, 0, 1, 2]]])
@@ -154,18 +173,42 @@ def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
         names = ["t", "x", "y", "z", "qx", "qy", "qz", "qw"] + ([] if cov is None else COV_HEADER)
         return _atomic_write(
             path,
-            lambda fh: np.savetxt(
-                fh, data, fmt=EXACT, delimiter=",", header=",".join(names), comments=""
-            ),
+            lambda fh: savetxt(fh, data, delimiter=",", header=",".join(names), comments=""),
         )
     raise EpaError(
         f"unknown format {fmt!r}; choose one of {', '.join(FORMATS[1:])}", path=str(path)
     )
 
 
+def _numbers(path, delimiter: str, skip: int) -> np.ndarray:
+    """The numbers of an artifact this project wrote (``#`` comments, ``skip`` header lines): by
+    pandas' C parser where pandas is already imported (workflow workers preload it; 3-4x faster
+    than loadtxt, the same doubles), else by numpy, whose import is already paid."""
+    if "pandas" in sys.modules:
+        import pandas as pd
+
+        try:
+            frame = pd.read_csv(
+                path, sep=delimiter, header=None, skiprows=skip, comment="#", dtype=float
+            )
+        except pd.errors.EmptyDataError:  # a header and no rows is an empty table
+            return np.zeros((0, 0))
+        # row-major like loadtxt's: numpy's sums over a column depend on the memory layout
+        return np.ascontiguousarray(frame.to_numpy()).reshape(len(frame), -1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # a header and no rows: an empty table
+        return np.loadtxt(
+            path,
+            delimiter=delimiter if delimiter != " " else None,
+            skiprows=skip,
+            ndmin=2,
+            comments="#",
+        )
+
+
 def read_tum_file(path) -> Trajectory:
     """Read a TUM artifact this project wrote (no detection, no repair)."""
-    rows = np.loadtxt(path, ndmin=2, comments="#")
+    rows = _numbers(path, " ", skip=0)
     if rows.shape[1] == 20:  # with covariance (see write_tum)
         return Trajectory(
             rows[:, 0],
@@ -197,13 +240,8 @@ def write_csv(path, columns: dict[str, np.ndarray], fmt: str = EXACT) -> None:
     )
     _atomic_write(
         path,
-        lambda fh: np.savetxt(
-            fh,
-            data.reshape(-1, len(names)),
-            fmt=fmt,
-            delimiter=",",
-            header=",".join(names),
-            comments="",
+        lambda fh: savetxt(
+            fh, data.reshape(-1, len(names)), fmt, ",", header=",".join(names), comments=""
         ),
     )
 
@@ -211,11 +249,7 @@ def write_csv(path, columns: dict[str, np.ndarray], fmt: str = EXACT) -> None:
 def read_csv(path) -> dict[str, np.ndarray]:
     with open(path, encoding="utf-8") as fh:
         names = fh.readline().strip().split(",")
-    with warnings.catch_warnings():
-        warnings.simplefilter(
-            "ignore", UserWarning
-        )  # a header and no rows is an empty table, not a problem
-        rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    rows = _numbers(path, ",", skip=1)
     if rows.size == 0:
         rows = np.zeros((0, len(names)))
     return {n: rows[:, k] for k, n in enumerate(names)}

@@ -96,8 +96,15 @@ def _parser() -> argparse.ArgumentParser:
     f = sub.add_parser(
         "fig", help="render a plot bundle again (another style or size), recomputing nothing"
     )
-    f.add_argument("bundle", help="a bundle .json (10_report/bundles/, results/figures/bundles/)")
-    f.add_argument("--out", required=True, help="output path without extension")
+    f.add_argument(
+        "bundle", nargs="?", help="a bundle .json (10_report/bundles/, results/figures/bundles/)"
+    )
+    f.add_argument("--out", help="output path without extension")
+    f.add_argument(
+        "--case",
+        help="a case folder (results/cases/<algorithm>/<dataset>/<run>): draw every figure of its"
+        " report (10_report/figures/) from its bundles",
+    )
     f.add_argument("--style", default="paper", help="paper (3.5 in column), wide (7 in), slide")
     f.add_argument(
         "--width", type=float, help="width in inches (the height follows the style's proportions)"
@@ -177,6 +184,7 @@ def _eval_config(args) -> dict:
             args.report or args.rerun
         ),  # epa eval stays free of matplotlib unless asked
         ("report", "rerun"): True if args.rerun else None,
+        ("report", "figures"): "all" if args.report else None,  # one case, asked for: every figure
         ("sources", "reference", "topic"): args.ref_topic,
         ("sources", "reference", "frames"): args.ref_frames,
         ("sources", "algorithms", EVAL_ALGORITHM, "topic"): args.est_topic,
@@ -303,6 +311,29 @@ def _eval(args) -> None:
         )
 
 
+def _fig(args) -> None:
+    from epa.outputs import figures
+
+    if (args.case is None) == (args.bundle is None) or (args.bundle and not args.out):
+        raise EpaError("give a bundle and --out, or --case CASE_DIR")
+    formats = ("png", "pdf") if args.pdf else ("png",)
+    if args.bundle:
+        jobs = [(Path(args.bundle), Path(args.out))]
+    else:
+        report = Path(args.case) / "10_report"
+        jobs = [(b, report / "figures" / b.stem) for b in sorted(report.glob("bundles/*.json"))]
+        if not jobs:
+            raise EpaError(
+                "no plot bundles in 10_report/bundles (has the report stage run?)", path=args.case
+            )
+    written = []
+    for bundle, out in jobs:
+        written += figures.render(
+            figures.read_bundle(bundle), out, style=args.style, width=args.width, formats=formats
+        )
+    print("wrote " + ", ".join(map(str, written)))
+
+
 def _traj(args) -> None:
     from epa import readers
     from epa.artifacts import files as io
@@ -376,16 +407,7 @@ def main(argv=None) -> int:
         if args.command == "eval":
             _eval(args)
         elif args.command == "fig":
-            from epa.outputs import figures
-
-            written = figures.render(
-                figures.read_bundle(args.bundle),
-                args.out,
-                style=args.style,
-                width=args.width,
-                formats=("png", "pdf") if args.pdf else ("png",),
-            )
-            print("wrote " + ", ".join(map(str, written)))
+            _fig(args)
         elif args.command == "traj":
             _traj(args)
         elif args.command in ("ape", "rpe"):

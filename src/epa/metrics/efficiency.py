@@ -62,10 +62,42 @@ def match_nearest(t_pose: np.ndarray, t_timing: np.ndarray, max_diff: float) -> 
 
 def match_m2ud(t_ref: np.ndarray, t_timing: np.ndarray, window: float = 0.15) -> np.ndarray:
     """The M2UD patch's matching: for each reference stamp, the *first* timing entry (in file order)
-    strictly within ±window; -1 where none."""
-    inside = np.abs(t_timing[None, :] - t_ref[:, None]) < window
-    first = np.argmax(inside, axis=1)
-    return np.where(inside.any(axis=1), first, -1)
+    strictly within ±window (``|t_timing - t_ref| < window``); -1 where none.
+
+    Linear in the stamps (the patch compares every pair: 0.9 s for a 7,500-pose case): the entries
+    within a window are a contiguous run of the stamp-sorted timing, found by binary search and its
+    edges settled by the exact test; the first in file order is a range minimum of their file
+    indices (a sparse table)."""
+    order = np.argsort(t_timing, kind="stable")
+    ts, n = t_timing[order], len(t_timing)
+    out = np.full(len(t_ref), -1, dtype=np.int64)
+    if n == 0 or len(t_ref) == 0:
+        return out
+    t_ref = np.asarray(t_ref, dtype=float)
+
+    def inside(j):
+        return (j >= 0) & (j < n) & (np.abs(ts[np.clip(j, 0, n - 1)] - t_ref) < window)
+
+    margin = 1e-9 * max(window, 1.0)  # a superset of the run, then its edges by the exact test
+    lo = np.searchsorted(ts, t_ref - window - margin, side="left")
+    hi = np.searchsorted(ts, t_ref + window + margin, side="right")
+    while True:
+        shrink_lo, shrink_hi = (lo < hi) & ~inside(lo), (lo < hi) & ~inside(hi - 1)
+        if not (shrink_lo.any() or shrink_hi.any()):
+            break
+        lo, hi = lo + shrink_lo, hi - shrink_hi
+    some = lo < hi
+    levels = [order.astype(np.int64)]  # levels[k][i] = min(order[i : i + 2**k])
+    while 2 ** len(levels) <= n:
+        prev, half = levels[-1], 2 ** (len(levels) - 1)
+        levels.append(np.minimum(prev[:-half], prev[half:]))
+    length = np.where(some, hi - lo, 1)
+    k = np.floor(np.log2(length)).astype(int)
+    for level in np.unique(k[some]):
+        q = some & (k == level)
+        span = 2**level
+        out[q] = np.minimum(levels[level][lo[q]], levels[level][hi[q] - span])
+    return out
 
 
 def weights(frame_ms: np.ndarray, rate_hz: float) -> np.ndarray:

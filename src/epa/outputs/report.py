@@ -151,6 +151,8 @@ TEXT = {
         "metrics": "Metrics",
         "fail": "Fail segments",
         "figures": "Figures",
+        "undrawn": "Not drawn ({why}): {names}. Draw them with `{command}` in the case folder"
+        " (the one holding 10_report/).",
         "none": "none",
         "offset": "Step 1 time offset",
         "extrinsic": "Step 2 extrinsic",
@@ -177,6 +179,7 @@ TEXT = {
         "metrics": "指标",
         "fail": "失效区段",
         "figures": "图",
+        "undrawn": "未绘制（{why}）：{names}。在案例文件夹（包含 10_report/ 的文件夹）中运行 `{command}` 绘制。",
         "none": "无",
         "offset": "步骤 1 时间偏移",
         "extrinsic": "步骤 2 外参",
@@ -214,7 +217,15 @@ def _axis_std(values, factor: float, unit: str, T: dict) -> str:
     )
 
 
-def report_md(doc: dict, case_name: str, figure_names: list[str], lang: str, fail: dict) -> str:
+def report_md(
+    doc: dict,
+    case_name: str,
+    figure_names: list[str],
+    lang: str,
+    fail: dict,
+    undrawn: tuple[list[str], str, str] | None = None,
+) -> str:
+    """A case's report in ``lang``; ``undrawn``: (figure names, why, the command that draws them)."""
     T = TEXT[lang]
     m = doc.get("metrics", {})
     sync, calib, align = m.get("sync", {}), m.get("calibrate", {}), m.get("alignment", {})
@@ -287,7 +298,23 @@ def report_md(doc: dict, case_name: str, figure_names: list[str], lang: str, fai
     else:
         lines.append(T["none"])
     lines += ["", f"## {T['figures']}", ""] + [f"![{n}](figures/{n}.png)" for n in figure_names]
+    if undrawn and undrawn[0]:
+        names, why, command = undrawn
+        lines += ["", T["undrawn"].format(why=why, names=", ".join(names), command=command)]
     return "\n".join(lines) + "\n"
+
+
+def flags(doc: dict) -> list[str]:
+    """Why a reader would open this case: what drift detection and Steps 1-2 found (empty: nothing)."""
+    m, drift = doc.get("metrics", {}), doc.get("drift", {})
+    out = []
+    if drift.get("global_failed"):
+        out.append("globally failed")
+    elif drift.get("n_fail_segments"):
+        out.append(f"{drift['n_fail_segments']} fail segments")
+    if (m.get("calibrate", {}).get("plan") or {}).get("fallback"):
+        out.append("evaluated the ov_eval way (" + m["calibrate"].get("reason", "") + ")")
+    return out
 
 
 def case_zip(case_root: Path, out: Path) -> None:
@@ -315,33 +342,39 @@ def case_zip(case_root: Path, out: Path) -> None:
 
 
 def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
-    """The report stage: documents, figures (unless ``report.figures`` is off) and the zip, from the
-    case's artifacts (``data`` reads them)."""
+    """The report stage: documents, plot bundles, figures (``report.figures``: flagged cases, all
+    or none) and the zip, from the case's artifacts (``data`` reads them)."""
     c = cfg["report"]
     case = data.folder
     folder = case.path("report", "report.json").parent
     doc = case_document(case)
     io.write_json(folder / "metrics.json", doc)
     io.write_text(folder / "metrics_summary.csv", summary_csv(doc))
-    drawn = []
-    if c["figures"]:
-        for fig_name, b in case_bundles(data).items():
-            figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b)
-            figures.render(
-                b, folder / "figures" / fig_name, formats=("png", "pdf") if c["pdf"] else ("png",)
-            )
-            drawn.append(fig_name)
+    # Figures cost most of a report (0.3 s a case): by default only the cases a reader opens first,
+    # those drift detection or Steps 1-2 flagged, are drawn; every case keeps its bundles.
+    bundles = case_bundles(data)
+    for fig_name, b in bundles.items():
+        figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b)
+    why = flags(doc)
+    draw = c["figures"] == "all" or (c["figures"] == "flagged" and why)
+    drawn = list(bundles) if draw else []
+    for fig_name in drawn:  # from the bundle as written: `epa fig` redraws the same bytes
+        formats = ("png", "pdf") if c["pdf"] else ("png",)
+        bundle = figures.read_bundle(folder / "bundles" / f"{fig_name}.json")
+        figures.render(bundle, folder / "figures" / fig_name, formats=formats)
+    reason = "report.figures: none" if c["figures"] == "none" else "the case is not flagged"
+    # run in the case folder: the report reads the same wherever the results are
+    undrawn = ([n for n in bundles if n not in drawn], reason, "epa fig --case .")
     for lang in ("en", "zh"):
-        io.write_text(
-            folder / f"report_{lang}.md", report_md(doc, name, drawn, lang, data.fail_segments)
-        )
+        md = report_md(doc, name, drawn, lang, data.fail_segments, undrawn)
+        io.write_text(folder / f"report_{lang}.md", md)
     if c["rerun"]:
         from epa.outputs import recording
 
         recording.write_rrd(data, name, folder / f"{name.replace('/', '_')}.rrd")
     if c["zip"]:  # last: it holds the other report files
         case_zip(case.root, folder / f"{name.replace('/', '_')}.zip")
-    return {"figures": drawn, "zip": bool(c["zip"]), "rerun": bool(c["rerun"])}
+    return {"figures": drawn, "flags": why, "zip": bool(c["zip"]), "rerun": bool(c["rerun"])}
 
 
 # ----------------------------------------------------------------------------- grid figures

@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import re
 import stat
+import sys
 import warnings
 from pathlib import Path
 
@@ -42,21 +43,19 @@ class _Table:
         self,
         path: Path,
         rows: np.ndarray,
-        body: list[str],
+        body: str,
         first_line: int,
         header: list[str] | None,
     ):
         self.path, self.rows, self.header = path, rows, header
         self.notes: list[str] = []  # every interpretation made that the file did not state
-        self._body, self._first_line = (
-            body,
-            first_line,
-        )  # the file's lines from the first data row on
+        # the file's text from the first data row on (split into lines only when needed)
+        self._body, self._first_line = body, first_line
 
     def data_lines(self) -> tuple[list[str], list[int]]:
         """The data rows' text and their 1-based file line numbers (comments and blanks skipped)."""
         text, numbers = [], []
-        for no, line in enumerate(self._body, start=self._first_line):
+        for no, line in enumerate(self._body.splitlines(), start=self._first_line):
             s = line.strip()
             if s and s[0] not in "#%":
                 text.append(s)
@@ -108,18 +107,31 @@ def read_table(path: Path) -> _Table:
     text = text.removeprefix(
         "\ufeff"
     )  # a byte-order mark (spreadsheet exports) is not part of the data
-    raw = text.splitlines()
+    # the header is in the first lines: split only those (the whole file is split only on error)
+    raw = text[:HEAD_CHARS].splitlines(keepends=True)
+    if len(text) > HEAD_CHARS:
+        raw = raw[:-1]  # the last line of the head may be cut
+    found = _scan_header(path, raw)
+    if found[0] == len(raw) and len(text) > HEAD_CHARS:  # comments beyond the head: whole file
+        raw = text.splitlines(keepends=True)
+        found = _scan_header(path, raw)
+    return _read_body(path, text, raw, found)
+
+
+HEAD_CHARS = 1 << 16
+
+
+def _scan_header(path: Path, raw: list[str]):
+    """(first data line index, header names, header line) of a file's lines: leading comments and
+    blank lines, and one uncommented header line; the last of them names the columns."""
     header: list[str] | None = None
-    start = 0
-    header_line = None  # the one uncommented header line a file may have
-    for start, line in enumerate(
-        raw
-    ):  # leading comments and a header line; the last one names the columns
+    start, header_line = len(raw), None
+    for k, line in enumerate(raw):
         s = line.strip()
         if not s:
             continue
         if s[0] not in "#%" and not _split(s):
-            raise EpaError("a row of empty fields", path=str(path), line=start + 1)
+            raise EpaError("a row of empty fields", path=str(path), line=k + 1)
         if s[0] in "#%":
             header = _header_names(s)
             continue
@@ -131,15 +143,18 @@ def read_table(path: Path) -> _Table:
                     f"not a number: {_split(s)[0]!r} (a second header line; line {header_line} was"
                     " taken as the header)",
                     path=str(path),
-                    line=start + 1,
+                    line=k + 1,
                 )
-            header, header_line = _header_names(s), start + 1
+            header, header_line = _header_names(s), k + 1
             continue
-        break
-    else:
-        start = len(raw)
-    body = raw[start:]
-    first = body[0] if body else ""
+        return k, header, header_line
+    return start, header, header_line
+
+
+def _read_body(path: Path, text: str, raw: list[str], found) -> _Table:
+    start, header, header_line = found
+    body_text = text[sum(map(len, raw[:start])) :]
+    first = raw[start] if start < len(raw) else ""
     if ";" in first and "," in first:
         raise EpaError(
             "fields separated by ';' with ',' inside: decimal commas are not supported (export"
@@ -147,7 +162,11 @@ def read_table(path: Path) -> _Table:
             path=str(path),
             line=start + 1,
         )
-    tab = _Table(path, np.zeros((0, 0)), body, start + 1, header)
+    tab = _Table(path, np.zeros((0, 0)), body_text, start + 1, header)
+    rows = _c_parser_rows(body_text, len(_split(first)))
+    if rows is not None:
+        return _checked(tab, rows, header, header_line)
+    body = body_text.splitlines()
     parse = (
         [line.replace(",", " ").replace(";", " ") for line in body]
         if ("," in first or ";" in first)
@@ -163,6 +182,11 @@ def read_table(path: Path) -> _Table:
             rows = np.loadtxt(parse, ndmin=2, dtype=float, comments=comments)
     except ValueError:
         _diagnose(tab)
+    return _checked(tab, rows, header, header_line)
+
+
+def _checked(tab: _Table, rows: np.ndarray, header, header_line) -> _Table:
+    path = tab.path
     if rows.size == 0:
         raise EpaError("no data rows (the file is empty or holds only comments)", path=str(path))
     if header_line is not None and len(header) != rows.shape[1]:
@@ -176,6 +200,37 @@ def read_table(path: Path) -> _Table:
         tab.fail(int(np.argmax(bad.any(axis=1))), "non-finite value (nan or inf)")
     tab.rows = rows
     return tab
+
+
+# From this size on, a body is parsed by pandas' C parser: 3-4x faster than numpy's loadtxt
+# (0.10 s against 0.37 s for a 100k-pose TUM file; same doubles, bit for bit), worth its 0.5 s
+# import; once pandas is imported (a worker that met a large file), for every file.
+C_PARSER_MIN_CHARS = 4_000_000
+
+
+def _c_parser_rows(body: str, width: int) -> np.ndarray | None:
+    """Rows of ``width`` whitespace-separated numbers parsed at once in C, or None where the
+    line-by-line reader must decide (and say which line is wrong): other separators or comments, a
+    line with another number of fields, or anything that is not a finite number."""
+    if len(body) < C_PARSER_MIN_CHARS and "pandas" not in sys.modules:
+        return None
+    if not body or width == 0 or any(c in body for c in ",;#%"):
+        return None
+    import io
+
+    import pandas as pd
+
+    data = body.encode("utf-8")
+    for sep in (" ", r"\s+"):  # one space (most files: the fastest path), else any whitespace
+        try:
+            frame = pd.read_csv(io.BytesIO(data), sep=sep, header=None, dtype=float, engine="c")
+        except (ValueError, pd.errors.ParserError):
+            continue
+        rows = np.ascontiguousarray(frame.to_numpy())  # row-major, as the rest expects
+        # a short line reads as NaN: the line-by-line reader names it
+        if rows.ndim == 2 and rows.shape[1] == width and np.isfinite(rows).all():
+            return rows
+    return None
 
 
 # Files that are not text trajectories, by their first bytes: say what they are.

@@ -175,7 +175,8 @@ def _pool(workers: int):
 
             # forkserver: Snakemake's process has threads, which fork() must not copy
             ctx = multiprocessing.get_context("forkserver")
-            ctx.set_forkserver_preload(["epa.workflow.jobs"])
+            # pandas: its C parser reads the artifacts (epa.artifacts.files); imported once here
+            ctx.set_forkserver_preload(["epa.workflow.jobs", "pandas"])
             _POOL = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
         return _POOL
 
