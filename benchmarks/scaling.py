@@ -2,6 +2,7 @@
 docs/performance.md and the closing note, never in a timed test.
 
     python benchmarks/scaling.py [--sizes 10000,100000,1000000] [--repeat 3] [--artifacts]
+    python benchmarks/scaling.py --example    # each stage over the example's 18 cases, as jobs run
 
 A simulated pair at 200 Hz (the reference) and 200 Hz (the estimate: noise, a 30 ms clock offset,
 a 10 deg / 5 cm extrinsic) runs through every stage as ``epa eval`` runs it (``--artifacts``: also
@@ -85,12 +86,43 @@ def c_parser_floor(ref_path, est_path) -> float:
     return CLOCK() - t0
 
 
+def example_stage_costs() -> None:
+    """CPU seconds per stage summed over the bundled example's cases, each stage run as a workflow
+    job runs it: fresh per-case state read from the previous stage's artifacts, every artifact
+    written, pandas preloaded as in the workers."""
+    import os
+
+    import pandas  # noqa: F401 - the workers preload it
+
+    from epa.artifacts.case import CaseData, CaseFolder
+    from epa.workflow import discovery
+
+    root = Path(__file__).resolve().parents[1]
+    os.chdir(root)
+    cfg = settings.resolve(settings.load_yaml(root / "config/config.yaml"))
+    cfg["report"]["per_case"] = False
+    _, cases = discovery.discover(cfg["truth_dir"], cfg["algorithms_dir"])
+    cpu: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as out:
+        for stage in chain.NAMES[:-1]:
+            for case in cases:
+                t0 = CLOCK()
+                chain.run_stage(stage, CaseData(CaseFolder.of(out, case)), cfg)
+                cpu[stage] = cpu.get(stage, 0.0) + CLOCK() - t0
+    for stage, t in cpu.items():
+        print(f"{stage:<12}{t:8.2f} s")
+    print(f"{'all stages':<12}{sum(cpu.values()):8.2f} s over {len(cases)} cases (CPU)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", default="10000,100000,1000000")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--artifacts", action="store_true")
+    ap.add_argument("--example", action="store_true", help="per-stage cost on the bundled example")
     args = ap.parse_args()
+    if args.example:
+        return example_stage_costs()
     sizes = [int(s) for s in args.sizes.split(",")]
     cfg = settings.defaults()
     cfg["report"]["per_case"] = False
