@@ -7,7 +7,7 @@ import epa
 from epa.errors import EpaError
 from snakemake.exceptions import WorkflowError
 from epa import cases as epa_cases, chain as epa_chain, grid as epa_grid, readers as epa_readers
-from epa import settings as epa_settings
+from epa import settings as epa_settings, slurm as epa_slurm
 from epa.outputs import report as epa_report, tables as epa_tables
 from epa.readers import bags as epa_bags
 
@@ -26,6 +26,27 @@ BATCHES = epa_grid.batches(sorted(CASE_BY_KEY), EPA["grid"]["max_batches"])
 
 wildcard_constraints:
     batch=".+",
+
+
+# Inside a cluster job (a `--mode remote` Snakemake: with the slurm executor, the job-step process
+# that runs a submission's jobs), every job of the submission runs in this process, in threads, as
+# localrules, instead of each under `srun` in a Snakemake of its own: one interpreter per submission
+# (docs/cluster.md). No effect where the remote process's executor is local anyway.
+if workflow.remote_exec:
+    workflow.localrules(*epa_chain.NAMES, "tables", "figures")
+
+
+# A cluster run: before anything is submitted, the job-state query the slurm executor will rely on
+# must answer (a failing one makes it wait forever). onstart runs in the main process only, after
+# the DAG, never in a dry run or a cluster job.
+onstart:
+    if getattr(workflow.executor_plugin, "name", None) == "slurm":
+        problem = epa_slurm.status_query_problem(
+            getattr(workflow.executor_settings, "status_command", None),
+            getattr(workflow.executor_settings, "init_seconds_before_status_checks", None),
+        )
+        if problem:
+            raise WorkflowError("epa: error: " + problem)
 
 
 def manifest(stage):
@@ -88,11 +109,17 @@ STAGE_RESOURCES = {
 
 
 def workers():
-    """Worker processes for in-process jobs: the cores Snakemake was given."""
+    """Worker processes for in-process jobs: the cores Snakemake was given, and no more than this
+    process may use: a cluster job is started with --cores all (the node's), but gets its allocation."""
     try:
-        return max(1, int(workflow.cores))
+        cores = max(1, int(workflow.cores))
     except Exception:  # no --cores (e.g. a remote job): run in the calling thread
         return 1
+    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else cores
+    allocated = os.environ.get("SLURM_CPUS_PER_TASK", "")  # set in a Slurm job given --cpus-per-task
+    if allocated.isdigit() and int(allocated) > 0:
+        usable = min(usable, int(allocated))
+    return max(1, min(cores, usable))
 
 
 def run_stage(stage, params, output, log, upstream=None):
