@@ -64,13 +64,16 @@ def status_query_problem(status_setting: str | None, init_seconds: int | None) -
         why = (err or out).strip().splitlines()
         why = why[-1] if why else f"exit status {rc}"
         cmd = shlex.join(query(name)[:1])
+        if name == "sacct" and status_setting == "squeue":
+            limit = f"<= {min_age // 3}" if min_age else "<= MinJobAge / 3"
+            return (f"the Slurm job-state query `{cmd}` (which the plugin uses instead of squeue because "
+                    f"MinJobAge {min_age} s is under 3 x slurm-init-seconds-before-status-checks = "
+                    f"{3 * init} s) fails ({why}), so the run would wait forever: set "
+                    f"`slurm-init-seconds-before-status-checks: {limit.split()[-1]}` or less in {PROFILE}, "
+                    f"or enable Slurm accounting (slurmdbd)")
         if name == "sacct":
-            fallback = ""
-            if status_setting == "squeue":
-                fallback = (f" (chosen by the plugin over squeue: MinJobAge {min_age} s is under 3 x "
-                            f"slurm-init-seconds-before-status-checks = {3 * init} s)")
-            return (f"the Slurm job-state query `{cmd}`{fallback} fails ({why}), so the run would wait "
-                    f"forever: set `slurm-status-command: squeue` in {PROFILE} (with "
+            return (f"the Slurm job-state query `{cmd}` fails ({why}), so the run would wait forever: "
+                    f"set `slurm-status-command: squeue` in {PROFILE} (with "
                     f"slurm-init-seconds-before-status-checks <= MinJobAge / 3) or enable Slurm "
                     f"accounting (slurmdbd)")
         return (f"the Slurm job-state query `{cmd}` fails ({why}): the run would wait forever; run "
