@@ -46,7 +46,7 @@ onstart:
             getattr(workflow.executor_settings, "init_seconds_before_status_checks", None),
         )
         if problem:
-            raise WorkflowError("epa: error: " + problem)
+            raise WorkflowError(f"epa: error: {problem}")
 
 
 def manifest(stage):
