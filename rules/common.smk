@@ -28,14 +28,6 @@ wildcard_constraints:
     batch=".+",
 
 
-# Inside a cluster job (a `--mode remote` Snakemake: with the slurm executor, the job-step process
-# that runs a submission's jobs), every job of the submission runs in this process, in threads, as
-# localrules, instead of each under `srun` in a Snakemake of its own: one interpreter per submission
-# (docs/cluster.md). No effect where the remote process's executor is local anyway.
-if workflow.remote_exec:
-    workflow.localrules(*epa_chain.NAMES, "tables", "figures")
-
-
 # A cluster run: before anything is submitted, the job-state query the slurm executor will rely on
 # must answer (a failing one makes it wait forever). onstart runs in the main process only, after
 # the DAG, never in a dry run or a cluster job.
@@ -108,18 +100,33 @@ STAGE_RESOURCES = {
 }
 
 
+def usable_cpus():
+    """The CPUs this process may use: its affinity mask, and in a Slurm job its allocation."""
+    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    allocated = os.environ.get("SLURM_CPUS_PER_TASK", "")  # set in a Slurm job given --cpus-per-task
+    if allocated.isdigit() and int(allocated) > 0:
+        usable = min(usable, int(allocated))
+    return max(1, usable)
+
+
 def workers():
     """Worker processes for in-process jobs: the cores Snakemake was given, and no more than this
     process may use: a cluster job is started with --cores all (the node's), but gets its allocation."""
     try:
-        cores = max(1, int(workflow.cores))
+        return max(1, min(int(workflow.cores), usable_cpus()))
     except Exception:  # no --cores (e.g. a remote job): run in the calling thread
         return 1
-    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else cores
-    allocated = os.environ.get("SLURM_CPUS_PER_TASK", "")  # set in a Slurm job given --cpus-per-task
-    if allocated.isdigit() and int(allocated) > 0:
-        usable = min(usable, int(allocated))
-    return max(1, min(cores, usable))
+
+
+# Inside a cluster job (a `--mode remote` Snakemake; with the slurm executor, the job-step process
+# that runs a submission's jobs) every job of the submission runs in this process, in threads, as a
+# local rule, instead of each under `srun` in a Snakemake of its own: one interpreter per submission.
+# The slurm executor starts it with --jobs 1; as many jobs as the job has CPUs run side by side (they
+# share the worker pool). No effect where the remote process's executor is local. docs/cluster.md.
+if workflow.remote_exec:
+    workflow.localrules(*epa_chain.NAMES, "tables", "figures")
+    if workflow.nodes is not None:
+        workflow.register_resource("_nodes", usable_cpus())
 
 
 def run_stage(stage, params, output, log, upstream=None):
