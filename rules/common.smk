@@ -100,20 +100,11 @@ STAGE_RESOURCES = {
 }
 
 
-def usable_cpus():
-    """The CPUs this process may use: its affinity mask, and in a Slurm job its allocation."""
-    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    allocated = os.environ.get("SLURM_CPUS_PER_TASK", "")  # set in a Slurm job given --cpus-per-task
-    if allocated.isdigit() and int(allocated) > 0:
-        usable = min(usable, int(allocated))
-    return max(1, usable)
-
-
 def workers():
     """Worker processes for in-process jobs: the cores Snakemake was given, and no more than this
     process may use: a cluster job is started with --cores all (the node's), but gets its allocation."""
     try:
-        return max(1, min(int(workflow.cores), usable_cpus()))
+        return max(1, min(int(workflow.cores), epa_slurm.usable_cpus()))
     except Exception:  # no --cores (e.g. a remote job): run in the calling thread
         return 1
 
@@ -126,7 +117,7 @@ def workers():
 if workflow.remote_exec:
     workflow.localrules(*epa_chain.NAMES, "tables", "figures")
     if workflow.nodes is not None:
-        workflow.register_resource("_nodes", usable_cpus())
+        workflow.register_resource("_nodes", epa_slurm.usable_cpus())
 
 
 def run_stage(stage, params, output, log, upstream=None):

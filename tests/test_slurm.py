@@ -118,3 +118,14 @@ def test_no_slurm_commands(tmp_path, monkeypatch):
     monkeypatch.setenv("PATH", str(tmp_path))
     problem = slurm.status_query_problem("squeue", 10)
     assert "`squeue` fails (squeue: command not found)" in problem
+
+
+# ----------------------------------------------------------------------------- a cluster job's CPUs
+def test_usable_cpus_is_the_slurm_allocation_not_the_node(monkeypatch):
+    node = len(os.sched_getaffinity(0))
+    monkeypatch.delenv("SLURM_CPUS_PER_TASK", raising=False)
+    assert slurm.usable_cpus() == node
+    monkeypatch.setenv("SLURM_CPUS_PER_TASK", "1")
+    assert slurm.usable_cpus() == 1
+    monkeypatch.setenv("SLURM_CPUS_PER_TASK", str(node + 8))  # never more than the process may use
+    assert slurm.usable_cpus() == node

@@ -1,4 +1,5 @@
-"""Slurm: checks a run through snakemake-executor-plugin-slurm (2.x) needs before it submits anything.
+"""Slurm: the CPUs a cluster job may use, and the check a run through snakemake-executor-plugin-slurm
+(2.x) needs before it submits anything.
 
 The plugin learns that a job has finished only from its job-state query (``sacct`` or ``squeue``). A
 query that fails, or a finished job that has already left ``squeue``, looks to it like a job still
@@ -10,6 +11,7 @@ No snakemake import here: the workflow passes the executor's settings (see rules
 
 from __future__ import annotations
 
+import os
 import re
 import shlex
 import shutil
@@ -19,6 +21,16 @@ from datetime import datetime, timedelta
 PLUGIN_INIT_SECONDS = 40  # the plugin's default slurm-init-seconds-before-status-checks
 PLUGIN_MAX_SLEEP = 180  # the plugin's longest wait between two queries (s)
 PROFILE = "profiles/slurm/config.yaml"
+
+
+def usable_cpus() -> int:
+    """The CPUs this process may use: its affinity mask and, in a Slurm job, its allocation
+    (SLURM_CPUS_PER_TASK; a cluster job's Snakemake is started with --cores all, the node's)."""
+    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    allocated = os.environ.get("SLURM_CPUS_PER_TASK", "")
+    if allocated.isdigit() and int(allocated) > 0:
+        usable = min(usable, int(allocated))
+    return max(1, usable)
 
 
 def min_job_age() -> int | None:
