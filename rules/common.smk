@@ -29,14 +29,14 @@ wildcard_constraints:
 
 
 # A cluster run: before anything is submitted, the job-state query the slurm executor will rely on
-# must answer (a failing one makes it wait forever). onstart runs in the main process only, after
-# the DAG, never in a dry run or a cluster job.
+# must answer, and some node must have the CPUs a submission asks for (else the run waits forever).
+# onstart runs in the main process only, after the DAG, never in a dry run or a cluster job.
 onstart:
     if getattr(workflow.executor_plugin, "name", None) == "slurm":
         problem = epa_slurm.status_query_problem(
             getattr(workflow.executor_settings, "status_command", None),
             getattr(workflow.executor_settings, "init_seconds_before_status_checks", None),
-        )
+        ) or epa_slurm.cores_problem(workflow.resource_settings.cores)
         if problem:
             raise WorkflowError(f"epa: error: {problem}")
 

@@ -78,6 +78,7 @@ def _fake_slurm(tmp_path, monkeypatch, *, sacct_ok, squeue_ok=True, min_job_age=
         tool("sacct", sacct_ok)
     tool("squeue", squeue_ok)
     tool("scontrol", True, f"MinJobAge               = {min_job_age} sec\\n")
+    tool("sinfo", True, "2\\n4\\n")
     monkeypatch.setenv("PATH", str(bin_dir))
     return bin_dir
 
@@ -129,3 +130,10 @@ def test_usable_cpus_is_the_slurm_allocation_not_the_node(monkeypatch):
     assert slurm.usable_cpus() == 1
     monkeypatch.setenv("SLURM_CPUS_PER_TASK", str(node + 8))  # never more than the process may use
     assert slurm.usable_cpus() == node
+
+
+def test_a_submission_wider_than_any_node_stops(tmp_path, monkeypatch):
+    _fake_slurm(tmp_path, monkeypatch, sacct_ok=True)
+    assert slurm.cores_problem(4) is None
+    problem = slurm.cores_problem(8)
+    assert "no Slurm node has more than 4" in problem and "set `cores: 4` or less" in problem

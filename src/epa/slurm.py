@@ -98,6 +98,19 @@ def status_query_problem(status_setting: str | None, init_seconds: int | None) -
     return None
 
 
+def cores_problem(cores) -> str | None:
+    """None when some node has the CPUs one submission asks for (the profile's ``cores``); else one
+    line. Slurm keeps a job that no node can hold pending (reason PartitionConfig), and the run waits."""
+    if not isinstance(cores, int) or cores < 1:
+        return None
+    rc, out, _ = _run(["sinfo", "-h", "-N", "-o", "%c"])
+    counts = [int(x) for x in re.findall(r"\d+", out)] if rc == 0 else []
+    if not counts or cores <= max(counts):
+        return None
+    return (f"a submission asks for {cores} CPUs (`cores: {cores}` in {PROFILE}) but no Slurm node has "
+            f"more than {max(counts)}, so its jobs would pend forever: set `cores: {max(counts)}` or less")
+
+
 def _run(cmd: list[str]) -> tuple[int, str, str]:
     try:
         p = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
