@@ -37,6 +37,19 @@ wildcard_constraints:
     batch=".+",
 
 
+# A cluster run: before anything is submitted, the job-state query the slurm executor will rely on
+# must answer, and some node must have the CPUs a submission asks for (else the run waits forever).
+# onstart runs in the main process only, after the DAG, never in a dry run or a cluster job.
+onstart:
+    if getattr(workflow.executor_plugin, "name", None) == "slurm":
+        problem = epa_cluster.status_query_problem(
+            getattr(workflow.executor_settings, "status_command", None),
+            getattr(workflow.executor_settings, "init_seconds_before_status_checks", None),
+        ) or epa_cluster.cores_problem(workflow.resource_settings.cores)
+        if problem:
+            raise WorkflowError(f"epa: error: {problem}")
+
+
 def manifest(stage):
     """A stage job's declared output: which cases of its batch succeeded (artifacts are per case)."""
     return f"{RESULTS}/batches/{{batch}}/{stage}.json"
@@ -119,11 +132,23 @@ STAGE_RESOURCES = {
 
 
 def workers():
-    """Worker processes for in-process jobs: the cores Snakemake was given."""
+    """Worker processes for in-process jobs: the cores Snakemake was given, and no more than this
+    process may use: a cluster job is started with --cores all (the node's), but gets its allocation."""
     try:
-        return max(1, int(workflow.cores))
+        return max(1, min(int(workflow.cores), epa_cluster.usable_cpus()))
     except Exception:  # no --cores (e.g. a remote job): run in the calling thread
         return 1
+
+
+# Inside a cluster job (a `--mode remote` Snakemake; with the slurm executor, the job-step process
+# that runs a submission's jobs) every job of the submission runs in this process, in threads, as a
+# local rule, instead of each under `srun` in a Snakemake of its own: one interpreter per submission.
+# The slurm executor starts it with --jobs 1; as many jobs as the job has CPUs run side by side (they
+# share the worker pool). No effect where the remote process's executor is local. docs/cluster.md.
+if workflow.remote_exec:
+    workflow.localrules(*epa_chain.NAMES, "tables", "figures")
+    if workflow.nodes is not None:
+        workflow.register_resource("_nodes", epa_cluster.usable_cpus())
 
 
 def idle_truths():
