@@ -14,7 +14,7 @@ from epa.workflow import (
     discovery as epa_discovery,
     jobs as epa_jobs,
 )
-from epa.workflow import settings as epa_settings
+from epa.workflow import cluster as epa_cluster, settings as epa_settings
 
 try:  # a mistake in the config or the folders is one line, not a traceback
     epa_settings.check_user_configs(
@@ -135,9 +135,10 @@ def workers():
     """Worker processes for in-process jobs: the cores Snakemake was given, and no more than this
     process may use: a cluster job is started with --cores all (the node's), but gets its allocation."""
     try:
-        return max(1, min(int(workflow.cores), epa_cluster.usable_cpus()))
-    except Exception:  # no --cores (e.g. a remote job): run in the calling thread
+        cores = int(workflow.cores)
+    except (TypeError, ValueError):  # no --cores (e.g. a remote job): run in the calling thread
         return 1
+    return max(1, min(cores, epa_cluster.usable_cpus()))
 
 
 # Inside a cluster job (a `--mode remote` Snakemake; with the slurm executor, the job-step process

@@ -14,7 +14,8 @@ from evo.core.sync_method import SyncMethod  # noqa: E402
 from evo.core.trajectory import Plane  # noqa: E402
 from evo.tools import file_interface  # noqa: E402
 
-from epa.cli import main as cli
+from epa.cli import main as cli  # noqa: E402
+from epa.core.errors import EpaError  # noqa: E402
 from epa.evo import commands as cli_evo
 from epa.evo import protocol as evo_protocol  # noqa: E402
 
@@ -434,3 +435,32 @@ def test_projection_keeps_only_the_rotation_about_the_normal():
     )
     assert flat.p.tolist() == [[1.0, 2.0, 0.0]]
     assert np.allclose(flat.r[0], geometry.rot_z(yaw))
+
+
+def test_align_posyaw_removes_a_yaw_and_a_shift_but_not_a_tilt():
+    """--align_posyaw (4-DoF, evo's pending option) fits position and yaw only: an estimate rotated
+    about z and shifted reads as exact; a tilt about x stays in the error, where -a removes it."""
+    from epa.core import geometry
+    from epa.core.trajectory import Trajectory
+
+    t = np.arange(400) * 0.05
+    p = np.column_stack([np.cos(t), np.sin(2 * t), 0.3 * np.sin(t)]) * 5
+    q = geometry.rot_to_quat(geometry.so3_exp(np.column_stack([0.2 * np.sin(t), 0.1 * t, 0.3 * t])))
+    ref = Trajectory(t, p, q)
+
+    def moved(rotvec):
+        r = geometry.so3_exp(np.asarray(rotvec, float))
+        return Trajectory(t, p @ r.T + [3.0, -2.0, 1.0], geometry.rot_to_quat(r[None] @ ref.r))
+
+    o = evo_protocol.EvoOptions(align_posyaw=True, relation="full")
+    yawed = evo_protocol.ape(ref, moved([0, 0, 0.7]), o, timed=True)
+    tilted = evo_protocol.ape(ref, moved([0.2, 0, 0.7]), o, timed=True)
+    rigid = evo_protocol.ape(
+        ref, moved([0.2, 0, 0.7]), evo_protocol.EvoOptions(align=True), timed=True
+    )
+    assert yawed.stats["rmse"] < 1e-9
+    assert tilted.stats["rmse"] > 0.1 and rigid.stats["rmse"] < 1e-9
+    assert "(with position and yaw (4-DoF) alignment)" in yawed.title
+    both = evo_protocol.EvoOptions(align_posyaw=True, correct_scale=True)
+    with pytest.raises(EpaError, match="aligns alone"):
+        evo_protocol.ape(ref, ref, both, timed=True)

@@ -65,6 +65,11 @@ def _add_options(f, kind: str, timed: bool) -> None:
     group = f.add_mutually_exclusive_group()
     group.add_argument("-a", "--align", action="store_true", help="Umeyama SE(3) alignment")
     group.add_argument("--align_origin", action="store_true", help="align the first poses")
+    group.add_argument(
+        "--align_posyaw",
+        action="store_true",
+        help="align position and yaw only (4-DoF; not in evo 1.38.1: its pending option)",
+    )
     f.add_argument(
         "-s", "--correct_scale", action="store_true", help="with -a: Sim(3); alone: the scale only"
     )

@@ -39,6 +39,7 @@ class EvoOptions:
     correct_scale: bool = False
     n_to_align: int = -1
     align_origin: bool = False
+    align_posyaw: bool = False  # not in evo 1.38.1: its pending 4-DoF alignment, as epica's posyaw
     project_to_plane: str | None = None
     t_max_diff: float = 0.01
     t_offset: float = 0.0
@@ -111,9 +112,16 @@ def synchronise(ref: Trajectory, est: Trajectory, o: EvoOptions) -> tuple[Trajec
 def align(
     ref: Trajectory, est: Trajectory, o: EvoOptions
 ) -> tuple[Trajectory, alignment.Similarity | None]:
-    """The estimate aligned as evo's flags say (-a, -s, -as, --n_to_align, --align_origin)."""
+    """The estimate aligned as evo's flags say (-a, -s, -as, --n_to_align, --align_origin), or on
+    position and yaw only (``--align_posyaw``: 4 degrees of freedom, for VIO whose roll and pitch
+    gravity makes observable; Step 3's ``posyaw``)."""
     if o.align and o.align_origin:
         raise EpaError("--align and --align_origin can't be used together")
+    if o.align_posyaw:
+        if o.align or o.align_origin or o.correct_scale:
+            raise EpaError("--align_posyaw aligns alone: not with -a, --align_origin or -s")
+        fit = alignment.fit(ref, est, method="posyaw", first_n=o.n_to_align)
+        return fit.apply(est), fit
     if o.align or o.correct_scale:
         fit = alignment.fit(
             ref, est, method="sim3" if o.correct_scale else "se3", first_n=o.n_to_align
@@ -159,9 +167,11 @@ def _title(head: str, o: EvoOptions) -> str:
         )
     elif only_scale:
         head += "\n(scale corrected)"
-    elif not o.align_origin:
+    elif not o.align_origin and not o.align_posyaw:
         head += "\n(not aligned)"
-    if (o.align or o.correct_scale) and o.n_to_align != -1:
+    if o.align_posyaw:
+        head += "\n(with position and yaw (4-DoF) alignment)"
+    if (o.align or o.correct_scale or o.align_posyaw) and o.n_to_align != -1:
         head += f" (aligned poses: {o.n_to_align})"
     if o.align_origin:
         head += "\n(with origin alignment)"
