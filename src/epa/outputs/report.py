@@ -19,6 +19,7 @@ import numpy as np
 
 from epa.artifacts import files as io
 from epa.artifacts.case import CaseData, CaseFolder
+from epa.metrics.accuracy import segment_key
 from epa.outputs import figures, tables
 
 CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")
@@ -378,77 +379,73 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
 
 
 # ----------------------------------------------------------------------------- grid figures
+def _num(row: dict, key: str) -> float:
+    try:
+        return float(row[key])
+    except (KeyError, ValueError):
+        return np.nan
+
+
 def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]:
     """ATE per algorithm and dataset, drift rate against segment length, success rate, RMSE over
-    time across runs: from summary.csv and results/consistency/, one colour per algorithm."""
-    from epa.metrics.accuracy import segment_key
-
+    time across runs, success against the drift threshold: from summary.csv, success_curves.csv and
+    results/consistency/, one colour per algorithm."""
     with open(summary_csv_path, encoding="utf-8", newline="") as fh:
         rows = list(csv.DictReader(fh))
     ok = [r for r in rows if tables.has_result(r["status"])]
     algs = sorted({r["algorithm"] for r in rows})
     datasets = sorted({r["dataset"] for r in rows})
-    colors = figures.OKABE_ITO
-
-    def num(r, key):
-        try:
-            return float(r[key])
-        except (KeyError, ValueError):
-            return np.nan
 
     def cells(key):
+        """Per algorithm, per dataset: the runs' finite values of a summary.csv column."""
         return [
             [
                 [
-                    num(r, key)
+                    _num(r, key)
                     for r in ok
-                    if r["algorithm"] == a and r["dataset"] == d and np.isfinite(num(r, key))
+                    if r["algorithm"] == a and r["dataset"] == d and np.isfinite(_num(r, key))
                 ]
                 for d in datasets
             ]
             for a in algs
         ]
 
-    out = {
+    success = [
+        [[np.nanmean(v)] if v else [] for v in a] for a in cells("success_rate_distance_pct")
+    ]
+    ate = {"values": cells("ate_trans_rmse_m"), "ylabel": "ATE RMSE [m]", "log": True}
+    rate = {"bars": True, "values": success, "ylabel": "success rate [% of path]"}
+    return {
         "ate": figures.bundle(
             "grouped",
             "ATE per algorithm and dataset (runs)",
-            {
-                "datasets": datasets,
-                "algorithms": algs,
-                "values": cells("ate_trans_rmse_m"),
-                "ylabel": "ATE RMSE [m]",
-                "log": True,
-                "colors": colors,
-            },
+            {"datasets": datasets, "algorithms": algs, **ate, "colors": figures.OKABE_ITO},
         ),
         "success_rate": figures.bundle(
             "grouped",
             "Success rate per algorithm and dataset",
-            {
-                "datasets": datasets,
-                "algorithms": algs,
-                "bars": True,
-                "values": [
-                    [[np.nanmean(v)] if v else [] for v in a]
-                    for a in cells("success_rate_distance_pct")
-                ],
-                "ylabel": "success rate [% of path]",
-                "colors": colors,
-            },
+            {"datasets": datasets, "algorithms": algs, **rate, "colors": figures.OKABE_ITO},
+        ),
+        "drift_rate": _drift_rate_bundle(ok, algs, segments),
+        "rmse_time": _rmse_time_bundle(Path(consistency_dir), algs, datasets),
+        "success_curve": _success_curve_bundle(
+            Path(summary_csv_path).parent / "success_curves.csv", algs, datasets
         ),
     }
+
+
+def _drift_rate_bundle(ok: list[dict], algs: list[str], segments) -> dict:
     lines = []
     for k, a in enumerate(algs):
         ys = [
             np.nanmean(
-                [num(r, f"drift_rate_{segment_key(s)}m_pct") for r in ok if r["algorithm"] == a]
+                [_num(r, f"drift_rate_{segment_key(s)}m_pct") for r in ok if r["algorithm"] == a]
                 or [np.nan]
             )
             for s in segments
         ]
         lines.append({"label": a, "x": list(segments), "y": ys, "color": k})
-    out["drift_rate"] = figures.bundle(
+    return figures.bundle(
         "lines",
         "Distance drift rate against segment length",
         {
@@ -456,42 +453,40 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
             "xlabel": "segment length [m]",
             "ylabel": "drift rate [%]",
             "markers": True,
-            "colors": colors,
-            "log": True,
+            "colors": figures.OKABE_ITO,
+            "log": True,  # a diverged run would flatten the others
         },
-    )  # a diverged run would flatten the others
+    )
+
+
+def _rmse_time_bundle(consistency_dir: Path, algs: list[str], datasets: list[str]) -> dict:
     panels = []
     for d in datasets:
         panel_lines = []
         for k, a in enumerate(algs):
-            path = Path(consistency_dir) / a / f"{d}.csv"
+            path = consistency_dir / a / f"{d}.csv"
             if path.exists():
                 t = io.read_csv(path)
                 if len(t.get("t", [])):
                     kk = figures.thin(len(t["t"]), 1500)
-                    panel_lines.append(
-                        {
-                            "label": a,
-                            "x": t["t"][kk] - t["t"][0],
-                            "y": t["rmse_pos_m"][kk],
-                            "color": k,
-                        }
-                    )
+                    x, y = t["t"][kk] - t["t"][0], t["rmse_pos_m"][kk]
+                    panel_lines.append({"label": a, "x": x, "y": y, "color": k})
         panels.append({"title": d, "lines": panel_lines})
-    out["rmse_time"] = figures.bundle(
+    return figures.bundle(
         "lines",
         "RMSE over time across runs",
         {
             "panels": panels,
             "xlabel": "time [s]",
             "ylabel": "RMSE [m]",
-            "colors": colors,
+            "colors": figures.OKABE_ITO,
             "log": True,
         },
     )
-    with open(
-        Path(summary_csv_path).parent / "success_curves.csv", encoding="utf-8", newline=""
-    ) as fh:
+
+
+def _success_curve_bundle(curves_path: Path, algs: list[str], datasets: list[str]) -> dict:
+    with open(curves_path, encoding="utf-8", newline="") as fh:
         curves = list(csv.DictReader(fh))
     panels = []
     for d in datasets:
@@ -499,30 +494,24 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
         for k, a in enumerate(algs):
             rows = [r for r in curves if r["algorithm"] == a and r["dataset"] == d]
             if rows:
-                panel_lines.append(
-                    {
-                        "label": a,
-                        "x": [num(r, "factor") for r in rows],
-                        "y": [num(r, "success_rate_distance_pct") for r in rows],
-                        "color": k,
-                    }
-                )
+                x = [_num(r, "factor") for r in rows]
+                y = [_num(r, "success_rate_distance_pct") for r in rows]
+                panel_lines.append({"label": a, "x": x, "y": y, "color": k})
         panels.append({"title": d, "lines": panel_lines})
-    out["success_curve"] = figures.bundle(
+    return figures.bundle(
         "lines",
         "Success rate against the drift threshold",
         {
             "panels": panels,
             "xlabel": "threshold / default",
             "ylabel": "success rate [% of path]",
-            "colors": colors,
+            "colors": figures.OKABE_ITO,
             "logx": True,
             "sharey": True,
             "dashes": True,
             "ylim": [0, 102],
         },
     )
-    return out
 
 
 def write_grid_figures(results_dir, segments, style: str = "wide") -> list[Path]:

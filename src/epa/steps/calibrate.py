@@ -169,40 +169,41 @@ def _fit(
     i, j = closest_pairs(ref.t - ref.t[0], pair_step, 0.25 * pair_step, strict=False, skip=1)
     info: dict = {"pairs": int(len(i)), "pair_step_s": pair_step}
     if len(i) < min_pairs:
-        return (
-            Extrinsic(
-                trusted=False,
-                reason=f"only {len(i)} motion pairs ({min_pairs} needed)",
-                status=Step2Status.TOO_LITTLE_MOTION,
-                info=info,
-            ),
-            None,
-            None,
-            None,
-            None,
-        )
+        return _too_little(f"only {len(i)} motion pairs ({min_pairs} needed)", info)
     qa, ta = geometry.relative_motions(ref.q, ref.p, i, j)
     qb, tb = geometry.relative_motions(est.q, est.p, i, j)
     alpha, beta = geometry.quat_log(qa), geometry.quat_log(qb)
-    ra = geometry.quat_to_rot(qa)  # the translation equations need (R_A - I) as matrices
     angle = np.degrees(np.linalg.norm(alpha, axis=1))
     use = angle >= min_rotation_deg
     info["rotation_pairs"] = int(use.sum())
     info["excitation_rms_deg"] = float(np.sqrt(np.mean(angle[use] ** 2))) if use.any() else 0.0
     if use.sum() < min_pairs:
-        return (
-            Extrinsic(
-                trusted=False,
-                reason=f"too little rotation: {int(use.sum())} pairs rotate more than"
-                f" {min_rotation_deg} deg ({min_pairs} needed)",
-                status=Step2Status.TOO_LITTLE_MOTION,
-                info=info,
-            ),
-            None,
-            None,
-            None,
-            None,
+        return _too_little(
+            f"too little rotation: {int(use.sum())} pairs rotate more than"
+            f" {min_rotation_deg} deg ({min_pairs} needed)",
+            info,
         )
+    # Pairs overlap in time, so the residuals are grouped in blocks (see _sandwich).
+    block = np.floor((ref.t[i] - ref.t[0]) / (2.0 * pair_step)).astype(int)
+    r_x, cov_rot, null_rot = _solve_rotation(
+        alpha, beta, use, block, min_pairs, outlier_iterations, max_condition, info
+    )
+    # the translation equations need (R_A - I) as matrices
+    x, cov_x, null_x = _solve_translation(
+        geometry.quat_to_rot(qa), ta, tb, r_x, cov_rot, block, scale, max_condition, info
+    )
+    s = float(x[3]) if scale else 1.0
+    return Extrinsic(R=r_x, t=x[:3], scale=s, info=info), cov_rot, null_rot, cov_x, null_x
+
+
+def _too_little(reason: str, info: dict):
+    ext = Extrinsic(trusted=False, reason=reason, status=Step2Status.TOO_LITTLE_MOTION, info=info)
+    return ext, None, None, None, None
+
+
+def _solve_rotation(alpha, beta, use, block, min_pairs, outlier_iterations, max_condition, info):
+    """R_X from the rotation vectors of the motion pairs (alpha = R_X beta) by Kabsch, rejecting
+    pairs beyond 3 median residuals; its covariance and unobservable directions."""
     keep = use.copy()
     for _ in range(outlier_iterations + 1):
         r_x, sv = _kabsch(beta[keep], alpha[keep])
@@ -219,17 +220,18 @@ def _fit(
         rotation_singular_values=sv.tolist(),
         rotation_condition=float(sv[0] / sv[1]) if sv[1] > 0 else float("inf"),
     )
-    # Rotation covariance: residual alpha - Exp(d) R beta ~ r + [R beta]x d, perturbing R on the left
-    # (body axes). Pairs overlap in time, so the residuals are grouped in blocks (see _sandwich).
-    block = np.floor((ref.t[i] - ref.t[0]) / (2.0 * pair_step)).astype(int)
+    # residual alpha - Exp(d) R beta ~ r + [R beta]x d, perturbing R on the left (body axes)
     jac_r = geometry.skew(beta[keep] @ r_x.T)
     cov_rot, null_rot, _ = _sandwich(
         jac_r, alpha[keep] - beta[keep] @ r_x.T, block[keep], max_condition
     )
+    return r_x, cov_rot, null_rot
 
-    # Translation (and scale): every pair, rotation now known.
-    eye = np.eye(3)
-    m = ra - eye  # (K, 3, 3)
+
+def _solve_translation(ra, ta, tb, r_x, cov_rot, block, scale, max_condition, info):
+    """t_X (and the scale) from every pair, the rotation now known: (R_A - I) t_X = R_X t_B - t_A
+    (with scale: s R_X t_B). Its covariance carries the rotation's uncertainty."""
+    m = ra - np.eye(3)  # (K, 3, 3)
     rtb = tb @ r_x.T  # R_X t_B
     if scale:
         m = np.concatenate([m, -rtb[:, :, None]], axis=2)
@@ -238,7 +240,6 @@ def _fit(
         b = rtb - ta
     x, keep_t, tinfo = _robust_lstsq(m, b, max_condition)
     info.update(tinfo)
-    t_x = x[:3]
     s = float(x[3]) if scale else 1.0
     cov_x, null_x, h_pinv = _sandwich(
         m[keep_t], np.einsum("kab,b->ka", m[keep_t], x) - b[keep_t], block[keep_t], max_condition
@@ -246,8 +247,7 @@ def _fit(
     # the rotation's own uncertainty moves R_X t_B: d(residual)/d(rotation) = s [R_X t_B]x
     lever = geometry.skew(s * rtb[keep_t])
     gain = h_pinv @ np.einsum("kai,kaj->ij", m[keep_t], lever)
-    cov_x = cov_x + gain @ cov_rot @ gain.T
-    return Extrinsic(R=r_x, t=t_x, scale=s, info=info), cov_rot, null_rot, cov_x, null_x
+    return x, cov_x + gain @ cov_rot @ gain.T, null_x
 
 
 def _verdict(
