@@ -379,7 +379,8 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
 
 
 # ----------------------------------------------------------------------------- grid figures
-def _num(row: dict, key: str) -> float:
+def _column(row: dict, key: str) -> float:
+    """A summary.csv row's number (nan where empty)."""
     try:
         return float(row[key])
     except (KeyError, ValueError):
@@ -401,9 +402,9 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
         return [
             [
                 [
-                    _num(r, key)
+                    _column(r, key)
                     for r in ok
-                    if r["algorithm"] == a and r["dataset"] == d and np.isfinite(_num(r, key))
+                    if r["algorithm"] == a and r["dataset"] == d and np.isfinite(_column(r, key))
                 ]
                 for d in datasets
             ]
@@ -439,7 +440,7 @@ def _drift_rate_bundle(ok: list[dict], algs: list[str], segments) -> dict:
     for k, a in enumerate(algs):
         ys = [
             np.nanmean(
-                [_num(r, f"drift_rate_{segment_key(s)}m_pct") for r in ok if r["algorithm"] == a]
+                [_column(r, f"drift_rate_{segment_key(s)}m_pct") for r in ok if r["algorithm"] == a]
                 or [np.nan]
             )
             for s in segments
@@ -494,8 +495,8 @@ def _success_curve_bundle(curves_path: Path, algs: list[str], datasets: list[str
         for k, a in enumerate(algs):
             rows = [r for r in curves if r["algorithm"] == a and r["dataset"] == d]
             if rows:
-                x = [_num(r, "factor") for r in rows]
-                y = [_num(r, "success_rate_distance_pct") for r in rows]
+                x = [_column(r, "factor") for r in rows]
+                y = [_column(r, "success_rate_distance_pct") for r in rows]
                 panel_lines.append({"label": a, "x": x, "y": y, "color": k})
         panels.append({"title": d, "lines": panel_lines})
     return figures.bundle(
