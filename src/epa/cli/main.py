@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 from pathlib import Path
 
@@ -357,16 +358,13 @@ def _selftest(args) -> None:
         cfg.setdefault("calibrate", {})["scale"] = True
     cfg = settings.resolve(cfg, source=args.config or "command line")
     ref, _ = load.load_reference(args.reference, cfg)
-    if args.trials < 1 or args.rate <= 0:
-        raise EpaError("--trials must be at least 1 and --rate positive")
-    print(
-        selftest.report(
-            selftest.run(ref, cfg, trials=args.trials, rate=args.rate, seed=args.seed),
-            Path(args.reference).name,
-            args.rate,
-        ),
-        end="",
-    )
+    if args.trials < 1 or not (math.isfinite(args.rate) and args.rate > 0):
+        raise EpaError("--trials must be at least 1 and --rate a positive number")
+    try:
+        results = selftest.run(ref, cfg, trials=args.trials, rate=args.rate, seed=args.seed)
+    except EpaError as exc:
+        raise (exc if exc.path else EpaError(exc.message, path=args.reference)) from None
+    print(selftest.report(results, Path(args.reference).name, args.rate), end="")
 
 
 def main(argv=None) -> int:
@@ -378,13 +376,18 @@ def main(argv=None) -> int:
         elif args.command == "fig":
             from epa.outputs import figures
 
-            written = figures.render(
-                figures.read_bundle(args.bundle),
-                args.out,
-                style=args.style,
-                width=args.width,
-                formats=("png", "pdf") if args.pdf else ("png",),
-            )
+            try:
+                written = figures.render(
+                    figures.read_bundle(args.bundle),
+                    args.out,
+                    style=args.style,
+                    width=args.width,
+                    formats=("png", "pdf") if args.pdf else ("png",),
+                )
+            except EpaError as exc:
+                if exc.path or exc.message.startswith(("unknown style", "--width")):
+                    raise
+                raise EpaError(exc.message, path=args.bundle) from None
             print("wrote " + ", ".join(map(str, written)))
         elif args.command == "traj":
             _traj(args)
