@@ -298,9 +298,13 @@ def _eval(args) -> None:
             f" {c['outside_3sigma_pct']:.2f} % outside 3 sigma"
         )
     if e.get("available"):
+        ea = (
+            f"EA-Drift {e['ea_drift']:.4f} % (seed formula {e['ea_drift_seed']:.4f} %)"
+            if e.get("ea_drift") is not None
+            else "EA-Drift empty: " + e.get("ea_drift_reason", "")
+        )
         print(
-            f"frame time mean {e['frame_time_mean_ms']:.2f} ms (p95 {e['frame_time_p95_ms']:.2f}),"
-            f" EA-Drift {e['ea_drift']:.4f} % (seed formula {e['ea_drift_seed']:.4f} %)"
+            f"frame time mean {e['frame_time_mean_ms']:.2f} ms (p95 {e['frame_time_p95_ms']:.2f}), {ea}"
         )
 
 
