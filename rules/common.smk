@@ -26,7 +26,7 @@ try:  # a mistake in the config or the folders is one line, not a traceback
         source=CONFIG_SOURCE,
     )
     TRUTH, CASES = epa_discovery.discover(
-        EPA["truth_dir"], EPA["algorithms_dir"], source=CONFIG_SOURCE
+        EPA["truth_dir"], EPA["algorithms_dir"], source=CONFIG_SOURCE, cfg=EPA
     )
 except EpaError as exc:
     raise WorkflowError("epa: error: " + exc.one_line()) from None

@@ -226,12 +226,17 @@ def _grid_folders(tmp: Path, setup: str) -> tuple[Path, Path, str | None]:
     return truth, algs, bad
 
 
-def run_grid(truth: Path, algs: Path, results: Path) -> dict[str, str]:
+def run_grid(truth: Path, algs: Path, results: Path, config: dict | None = None) -> dict[str, str]:
     """Every stage as the workflow's jobs run it (one batch), then the tables; key -> status."""
     cfg = settings.resolve(
-        {"truth_dir": str(truth), "algorithms_dir": str(algs), "results_dir": str(results)}
+        {
+            "truth_dir": str(truth),
+            "algorithms_dir": str(algs),
+            "results_dir": str(results),
+            **(config or {}),
+        }
     )
-    _, found = cases.discover(truth, algs)
+    _, found = cases.discover(truth, algs, cfg=cfg)
     batch = [{"key": c.key, "truth": str(c.truth), "estimate": str(c.estimate)} for c in found]
     upstream = None
     for st in chain.STAGES:

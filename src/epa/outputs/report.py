@@ -345,6 +345,13 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
 
 
 # ----------------------------------------------------------------------------- grid figures
+def _nanmean(values):
+    """np.nanmean, without numpy's "Mean of empty slice" warning when every value is nan (an
+    algorithm whose every run failed): nan, drawn as a gap."""
+    a = np.asarray(values, float)
+    return np.nanmean(a) if (~np.isnan(a)).any() else np.nan
+
+
 def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]:
     """ATE per algorithm and dataset, drift rate against segment length, success rate, RMSE over
     time across runs: from summary.csv and results/consistency/, one colour per algorithm."""
@@ -397,7 +404,7 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
                 "algorithms": algs,
                 "bars": True,
                 "values": [
-                    [[np.nanmean(v)] if v else [] for v in a]
+                    [[_nanmean(v)] if v else [] for v in a]
                     for a in cells("success_rate_distance_pct")
                 ],
                 "ylabel": "success rate [% of path]",
@@ -408,7 +415,7 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
     lines = []
     for k, a in enumerate(algs):
         ys = [
-            np.nanmean(
+            _nanmean(
                 [num(r, f"drift_rate_{segment_key(s)}m_pct") for r in ok if r["algorithm"] == a]
                 or [np.nan]
             )
