@@ -26,7 +26,8 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument(
         "--out",
         required=True,
-        help="output folder, laid out as a workflow case folder (06_metrics/metrics.json, 07_drift/drift.json, ...)",
+        help="output folder, laid out as a workflow case folder (06_metrics/metrics.json, 07_drift/drift.json, ...),"
+        " with metrics.json: every stage's record in one document, as the per-case report's",
     )
     e.add_argument(
         "--artifacts",
@@ -92,7 +93,16 @@ def _parser() -> argparse.ArgumentParser:
     tr.add_argument(
         "--format", default="auto", help="text format (auto, tum, kitti, euroc, openvins, csv)"
     )
-    tr.add_argument("--export", help="write the trajectory to FILE: TUM (.txt, .tum) or CSV (.csv)")
+    tr.add_argument(
+        "--export",
+        help="write the trajectory to FILE: TUM (.txt, .tum: 8 columns) or CSV (.csv: t x y z qx qy qz qw)",
+    )
+    tr.add_argument(
+        "--covariance",
+        action="store_true",
+        help="with --export: also the orientation and position covariance upper triangles (TUM:"
+        " the OpenVINS 20-column layout; CSV: named columns pr11..pt33); an error without covariance",
+    )
 
     f = sub.add_parser(
         "fig", help="render a plot bundle again (another style or size), recomputing nothing"
@@ -255,6 +265,9 @@ def _eval(args) -> None:
     cfg = _eval_config(args)
     out = CaseFolder(args.out)
     chain.clear_arrays(out)
+    document = Path(args.out) / "metrics.json"  # every stage's record in one document
+    if document.is_file():  # a previous run's: never beside this run's stage folders
+        document.unlink()
     clock = {"stage": None, "t": time.perf_counter()}
     size_mb = sum(_input_bytes(p) for p in (args.ref, args.est)) / 1e6
     progress = args.verbose or size_mb >= LARGE_INPUT_MB
@@ -285,6 +298,10 @@ def _eval(args) -> None:
         est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM),
     )
     on_stage(None)
+    from epa.artifacts import files as io
+    from epa.outputs import report
+
+    io.write_json(document, report.case_document(out))
     record = result["metrics"]
     ate = record["ate"]["trans_m"]["rmse"]
     print(
@@ -311,6 +328,7 @@ def _eval(args) -> None:
 def _traj(args) -> None:
     from epa import readers
     from epa.artifacts import files as io
+    from epa.core.trajectory import Trajectory
     from epa.readers import bags
     from epa.workflow import settings
 
@@ -346,8 +364,25 @@ def _traj(args) -> None:
             raise EpaError(
                 "export to .txt or .tum (TUM) or .csv (CSV with named columns)", path=out
             )
-        io.write_trajectory(out, traj, fmt)
-        print(f"wrote {len(traj)} poses to {out} ({fmt})")
+        has_cov = traj.cov_rot is not None
+        if args.covariance:
+            if not has_cov:
+                raise EpaError(
+                    "--covariance: this trajectory has no covariance to write", path=args.source
+                )
+            fmt_written = "openvins" if fmt == "tum" else fmt
+        else:
+            traj, fmt_written = Trajectory(traj.t, traj.p, traj.q), fmt
+        io.write_trajectory(out, traj, fmt_written)
+        what = "OpenVINS layout: TUM + covariance" if fmt_written == "openvins" else fmt
+        left = (
+            "; its covariance is left out (--covariance writes it)"
+            if has_cov and not args.covariance
+            else ""
+        )
+        print(f"wrote {len(traj)} poses to {out} ({what}{left})")
+    elif args.covariance:
+        raise EpaError("--covariance is an option of --export (nothing is written without it)")
 
 
 def _selftest(args) -> None:
