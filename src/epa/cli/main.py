@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import math
 import sys
@@ -195,6 +196,14 @@ def _eval_config(args) -> dict:
         ("sources", "algorithms", EVAL_ALGORITHM, "timing"): args.timing
         and str(Path(args.timing).resolve()),
     }
+    given = (
+        (cfg.get("report") or {}).get("per_case") if isinstance(cfg.get("report"), dict) else None
+    )
+    if given is not None and given != overrides[("report", "per_case")]:
+        logging.getLogger("epa").warning(
+            "report.per_case: %s in the config is not used by epa eval (--report writes the report)",
+            json.dumps(given),
+        )
     for keys, value in overrides.items():
         if value is None:
             continue
