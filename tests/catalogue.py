@@ -1251,6 +1251,14 @@ CATALOGUE: list[Bad] = [
         blamed="--delta",
     ),
     Bad(
+        "ape-negative-n-to-align",
+        "command",
+        "`epa ape ... -a --n_to_align -5` (only -1 means all)",
+        "--n_to_align must be -1 (all) or a number of poses, not -5",
+        args=("ape", "tum", "{ref}", "{est}", "-a", "--n_to_align", "-5"),
+        blamed="--n_to_align",
+    ),
+    Bad(
         "rpe-nan-tolerance",
         "command",
         "`epa rpe ... --t_max_diff nan`",

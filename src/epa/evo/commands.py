@@ -213,6 +213,9 @@ NOT_NEGATIVE = ("t_max_diff",)
 def _check_numbers(args) -> None:
     import math
 
+    n = getattr(args, "n_to_align", -1)
+    if n < -1:  # -1 is evo's "all"; another negative would cut poses off the end silently
+        raise EpaError(f"--n_to_align must be -1 (all) or a number of poses, not {n}")
     for name, v in sorted(vars(args).items()):
         if not isinstance(v, float):
             continue
