@@ -22,7 +22,9 @@ try:  # a mistake in the config or the folders is one line, not a traceback
     )
     CONFIG_SOURCE = ", ".join(map(str, workflow.configfiles)) or "config"
     EPA = epa_settings.resolve(
-        epa_settings.coerce_overrides(config, workflow.config_settings.overwrite_config),
+        epa_settings.coerce_overrides(
+            config, workflow.config_settings.overwrite_config
+        ),
         source=CONFIG_SOURCE,
     )
     TRUTH, CASES = epa_discovery.discover(
