@@ -21,9 +21,14 @@ try:  # a mistake in the config or the folders is one line, not a traceback
         workflow.overwrite_configfiles, workflow.config_settings.overwrite_config
     )
     CONFIG_SOURCE = ", ".join(map(str, workflow.configfiles)) or "config"
-    EPA = epa_settings.resolve(config, source=CONFIG_SOURCE)
+    EPA = epa_settings.resolve(
+        epa_settings.coerce_overrides(
+            config, workflow.config_settings.overwrite_config
+        ),
+        source=CONFIG_SOURCE,
+    )
     TRUTH, CASES = epa_discovery.discover(
-        EPA["truth_dir"], EPA["algorithms_dir"], source=CONFIG_SOURCE
+        EPA["truth_dir"], EPA["algorithms_dir"], source=CONFIG_SOURCE, cfg=EPA
     )
 except EpaError as exc:
     raise WorkflowError("epa: error: " + exc.one_line()) from None

@@ -33,7 +33,7 @@ def main(argv=None) -> int:
     try:
         cfg = settings.resolve(settings.load_yaml(args.configfile), source=args.configfile)
         truth, cases = discovery.discover(
-            cfg["truth_dir"], cfg["algorithms_dir"], source=args.configfile
+            cfg["truth_dir"], cfg["algorithms_dir"], source=args.configfile, cfg=cfg
         )
         used = {c.dataset for c in cases}
         idle = (

@@ -16,11 +16,13 @@ def write_bag(
     storage: str = "ros1",
     frames: tuple[str, str] = ("world", "body"),
     extra: dict[str, tuple[str, list]] | None = None,
+    compressed: bool = False,
 ) -> None:
     """Write trajectories as bag topics: ``topics`` maps topic -> (message type, trajectory).
     ``storage``: ``ros1`` (.bag), ``sqlite3`` or ``mcap`` (ROS 2 bag folder). TFMessage topics carry
     ``frames`` (parent, child); a Path topic is one message holding every pose. ``extra`` adds raw
-    topics: topic -> (message type, [(record_ns, message)])."""
+    topics: topic -> (message type, [(record_ns, message)]). ``compressed``: bz2 chunks (ROS 1) or
+    zstd chunks (MCAP storage), so that a damaged chunk is a decompressor's error."""
     from rosbags.typesys import Stores, get_typestore
 
     path = Path(path)
@@ -39,6 +41,8 @@ def write_bag(
         from rosbags.rosbag1 import Writer
 
         writer = Writer(path)
+        if compressed:
+            writer.set_compression(Writer.CompressionFormat.BZ2)
     else:
         from rosbags.rosbag2 import StoragePlugin, Writer
 
@@ -47,6 +51,10 @@ def write_bag(
             version=9,
             storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3,
         )
+        if compressed:
+            from rosbags.rosbag2 import CompressionFormat, CompressionMode
+
+            writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
 
     def header(t, frame):
         sec = int(np.floor(t))

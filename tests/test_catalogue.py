@@ -8,6 +8,7 @@ import logging
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import bag_fixture
@@ -93,6 +94,39 @@ def _bag(tmp: Path, est: Path, setup: str) -> Path:
     )
     if setup == "bag-one":
         bag_fixture.write_bag(est, {"/pose": ("geometry_msgs/msg/PoseStamped", good)})
+        return est
+    if setup == "bag-tf-loop":  # world -> odom and odom -> world, and odom -> body
+        from test_bags import _write_tf
+
+        edges = {("world", "odom"): good, ("odom", "world"): good, ("odom", "body"): good}
+        _write_tf(est, edges, static={})
+        return est
+    if setup in ("bag-damaged", "mcap-damaged"):  # a damaged compressed chunk (bz2, zstd)
+        bag_fixture.write_bag(
+            est,
+            {
+                "/pose": ("geometry_msgs/msg/PoseStamped", good),
+                "/tf": ("tf2_msgs/msg/TFMessage", good),
+            },
+            storage="mcap" if setup == "mcap-damaged" else "ros1",
+            compressed=True,
+        )
+        damaged = next(est.glob("*.mcap")) if est.is_dir() else est
+        data = bytearray(damaged.read_bytes())
+        at = len(data) // 2 if setup == "mcap-damaged" else len(data) // 3
+        for k in range(at, at + 200):
+            data[k] ^= 0xFF if setup == "mcap-damaged" else 0x5A
+        damaged.write_bytes(bytes(data))
+        return est
+    if setup == "bag-amcl":  # PoseWithCovarianceStamped with a covariance
+        import numpy as np
+
+        c = np.tile(np.eye(3) * 0.01, (len(good), 1, 1))
+        with_cov = _traj(good.t, good.p, good.q)
+        with_cov = type(with_cov)(good.t, good.p, good.q, cov_pos=c, cov_rot=c)
+        bag_fixture.write_bag(
+            est, {"/amcl_pose": ("geometry_msgs/msg/PoseWithCovarianceStamped", with_cov)}
+        )
         return est
     if setup == "bag-repeated":
         t = catalogue.T.copy()
@@ -223,16 +257,56 @@ def _grid_folders(tmp: Path, setup: str) -> tuple[Path, Path, str | None]:
     elif setup == "grid-no-truth":
         _write(algs / "good" / "unknown" / "run1.txt", good)
         bad = None
+    elif setup == "grid-backslash":
+        _write(algs / "bad" / "seq" / "run1\\..\\..\\EPABI.txt", good)
+        bad = "bad/seq/run1\\..\\..\\EPABI"
+    elif setup == "grid-all-fail":  # both runs of the algorithm fail, in both datasets
+        for ds in ("seq", "other"):
+            _write(algs / "bad" / ds / "run1.txt", catalogue._replace_line(good, 4, "1 2 3"))
+        bad = "bad/seq/run1"
+    elif setup == "grid-timing-pattern":
+        for ds in ("seq", "other"):
+            _write(
+                algs / "good" / ds / "run1.frames", "".join(f"{t:.9f} 12\n" for t in catalogue.T)
+            )
+        bad = None
+    elif setup == "grid-empty-dataset":
+        (algs / "empty" / "seq").mkdir(parents=True)
+        bad = None
+    elif setup == "grid-ea-overflow":
+        _write(
+            algs / "good" / "seq" / "run1_timing.txt",
+            "".join(f"{t:.9f} {100000 if k == 100 else 20}\n" for k, t in enumerate(catalogue.T)),
+        )
+        bad = None
+    elif setup is None:
+        bad = None
     return truth, algs, bad
 
 
-def run_grid(truth: Path, algs: Path, results: Path) -> dict[str, str]:
+def run_grid(truth: Path, algs: Path, results: Path, config: dict | None = None) -> dict[str, str]:
     """Every stage as the workflow's jobs run it (one batch), then the tables; key -> status."""
     cfg = settings.resolve(
-        {"truth_dir": str(truth), "algorithms_dir": str(algs), "results_dir": str(results)}
+        {
+            "truth_dir": str(truth),
+            "algorithms_dir": str(algs),
+            "results_dir": str(results),
+            **(config or {}),
+        }
     )
-    _, found = cases.discover(truth, algs)
-    batch = [{"key": c.key, "truth": str(c.truth), "estimate": str(c.estimate)} for c in found]
+    _, found = cases.discover(truth, algs, cfg=cfg)
+    from epa import readers
+
+    batch = [  # as rules/common.smk's load_case
+        {
+            "key": c.key,
+            "truth": str(c.truth),
+            "estimate": str(c.estimate),
+            "truth_source": readers.options(cfg, "reference", dataset=c.dataset),
+            "estimate_source": readers.options(cfg, "estimate", algorithm=c.algorithm),
+        }
+        for c in found
+    ]
     upstream = None
     for st in chain.STAGES:
         manifest = results / "batches" / "all" / f"{st.NAME}.json"
@@ -250,16 +324,39 @@ GRID_ROWS = [b for b in catalogue.CATALOGUE if b.where == "grid"]
 
 @pytest.mark.parametrize("b", GRID_ROWS, ids=[b.id for b in GRID_ROWS])
 def test_grid(tmp_path, caplog, b):
+    import yaml
+
     truth, algs, bad = _grid_folders(tmp_path, b.setup)
-    with caplog.at_level(logging.WARNING, logger="epa"):
+    config = yaml.safe_load(b.config) if b.config else None
+    with caplog.at_level(logging.WARNING, logger="epa"), warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # numpy's warnings never reach the user
         try:
-            status = run_grid(truth, algs, tmp_path / "results")
+            status = run_grid(truth, algs, tmp_path / "results", config)
         except EpaError as exc:  # a mistake in the grid as a whole: one line at parse time
             assert not b.ok and b.expect in exc.one_line() and "\n" not in exc.one_line()
             return
+        if b.setup == "grid-all-fail":
+            from epa.outputs import report
+
+            report.write_grid_figures(tmp_path / "results", [8, 16])
+    assert "inf" not in (tmp_path / "results" / "summary.csv").read_text().split()
+    for tex in (tmp_path / "results" / "tables").glob("*.tex"):
+        assert " inf " not in tex.read_text(), tex
     if b.ok:
-        assert b.expect in caplog.text or all(s == "ok" for s in status.values())
+        notes = caplog.text + "".join(
+            p.read_text() for p in (tmp_path / "results" / "cases").rglob("*.json")
+        )
+        assert b.expect in notes or (b.expect == "ok" and all(s == "ok" for s in status.values()))
         assert all(s == "ok" for s in status.values()), status
+        if b.setup == "grid-ea-overflow":
+            rows = list(csv.DictReader(open(tmp_path / "results" / "summary.csv")))
+            row = next(r for r in rows if r["dataset"] == "seq")
+            assert row["ea_drift"] == "" and row["frame_time_mean_ms"] != ""
+        if b.setup == "grid-timing-pattern":
+            eff = json.loads(
+                (tmp_path / "results/cases/good/seq/run1/09_efficiency/efficiency.json").read_text()
+            )
+            assert eff["available"] and eff["frame_time_mean_ms"] == 12
         if b.setup == "grid-names":
             assert len(status) == 10
             assert all(
@@ -268,8 +365,85 @@ def test_grid(tmp_path, caplog, b):
             )
         return
     assert b.expect in status.pop(bad) and "\n" not in b.expect
+    status = {k: v for k, v in status.items() if not k.startswith("bad/")}  # its other runs
     assert status and all(s == "ok" for s in status.values()), status  # every other case finished
     _no_partial_output(tmp_path / "results" / "cases" / bad)
+    outside = [p for p in tmp_path.rglob("*EPABI*") if not p.is_relative_to(algs)]
+    assert all(p.is_relative_to(tmp_path / "results") for p in outside), outside
+
+
+# ----------------------------------------------------------------------------- commands
+COMMAND_ROWS = [b for b in catalogue.CATALOGUE if b.where == "command"]
+
+
+def _command_setup(tmp: Path, b: catalogue.Bad) -> dict[str, str]:
+    ref, est = tmp / b.ref_name, tmp / b.est_name
+    _write(ref, b.ref)
+    if b.setup and b.setup.startswith(("bag", "mcap")):
+        est = _bag(tmp, est, b.setup)
+    else:
+        _write(est, b.est if b.est is not None else catalogue.GOOD)
+    result = {"format": "epica-result/1", "title": "APE", "stats": {"rmse": 1.0}}
+    if b.setup == "file-X":
+        _write(tmp / "X", "a file")
+    elif b.setup == "result-no-title":
+        _write(tmp / "r.json", json.dumps({k: v for k, v in result.items() if k != "title"}))
+    elif b.setup == "result-no-stats":
+        _write(tmp / "r.json", json.dumps({k: v for k, v in result.items() if k != "stats"}))
+    elif b.setup == "metrics-ate-null":
+        _write(tmp / "metrics.json", json.dumps({"ate": None}))
+    elif b.setup == "bundle-no-data":
+        _write(tmp / "b.json", json.dumps({"format": "epica-plot-bundle/1", "kind": "ape_time"}))
+    elif b.setup == "bundle-partial":
+        _write(
+            tmp / "b.json",
+            json.dumps(
+                {
+                    "format": "epica-plot-bundle/1",
+                    "kind": "ape_time",
+                    "title": "x",
+                    "data": {"ape": [1.0, 2.0]},
+                }
+            ),
+        )
+    return {"ref": str(ref), "est": str(est), "tmp": str(tmp)}
+
+
+@pytest.mark.parametrize("b", COMMAND_ROWS, ids=[b.id for b in COMMAND_ROWS])
+def test_command(tmp_path, capsys, caplog, b):
+    names = _command_setup(tmp_path, b)
+    argv = [a.format(**names) for a in b.args]
+    with caplog.at_level(logging.WARNING, logger="epa"), warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        rc = cli.main(argv)
+    captured = capsys.readouterr()
+    err = captured.err
+    assert "Traceback" not in err
+    if b.ok:
+        assert rc == 0, err
+        assert b.expect in captured.out + err + caplog.text, captured.out
+        if b.setup == "bag-amcl":
+            rows = [
+                line.split()
+                for line in (tmp_path / "poses.tum").read_text().splitlines()
+                if not line.startswith("#")
+            ]
+            assert {len(r) for r in rows} == {20 if "--covariance" in argv else 8}
+        if b.setup == "eval-document":
+            from epa.artifacts.case import CaseFolder
+            from epa.outputs import report
+
+            doc = json.loads((tmp_path / "out" / "metrics.json").read_text())
+            assert list(doc) == ["metrics", "drift", "consistency", "efficiency"]
+            assert doc == report.case_document(CaseFolder(tmp_path / "out"))
+        return
+    lines = [line for line in err.splitlines() if line.startswith("epa: error: ")]
+    assert rc == 2 and len(lines) == 1, err
+    assert b.expect.format(**names) in lines[0], lines[0]
+    assert lines[0].startswith("epa: error: " + b.blamed.format(**names)), lines[0]
+    for p in tmp_path.rglob("*"):
+        assert not p.name.startswith("."), f"temporary file left behind: {p}"
+    assert not (tmp_path / "fig.png").exists() and not (tmp_path / "poses.tum").exists()
 
 
 # ----------------------------------------------------------------------------- snakemake, parse time
@@ -279,6 +453,9 @@ WORKFLOW_ROWS = [b for b in catalogue.CATALOGUE if b.where == "workflow"]
 @pytest.mark.parametrize("b", WORKFLOW_ROWS, ids=[b.id for b in WORKFLOW_ROWS])
 def test_snakemake(tmp_path, b):
     _write(tmp_path / "cfg.yaml", b.config)
+    if b.setup == "wf-folders":
+        _write(tmp_path / "truth" / "seq.txt", catalogue.GOOD)
+        _write(tmp_path / "algorithms" / "a" / "seq" / "run1.txt", catalogue.GOOD)
     run = subprocess.run(
         [
             sys.executable,
@@ -291,6 +468,7 @@ def test_snakemake(tmp_path, b):
             str(tmp_path / "cfg.yaml"),
             "-d",
             str(tmp_path),
+            *b.args,
         ],
         capture_output=True,
         text=True,
@@ -298,6 +476,9 @@ def test_snakemake(tmp_path, b):
         env={**os.environ, "PYTHONWARNINGS": "ignore"},
     )
     text = run.stdout + run.stderr
+    if b.ok:
+        assert run.returncode == 0 and b.expect in text, text
+        return
     assert run.returncode != 0 and "Traceback" not in text and not (tmp_path / "HACKED").exists()
     line = next(line for line in text.splitlines() if b.expect in line)
     if b.blame != "none":

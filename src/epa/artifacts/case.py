@@ -56,9 +56,21 @@ class Case:
         """A key is three plain names (discovery makes them from file names), so nothing built from
         it escapes the results folder."""
         parts = key.split("/")
-        if len(parts) != 3 or any(p in ("", ".", "..") or "\\" in p for p in parts):
+        if len(parts) != 3 or any(not plain_name(p) for p in parts):
             raise EpaError(f"case {key!r} is not <algorithm>/<dataset>/<run> with plain names")
         return cls(*parts, **inputs)
+
+    @classmethod
+    def unchecked(cls, key: str) -> Case:
+        """The identity of a key that may not be plain (its failure is marked under its own name;
+        never used for a path)."""
+        parts = (key.split("/", 2) + ["", ""])[:3]
+        return cls(*parts)
+
+
+def plain_name(name: str) -> bool:
+    """A name that is one path component everywhere (no ``/`` or ``\\``, not ``.`` or ``..``)."""
+    return name not in ("", ".", "..") and "/" not in name and "\\" not in name
 
 
 # ----------------------------------------------------------------------------- reading once

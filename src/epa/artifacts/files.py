@@ -21,24 +21,47 @@ _UMASK = os.umask(0o022)
 os.umask(_UMASK)
 
 
-def _atomic_write(path, write) -> None:
-    """Write via a temporary file and rename, so no half-written file is ever taken as done."""
+def _atomic_write(path, write, binary: bool = False) -> None:
+    """Write via a temporary file and rename, so no half-written file is ever taken as done. A path
+    that cannot be written (a file where a folder should be, no permission, a full disk) is one line
+    naming it."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix="." + path.name + ".", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix="." + path.name + ".", dir=path.parent)
+    except OSError as exc:
+        raise EpaError(f"cannot write: {_why(exc, path)}", path=str(path)) from None
     try:
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; results are for the group too
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            write(fh)
+        if binary:
+            with os.fdopen(fd, "wb") as fh:
+                write(fh)
+        else:
+            with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
+                write(fh)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise EpaError(f"cannot write: {_why(exc, path)}", path=str(path)) from None
         raise
+
+
+def _why(exc: OSError, path: Path) -> str:
+    """The reason, with the path part that is in the way (a file where a folder is needed)."""
+    where = next((p for p in path.parents if p.exists() and not p.is_dir()), None)
+    if where is not None:
+        return f"{where} is a file, not a folder"
+    return exc.strerror or type(exc).__name__
 
 
 def write_text(path, text: str) -> None:
     _atomic_write(path, lambda fh: fh.write(text))
+
+
+def write_bytes(path, data: bytes) -> None:
+    _atomic_write(path, lambda fh: fh.write(data), binary=True)
 
 
 def _jsonable(obj):

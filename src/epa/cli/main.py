@@ -6,7 +6,9 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
+import math
 import sys
 from pathlib import Path
 
@@ -25,7 +27,8 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument(
         "--out",
         required=True,
-        help="output folder, laid out as a workflow case folder (06_metrics/metrics.json, 07_drift/drift.json, ...)",
+        help="output folder, laid out as a workflow case folder (06_metrics/metrics.json, 07_drift/drift.json, ...),"
+        " with metrics.json: every stage's record in one document, as the per-case report's",
     )
     e.add_argument(
         "--artifacts",
@@ -91,7 +94,16 @@ def _parser() -> argparse.ArgumentParser:
     tr.add_argument(
         "--format", default="auto", help="text format (auto, tum, kitti, euroc, openvins, csv)"
     )
-    tr.add_argument("--export", help="write the trajectory to FILE: TUM (.txt, .tum) or CSV (.csv)")
+    tr.add_argument(
+        "--export",
+        help="write the trajectory to FILE: TUM (.txt, .tum: 8 columns) or CSV (.csv: t x y z qx qy qz qw)",
+    )
+    tr.add_argument(
+        "--covariance",
+        action="store_true",
+        help="with --export: also the orientation and position covariance upper triangles (TUM:"
+        " the OpenVINS 20-column layout; CSV: named columns pr11..pt33); an error without covariance",
+    )
 
     f = sub.add_parser(
         "fig", help="render a plot bundle again (another style or size), recomputing nothing"
@@ -192,6 +204,14 @@ def _eval_config(args) -> dict:
         ("sources", "algorithms", EVAL_ALGORITHM, "timing"): args.timing
         and str(Path(args.timing).resolve()),
     }
+    given = (
+        (cfg.get("report") or {}).get("per_case") if isinstance(cfg.get("report"), dict) else None
+    )
+    if given is not None and given != overrides[("report", "per_case")]:
+        logging.getLogger("epa").warning(
+            "report.per_case: %s in the config is not used by epa eval (--report writes the report)",
+            json.dumps(given),
+        )
     for keys, value in overrides.items():
         if value is None:
             continue
@@ -262,6 +282,9 @@ def _eval(args) -> None:
     cfg = _eval_config(args)
     out = CaseFolder(args.out)
     chain.clear_arrays(out)
+    document = Path(args.out) / "metrics.json"  # every stage's record in one document
+    if document.is_file():  # a previous run's: never beside this run's stage folders
+        document.unlink()
     clock = {"stage": None, "t": time.perf_counter()}
     size_mb = sum(_input_bytes(p) for p in (args.ref, args.est)) / 1e6
     progress = args.verbose or size_mb >= LARGE_INPUT_MB
@@ -292,6 +315,10 @@ def _eval(args) -> None:
         est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM),
     )
     on_stage(None)
+    from epa.artifacts import files as io
+    from epa.outputs import report
+
+    io.write_json(document, report.case_document(out))
     record = result["metrics"]
     ate = record["ate"]["trans_m"]["rmse"]
     print(
@@ -305,9 +332,13 @@ def _eval(args) -> None:
             f" {c['outside_3sigma_pct']:.2f} % outside 3 sigma"
         )
     if e.get("available"):
+        ea = (
+            f"EA-Drift {e['ea_drift']:.4f} % (seed formula {e['ea_drift_seed']:.4f} %)"
+            if e.get("ea_drift") is not None
+            else "EA-Drift empty: " + e.get("ea_drift_reason", "")
+        )
         print(
-            f"frame time mean {e['frame_time_mean_ms']:.2f} ms (p95 {e['frame_time_p95_ms']:.2f}),"
-            f" EA-Drift {e['ea_drift']:.4f} % (seed formula {e['ea_drift_seed']:.4f} %)"
+            f"frame time mean {e['frame_time_mean_ms']:.2f} ms (p95 {e['frame_time_p95_ms']:.2f}), {ea}"
         )
 
 
@@ -328,15 +359,25 @@ def _fig(args) -> None:
             )
     written = []
     for bundle, out in jobs:
-        written += figures.render(
-            figures.read_bundle(bundle), out, style=args.style, width=args.width, formats=formats
-        )
+        try:
+            written += figures.render(
+                figures.read_bundle(bundle),
+                out,
+                style=args.style,
+                width=args.width,
+                formats=formats,
+            )
+        except EpaError as exc:  # a bundle's own problem names the bundle
+            if exc.path or exc.message.startswith(("unknown style", "--width")):
+                raise
+            raise EpaError(exc.message, path=str(bundle)) from None
     print("wrote " + ", ".join(map(str, written)))
 
 
 def _traj(args) -> None:
     from epa import readers
     from epa.artifacts import files as io
+    from epa.core.trajectory import Trajectory
     from epa.readers import bags
     from epa.workflow import settings
 
@@ -372,8 +413,25 @@ def _traj(args) -> None:
             raise EpaError(
                 "export to .txt or .tum (TUM) or .csv (CSV with named columns)", path=out
             )
-        io.write_trajectory(out, traj, fmt)
-        print(f"wrote {len(traj)} poses to {out} ({fmt})")
+        has_cov = traj.cov_rot is not None
+        if args.covariance:
+            if not has_cov:
+                raise EpaError(
+                    "--covariance: this trajectory has no covariance to write", path=args.source
+                )
+            fmt_written = "openvins" if fmt == "tum" else fmt
+        else:
+            traj, fmt_written = Trajectory(traj.t, traj.p, traj.q), fmt
+        io.write_trajectory(out, traj, fmt_written)
+        what = "OpenVINS layout: TUM + covariance" if fmt_written == "openvins" else fmt
+        left = (
+            "; its covariance is left out (--covariance writes it)"
+            if has_cov and not args.covariance
+            else ""
+        )
+        print(f"wrote {len(traj)} poses to {out} ({what}{left})")
+    elif args.covariance:
+        raise EpaError("--covariance is an option of --export (nothing is written without it)")
 
 
 def _selftest(args) -> None:
@@ -388,16 +446,13 @@ def _selftest(args) -> None:
         cfg.setdefault("calibrate", {})["scale"] = True
     cfg = settings.resolve(cfg, source=args.config or "command line")
     ref, _ = load.load_reference(args.reference, cfg)
-    if args.trials < 1 or args.rate <= 0:
-        raise EpaError("--trials must be at least 1 and --rate positive")
-    print(
-        selftest.report(
-            selftest.run(ref, cfg, trials=args.trials, rate=args.rate, seed=args.seed),
-            Path(args.reference).name,
-            args.rate,
-        ),
-        end="",
-    )
+    if args.trials < 1 or not (math.isfinite(args.rate) and args.rate > 0):
+        raise EpaError("--trials must be at least 1 and --rate a positive number")
+    try:
+        results = selftest.run(ref, cfg, trials=args.trials, rate=args.rate, seed=args.seed)
+    except EpaError as exc:
+        raise (exc if exc.path else EpaError(exc.message, path=args.reference)) from None
+    print(selftest.report(results, Path(args.reference).name, args.rate), end="")
 
 
 def main(argv=None) -> int:

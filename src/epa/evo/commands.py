@@ -9,6 +9,7 @@ Option names and defaults are evo 1.38.1's; docs/evo.md maps every evo option to
 
 from __future__ import annotations
 
+import io as io_bytes
 import json
 import zipfile
 from pathlib import Path
@@ -197,6 +198,7 @@ def run(args) -> None:
         for k, v in vars(args).items()
         if names.get(k, k) in fields and v is not None
     }
+    _check_numbers(args)
     o = evo_protocol.EvoOptions(**values)
     ref, est = _read(args, "ref"), _read(args, "est")
     fn = evo_protocol.ape if args.command == "ape" else evo_protocol.rpe
@@ -206,6 +208,29 @@ def run(args) -> None:
     if args.save_results:
         save(result, args.save_results, ref=_source(args, "ref"), est=_source(args, "est"))
         print(f"wrote {args.save_results}")
+
+
+# options that must be positive (deltas, tolerances, rates) or at least 0; every number is finite
+POSITIVE = ("delta", "delta_tol", "tf_cache_lookup_frequency")
+NOT_NEGATIVE = ("t_max_diff",)
+
+
+def _check_numbers(args) -> None:
+    import math
+
+    n = getattr(args, "n_to_align", -1)
+    if n < -1:  # -1 is evo's "all"; another negative would cut poses off the end silently
+        raise EpaError(f"--n_to_align must be -1 (all) or a number of poses, not {n}")
+    for name, v in sorted(vars(args).items()):
+        if not isinstance(v, float):
+            continue
+        flag = "--" + name
+        if not math.isfinite(v):
+            raise EpaError(f"{flag} must be a finite number, not {v}")
+        if name in POSITIVE and v <= 0:
+            raise EpaError(f"{flag} must be positive, not {v:g}")
+        if name in NOT_NEGATIVE and v < 0:
+            raise EpaError(f"{flag} must not be negative, not {v:g}")
 
 
 def _path(args, which: str) -> str:
@@ -242,12 +267,11 @@ def save(result, path, *, ref: str, est: str) -> None:
     if path.suffix.lower() != ".zip":
         io.write_text(path, figures._json({**doc, "errors": result.errors}) + "\n")
         return
-    tmp = path.with_name("." + path.name + ".tmp")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+    buf = io_bytes.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("result.json", json.dumps(doc, indent=1) + "\n")
         z.writestr("errors.csv", "error\n" + "".join(f"{e!r}\n" for e in result.errors.tolist()))
-    tmp.replace(path)
+    io.write_bytes(path, buf.getvalue())
 
 
 STAT_COLUMNS = ("rmse", "mean", "median", "std", "min", "max", "sse")
@@ -275,26 +299,52 @@ def load_results(path) -> list[dict]:
         raise EpaError("file not found", path=str(path)) from None
     except (OSError, ValueError, zipfile.BadZipFile) as exc:
         raise EpaError(f"not a result file: {exc}", path=str(path)) from None
+    where = str(path)
     if isinstance(doc, dict) and doc.get("format") == RESULT_FORMAT:
-        return [{"name": str(path), "what": doc["title"].split("\n")[0], "stats": doc["stats"]}]
+        title = doc.get("title")
+        if not isinstance(title, str):
+            raise EpaError(f"{RESULT_FORMAT} result without a title (key 'title')", path=where)
+        return [{"name": where, "what": title.split("\n")[0], "stats": _stats(doc, "stats", where)}]
     metrics = doc.get("metrics", doc) if isinstance(doc, dict) else None
     if not isinstance(metrics, dict) or "ate" not in metrics:
         raise EpaError(
-            "neither an epa result (epica-result/1) nor a case's metrics.json", path=str(path)
+            "neither an epa result (epica-result/1) nor a case's metrics.json", path=where
         )
+    if not isinstance(metrics["ate"], dict):
+        why = " (the case failed)" if metrics.get("status") == "failed" else ""
+        raise EpaError(f"key 'ate' holds no ATE: {metrics['ate']!r}{why}", path=where)
     rows = [
-        {"name": str(path), "what": f"ATE {key}", "stats": metrics["ate"][key]}
+        {"name": where, "what": f"ATE {key}", "stats": _stats(metrics["ate"], key, where, "ate.")}
         for key in ("trans_m", "rot_deg")
         if key in metrics["ate"]
     ]
-    for spec in metrics.get("rpe", []):
+    rpe = metrics.get("rpe", [])
+    if not isinstance(rpe, list) or not all(isinstance(spec, dict) for spec in rpe):
+        raise EpaError("key 'rpe' is not a list of RPE records", path=where)
+    for k, spec in enumerate(rpe):
         label = f"RPE {spec.get('delta')} {spec.get('unit')}{' all pairs' if spec.get('all_pairs') else ''}"
         rows += [
-            {"name": str(path), "what": f"{label} {key}", "stats": spec[key]}
+            {
+                "name": where,
+                "what": f"{label} {key}",
+                "stats": _stats(spec, key, where, f"rpe.{k}."),
+            }
             for key in ("trans_m", "rot_deg")
             if key in spec
         ]
     return rows
+
+
+def _stats(doc: dict, key: str, where: str, prefix: str = "") -> dict:
+    """A statistics record {rmse, mean, ...}: numbers (or null for none)."""
+    stats = doc.get(key)
+    if not isinstance(stats, dict):
+        raise EpaError(f"key '{prefix}{key}' holds no statistics: {stats!r}", path=where)
+    for name in STAT_COLUMNS:
+        v = stats.get(name)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))):
+            raise EpaError(f"key '{prefix}{key}.{name}' is not a number: {v!r}", path=where)
+    return stats
 
 
 def res(args) -> None:

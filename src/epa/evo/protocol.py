@@ -236,6 +236,8 @@ def rpe(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True) 
         raise EpaError(
             f"unknown --delta_unit {o.delta_unit!r}; choose one of {', '.join(DELTA_UNITS)}"
         )
+    if not (np.isfinite(o.delta) and o.delta > 0):  # a negative or zero delta relates no poses
+        raise EpaError(f"--delta must be positive, not {o.delta:g}")
     if o.delta_unit == "f" and float(o.delta) != int(o.delta):
         raise EpaError(f"--delta must be an integer for delta unit f (frames), not {o.delta}")
     ref, est, o, info = prepare(ref, est, o, timed=timed)

@@ -18,6 +18,8 @@ Three variants:
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from epa.core.stamps import nearest_from
@@ -102,7 +104,20 @@ def match_m2ud(t_ref: np.ndarray, t_timing: np.ndarray, window: float = 0.15) ->
 
 def weights(frame_ms: np.ndarray, rate_hz: float) -> np.ndarray:
     period_s = 1.0 / rate_hz
-    return np.exp((frame_ms / 1000.0 - period_s) / period_s)
+    with np.errstate(over="ignore"):  # a frame of ~700 periods: inf, which evaluate() reports
+        return np.exp((frame_ms / 1000.0 - period_s) / period_s)
+
+
+# exp(x) overflows a double above this: a frame that long has no finite EA-Drift weight
+MAX_WEIGHT_EXPONENT = float(np.log(np.finfo(float).max))
+
+
+def _overflowing_frame(frame_ms: np.ndarray, rate_hz: float) -> int | None:
+    """The index of the first frame whose EA-Drift weight is not a finite number, else None."""
+    period_ms = 1000.0 / rate_hz
+    exponent = (frame_ms - period_ms) / period_ms
+    over = exponent >= MAX_WEIGHT_EXPONENT / 2  # squared in the M2UD variant
+    return int(np.argmax(over)) if over.any() else None
 
 
 def ea_drift(err_m: np.ndarray, frame_ms: np.ndarray, rate_hz: float, path_length_m: float) -> dict:
@@ -120,7 +135,8 @@ def ea_drift_m2ud(
     err_m: np.ndarray, frame_ms: np.ndarray, rate_hz: float, path_length_m: float
 ) -> float:
     frame_time_ms = 1000.0 / rate_hz
-    w = np.exp((frame_ms - frame_time_ms) / frame_time_ms)
+    with np.errstate(over="ignore"):
+        w = np.exp((frame_ms - frame_time_ms) / frame_time_ms)
     return float(100 * np.sqrt(np.sum((w * err_m) ** 2)) / path_length_m)
 
 
@@ -163,11 +179,23 @@ def evaluate(
         summary.update(available=False, reason=f"no pose has a timing entry within {max_diff} s")
         return summary, {}
     summary["available"] = True
-    summary.update(ea_drift(err_m[have], ms[idx[have]], rate_hz, est_path_length_m))
-    m2 = match_m2ud(t_ref, t_tim)
-    summary["ea_drift_m2ud"] = (
-        ea_drift_m2ud(err_m, ms[m2], rate_hz, est_path_length_m) if (m2 >= 0).all() else None
-    )  # the patch stops when a pose has no timing
+    k = _overflowing_frame(ms, rate_hz)
+    if (
+        k is not None
+    ):  # never inf as a result: the frame times stand, EA-Drift is empty and says why
+        summary.update(ea_drift_seed=None, ea_drift=None, ea_drift_m2ud=None)
+        summary["ea_drift_reason"] = (
+            f"timing entry {k + 1} (stamp {t_tim[k]:.6f} s) takes {ms[k]:g} ms, "
+            f"{ms[k] * rate_hz / 1000:.0f} sensor periods: its EA-Drift weight overflows, "
+            "so EA-Drift is left empty"
+        )
+        logging.getLogger("epa").warning("%s", summary["ea_drift_reason"])
+    else:
+        summary.update(ea_drift(err_m[have], ms[idx[have]], rate_hz, est_path_length_m))
+        m2 = match_m2ud(t_ref, t_tim)
+        summary["ea_drift_m2ud"] = (
+            ea_drift_m2ud(err_m, ms[m2], rate_hz, est_path_length_m) if (m2 >= 0).all() else None
+        )  # the patch stops when a pose has no timing
     table = {
         "t": t_est,
         "frame_ms": np.where(have, ms[np.maximum(idx, 0)], np.nan),
@@ -183,8 +211,10 @@ TABLES = (
         "EA-DRIFT LATEX TABLE (% PER-FRAME NORMALISED, SEE DOCS)",
         pair=False,
         per_run=lambda r: (r["ea_drift"],),
-        has=lambda r: bool(r.get("available")),
-        missing="no timing",
+        has=lambda r: bool(r.get("available")) and r.get("ea_drift") is not None,
+        missing=lambda records: (
+            "EA-Drift overflows" if any(r.get("ea_drift_reason") for r in records) else "no timing"
+        ),
     ),
     Table(
         "runtime",

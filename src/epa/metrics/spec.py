@@ -33,7 +33,7 @@ class Table:
     pair: bool = True  # cells of two numbers (rotation / translation), else one
     per_run: Callable[[dict], tuple] | None = None
     has: Callable[[dict], bool] = lambda record: True
-    missing: str | None = None
+    missing: str | Callable[[list[dict]], str] | None = None  # or of the algorithm's records
     per_algorithm: Callable[[list[dict]], tuple] | None = None
     header: tuple[str, ...] = ()
     after: str | None = None  # the base table it follows; None: after the base tables

@@ -114,6 +114,8 @@ def read_bundle(path) -> dict:
             "not an epica plot bundle (format epica-plot-bundle/1 with a known kind)",
             path=str(path),
         )
+    if not isinstance(b.get("data"), dict):
+        raise EpaError("a plot bundle without its data (key 'data')", path=str(path))
     return b
 
 
@@ -215,15 +217,26 @@ def _single(plt, w, h, top: float = 0.12):
     return fig, fig.axes[0]
 
 
+MAX_WIDTH_IN = 100.0  # a figure wider than this is a typo (centimetres, points)
+
+
 def render(
     b: dict, out_stem, *, style: str = "paper", width: float | None = None, formats=("png", "pdf")
 ) -> list[Path]:
     """Draw a bundle to ``out_stem``.png / .pdf; returns the files written."""
     if style not in STYLES:
         raise EpaError(f"unknown style {style!r}; choose one of {', '.join(STYLES)}")
+    if width is not None and not (np.isfinite(width) and 0 < width <= MAX_WIDTH_IN):
+        raise EpaError(f"--width must be between 0 and {MAX_WIDTH_IN:g} inches, not {width:g}")
     plt, w, h = _setup(style)
     scale = (width / w) if width else 1.0
-    fig = RENDERERS[b["kind"]](plt, b, w * scale, h * scale)
+    try:
+        fig = RENDERERS[b["kind"]](plt, b, w * scale, h * scale)
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+        plt.close("all")
+        _KEPT.clear()
+        what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc).splitlines()[0]
+        raise EpaError(f"the {b['kind']} bundle's data cannot be drawn: {what}") from None
     from matplotlib.ticker import MaxNLocator
 
     for ax in (
@@ -237,7 +250,10 @@ def render(
     out = []
     for fmt in formats:
         path = Path(f"{out_stem}.{fmt}")
-        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise EpaError(f"cannot write: {exc.strerror}", path=str(path)) from None
         tmp = path.with_name("." + path.name + ".tmp")
         # no creation date: the same bundle gives the same bytes (re-runs and batching compare equal)
         meta = {"CreationDate": None} if fmt == "pdf" else {}

@@ -379,6 +379,13 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
 
 
 # ----------------------------------------------------------------------------- grid figures
+def _nanmean(values):
+    """np.nanmean, without numpy's "Mean of empty slice" warning when every value is nan (an
+    algorithm whose every run failed): nan, drawn as a gap."""
+    a = np.asarray(values, float)
+    return np.nanmean(a) if (~np.isnan(a)).any() else np.nan
+
+
 def _column(row: dict, key: str) -> float:
     """A summary.csv row's number (nan where empty)."""
     try:
@@ -439,7 +446,7 @@ def _drift_rate_bundle(ok: list[dict], algs: list[str], segments) -> dict:
     lines = []
     for k, a in enumerate(algs):
         ys = [
-            np.nanmean(
+            _nanmean(
                 [_column(r, f"drift_rate_{segment_key(s)}m_pct") for r in ok if r["algorithm"] == a]
                 or [np.nan]
             )

@@ -112,6 +112,12 @@ def read(path, opts: dict, *, notes: list | None = None, kitti_times=None) -> Tr
             "a topic is set for this source but it is not a bag (.bag, .mcap or a ROS 2 bag folder)",
             path=str(path),
         )
+    if opts.get("stamp", "header") != "header":  # a text file has only its own stamps
+        raise EpaError(
+            f"stamp: {opts['stamp']} is set for this source but it is not a bag (set it in"
+            " sources.<...>.stamp for the bag sources only)",
+            path=str(path),
+        )
     traj = text.read_trajectory(
         path,
         opts.get("format", "auto"),

@@ -89,11 +89,14 @@ class _Open:
             raise EpaError(f"cannot read the bag: {_reason(exc)}", path=str(self.path)) from None
         return self.reader
 
-    def __exit__(self, *exc):
+    def __exit__(self, exc_type, exc, tb):
         try:
             self.reader.close()
         except Exception:
             pass
+        if isinstance(exc, Exception) and not isinstance(exc, EpaError):
+            # damage met while reading (a decompressor's, a parser's error): one line, as on opening
+            raise EpaError(f"cannot read the bag: {_reason(exc)}", path=str(self.path)) from None
         return False
 
 
@@ -170,7 +173,14 @@ def read_bag(
                     f"topic {topic} is TF: give the parent and child frame (frames: [parent, child])",
                     path=str(path),
                 )
-            return _read_tf(reader, path, topic, static_topic, tuple(frames), stamp, notes, tf_rate)
+            try:
+                return _read_tf(
+                    reader, path, topic, static_topic, tuple(frames), stamp, notes, tf_rate
+                )
+            except EpaError as exc:
+                raise (exc if exc.path else EpaError(exc.message, path=where)) from None
+            except Exception as exc:  # a damaged chunk: as the pose reader says it
+                raise EpaError(f"cannot read the messages: {_reason(exc)}", path=where) from None
         conns = [c for c in reader.connections if c.topic == topic]
         try:
             traj = _read_poses(reader, conns, msgtype, stamp)
@@ -314,13 +324,25 @@ def _decode_all(reader, raws: list, conn_type: str, msgtype: str, ros1: bool):
     return t, p, q, cov
 
 
+def _quat_norms(q: np.ndarray, what: str = "message") -> np.ndarray:
+    """The norms of finite quaternions; a zero one (or one too large to normalise) is an error."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        norms = np.linalg.norm(q, axis=1)
+    bad = ~np.isfinite(norms) | (norms < 1e-6)
+    if len(q) and bad.any():
+        k = int(np.argmax(bad))
+        raise EpaError(
+            f"{what} {k + 1}: "
+            + ("zero quaternion" if norms[k] < 1e-6 else "quaternion too large to normalise")
+        )
+    return norms
+
+
 def _finish(t, p, q, cov36) -> Trajectory:
     if len(t) and (not np.isfinite(p).all() or not np.isfinite(q).all()):
         k = int(np.argmax(~(np.isfinite(p).all(axis=1) & np.isfinite(q).all(axis=1))))
         raise EpaError(f"message {k + 1}: non-finite pose (nan or inf)")
-    norms = np.linalg.norm(q, axis=1)
-    if len(t) and (norms < 1e-6).any():
-        raise EpaError(f"message {int(np.argmax(norms < 1e-6)) + 1}: zero quaternion")
+    norms = _quat_norms(q)
     q = q / norms[:, None] if len(t) else q
     extra = {}
     if cov36 is not None and np.any(cov36):  # all zeros (a common placeholder) is no covariance
@@ -362,9 +384,12 @@ def _tf_edges(
 def _chain(
     edges: set[tuple[str, str]], parent: str, child: str
 ) -> list[tuple[str, str, bool]] | None:
-    """The path parent -> child in the frame tree as (frame_id, child_frame_id, inverted) steps."""
+    """The path parent -> child in the frame tree as (frame_id, child_frame_id, inverted) steps.
+    Searched in sorted order (never hash order); a loop among the frames linked to ``parent``
+    (``odom -> world`` beside ``world -> odom``, say) is an error: a TF tree has one path."""
+    _no_loop(edges, parent)
     nbrs: dict[str, list] = {}
-    for a, b in edges:
+    for a, b in sorted(edges):
         nbrs.setdefault(a, []).append((b, (a, b), False))
         nbrs.setdefault(b, []).append((a, (a, b), True))
     prev: dict[str, tuple] = {parent: None}
@@ -386,6 +411,32 @@ def _chain(
         steps.append((edge[0], edge[1], inv))
         f = f0
     return steps[::-1]
+
+
+def _no_loop(edges: set[tuple[str, str]], parent: str) -> None:
+    root: dict[str, str] = {}
+
+    def find(f: str) -> str:
+        while root.setdefault(f, f) != f:
+            f = root[f]
+        return f
+
+    linked = {parent}
+    grew = True
+    while grew:  # the frames linked to parent
+        grew = False
+        for a, b in edges:
+            if (a in linked) != (b in linked):
+                linked |= {a, b}
+                grew = True
+    for a, b in sorted(e for e in edges if e[0] in linked):
+        ra, rb = find(a), find(b)
+        if ra == rb:
+            both = " and ".join(f"{x} -> {y}" for x, y in sorted({(a, b), (b, a)} & set(edges)))
+            raise EpaError(
+                f"the TF frames form a loop ({both} close it): a TF tree links two frames one way only"
+            )
+        root[ra] = rb
 
 
 def _interp(rows: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -429,6 +480,11 @@ def _read_tf(
             np.asarray(ns, np.int64)[order],
             (a, b) not in dynamic,
         )
+    for (a, b), (rows, _, _) in series.items():
+        if not np.isfinite(rows).all():
+            k = int(np.argmax(~np.isfinite(rows).all(axis=1)))
+            raise EpaError(f"transform {a} -> {b}, message {k + 1}: non-finite pose (nan or inf)")
+        _quat_norms(rows[:, 4:8], f"transform {a} -> {b}, message")
     moving = [e for e, (_, _, is_static) in series.items() if not is_static]
     if not moving:
         raise EpaError(

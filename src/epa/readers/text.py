@@ -268,7 +268,26 @@ def _diagnose(tab: _Table):
                 path=str(tab.path),
                 line=no,
             )
+    first = _separator(data[0])
+    for s, no in zip(data, numbers):  # the rows parse alone but not together: mixed separators
+        if first == "spaces" and _separator(s) != first:  # (commas first: every row's are read)
+            raise EpaError(
+                f"fields separated by {_separator(s)} where the first data row (line {numbers[0]})"
+                f" separates them by {first}: use one separator throughout",
+                path=str(tab.path),
+                line=no,
+            )
+    for s, no in zip(data, numbers):  # else the first row numpy itself refuses, with its reason
+        try:
+            np.loadtxt([s], ndmin=2, dtype=float, comments=("#", "%"))
+        except ValueError as exc:
+            reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else "unreadable"
+            raise EpaError(f"cannot read the row: {reason}", path=str(tab.path), line=no) from None
     raise EpaError("could not parse the numeric rows", path=str(tab.path))
+
+
+def _separator(line: str) -> str:
+    return "';'" if ";" in line else ("','" if "," in line else "spaces")
 
 
 # ----------------------------------------------------------------------------- column naming

@@ -126,7 +126,11 @@ def run_cases(
     for c in cases:
         key = c["key"]
         inputs = ("truth", "estimate", "truth_source", "estimate_source")
-        case = CaseFolder.of(results_dir, Case.from_key(key, **{k: c.get(k) for k in inputs}))
+        try:
+            case = CaseFolder.of(results_dir, Case.from_key(key, **{k: c.get(k) for k in inputs}))
+        except EpaError as exc:  # a name that is no plain name: this case fails, nothing is written
+            status[key] = {"status": "failed", "reason": f"{stage}: {exc.one_line()}"}
+            continue
         reason = upstream.get(key)
         with case_log(case.log(stage)):
             if reason is not None:

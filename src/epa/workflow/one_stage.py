@@ -20,7 +20,7 @@ def grid_case(case_dir, cfg: dict, source: str) -> Case:
     """The case a case folder ``<results>/cases/<algorithm>/<dataset>/<run>`` belongs to, with its
     files and each side's source settings as the grid's load job has them."""
     key = "/".join(Path(case_dir).resolve().parts[-3:])
-    _, cases = discovery.discover(cfg["truth_dir"], cfg["algorithms_dir"], source=source)
+    _, cases = discovery.discover(cfg["truth_dir"], cfg["algorithms_dir"], source=source, cfg=cfg)
     found = next((c for c in cases if c.key == key), None)
     if found is None:
         raise EpaError(f"{case_dir}: no case {key!r} in the grid of {source}")

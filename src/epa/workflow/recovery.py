@@ -45,6 +45,12 @@ def trial(ref: Trajectory, cfg: dict, rng: np.random.Generator, level: str, rate
         walk_pos_m=pos_walk,
         margin=0.5,
     )
+    need = cfg["sync"]["min_pairs"]
+    if len(est) < need:  # the simulated estimate leaves out the reference's ends (offset, margin)
+        raise EpaError(
+            f"too short for a selftest: {ref.t[-1] - ref.t[0]:.3f} s of reference ({len(ref)} poses)"
+            f" give {len(est)} simulated poses at {rate:g} Hz, {need} needed (sync.min_pairs)"
+        )
     found = sync.offset_step(ref, est, cfg)
     out = {
         "level": level,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import math
 from functools import lru_cache
 from pathlib import Path
 
@@ -37,11 +38,33 @@ def defaults() -> dict:
     return _fill({}, schema())
 
 
+def _non_finite(value, key: str = "") -> str | None:
+    """The key of the first number that is nan or infinite (the schema's bounds let them through:
+    nan compares false with every bound, inf passes any minimum)."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            found = _non_finite(v, f"{key}.{k}" if key else str(k))
+            if found:
+                return found
+    elif isinstance(value, list):
+        for k, v in enumerate(value):
+            found = _non_finite(v, f"{key}.{k}")
+            if found:
+                return found
+    elif isinstance(value, float) and not math.isfinite(value):
+        return key
+    return None
+
+
 def resolve(config: dict | None, *, source: str = "config") -> dict:
     """Validate a config and fill in every default; a mistake is one line naming the key."""
     import jsonschema
 
     cfg = copy.deepcopy(config or {})
+    bad = _non_finite(cfg)
+    if bad:
+        value = _at(cfg, bad.split("."))
+        raise EpaError(f"{bad}: {value} is not a finite number", path=source)
     validator = jsonschema.Draft202012Validator(schema())
     errors = sorted(validator.iter_errors(cfg), key=lambda e: list(e.path))
     if errors:
@@ -64,6 +87,75 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
 
         if not recording.available():  # refused before any case runs, not once per case
             raise EpaError(recording.INSTALL_HINT, path=source)
+    return cfg
+
+
+def _at(node, keys: list):
+    for k in keys:
+        node = node[int(k)] if isinstance(node, list) else node[k]
+    return node
+
+
+def _schema_at(keys: list) -> dict:
+    """The schema of one key path (object properties, additionalProperties, array items, $refs)."""
+    root = schema()
+    sch = root
+    for k in keys:
+        if "$ref" in sch:
+            sch = root["$defs"][sch["$ref"].rsplit("/", 1)[-1]]
+        if isinstance(k, int) or (isinstance(k, str) and k.isdigit() and "items" in sch):
+            sch = sch.get("items", {})
+        elif k in sch.get("properties", {}):
+            sch = sch["properties"][k]
+        elif isinstance(sch.get("additionalProperties"), dict):
+            sch = sch["additionalProperties"]
+        else:
+            return {}
+    if "$ref" in sch:
+        sch = root["$defs"][sch["$ref"].rsplit("/", 1)[-1]]
+    return sch
+
+
+YAML_TRUE = ("true", "yes", "on")
+YAML_FALSE = ("false", "no", "off")
+
+
+def coerce_overrides(config: dict, overrides: dict | None) -> dict:
+    """Snakemake reads ``--config key={...}`` with YAML's BaseLoader: every nested scalar is a string
+    (``report={"per_case": false}`` gives ``'false'``). The keys given on the command line are turned
+    back into what the schema expects: a YAML boolean word for a boolean key, a number for a number
+    key, ``null`` where null is allowed. Nothing else is touched (a config file's quoted ``"false"``
+    stays an error)."""
+    cfg = copy.deepcopy(config)
+
+    def walk(given, node, keys):
+        if isinstance(given, dict) and isinstance(node, dict):
+            for k, v in given.items():
+                if k in node:
+                    node[k] = walk(v, node[k], keys + [k])
+            return node
+        if isinstance(given, list) and isinstance(node, list) and len(given) == len(node):
+            return [walk(g, n, keys + [str(i)]) for i, (g, n) in enumerate(zip(given, node))]
+        if not isinstance(node, str):
+            return node
+        types = _schema_at(keys).get("type")
+        types = types if isinstance(types, list) else [types]
+        word = node.strip().lower()
+        if "boolean" in types and word in YAML_TRUE + YAML_FALSE:
+            return word in YAML_TRUE
+        if "null" in types and word in ("null", "~", ""):
+            return None
+        if "integer" in types or "number" in types:
+            for parse in (int, float):  # as YAML reads it: 8 is an int, 8.5 a float
+                try:
+                    return parse(word)
+                except ValueError:
+                    pass
+        return node
+
+    for k, v in (overrides or {}).items():
+        if k in cfg:
+            cfg[k] = walk(v, cfg[k], [k])
     return cfg
 
 

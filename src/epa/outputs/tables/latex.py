@@ -189,7 +189,13 @@ def _metric_table(grid, algs, metric, spec, decimals, spread, rows_per_dataset, 
         cell.pair = spec.pair
         return cell
 
-    marked = (lambda a: None if has(a) else spec.missing) if spec.missing else (lambda a: None)
+    def marked(alg):
+        if not spec.missing or has(alg):
+            return None
+        if callable(spec.missing):
+            return spec.missing([c.record_of(metric) for c in grid if c.algorithm == alg])
+        return spec.missing
+
     rows = rows_per_dataset(cell_of, spec.pair, marked)
     header = datasets + ["Average"]
     return (

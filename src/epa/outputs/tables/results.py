@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from epa.artifacts.case import Case, CaseFolder
+from epa.core.errors import EpaError
 
 
 def has_result(status: str) -> bool:
@@ -48,7 +49,11 @@ def collect(keys: list[str], results_dir) -> list[CaseResult]:
     """Read every case's artifacts (``<results_dir>/cases/<algorithm>/<dataset>/<run>/``)."""
     out = []
     for key in keys:
-        folder = CaseFolder.of(results_dir, Case.from_key(key))
+        try:
+            folder = CaseFolder.of(results_dir, Case.from_key(key))
+        except EpaError as exc:  # no folder was ever written for it: marked failed under its name
+            out.append(CaseResult(Case.unchecked(key), status="failed: " + exc.one_line()))
+            continue
         res = CaseResult(folder.case)
         load, load_failed = folder.record_or_failure("load", "load.json")
         if load_failed is None:
