@@ -1,7 +1,7 @@
 """The ``epa`` command: ``epa eval`` (one case, every stage in one process), ``epa ape|rpe|res``
 (evo's command lines, in epa.evo), ``epa rpg`` (rpg_trajectory_evaluation's), ``epa traj``,
-``epa fig``, ``epa config``, ``epa selftest``, ``epa stage`` (one stage of one grid case) and
-``epa simulate``."""
+``epa fig``, ``epa config``, ``epa selftest``, ``epa stage`` (one stage of one grid case),
+``epa verify`` (regenerate a results folder byte for byte) and ``epa simulate``."""
 
 from __future__ import annotations
 
@@ -117,6 +117,10 @@ def _parser() -> argparse.ArgumentParser:
     from epa.rpg import command as rpg_command
 
     rpg_command.add_parser(sub)
+
+    from epa.workflow import verify
+
+    verify.add_parser(sub)
 
     st = sub.add_parser(
         "selftest",
@@ -284,6 +288,7 @@ def _eval(args) -> None:
         est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM),
     )
     on_stage(None)
+    _eval_provenance(args, cfg)
     record = result["metrics"]
     ate = record["ate"]["trans_m"]["rmse"]
     print(
@@ -301,6 +306,22 @@ def _eval(args) -> None:
             f"frame time mean {e['frame_time_mean_ms']:.2f} ms (p95 {e['frame_time_p95_ms']:.2f}),"
             f" EA-Drift {e['ea_drift']:.4f} % (seed formula {e['ea_drift_seed']:.4f} %)"
         )
+
+
+def _eval_provenance(args, cfg) -> None:
+    """provenance.json and config.resolved.yaml of the case (docs/reproducibility.md)."""
+    from epa.outputs import provenance
+
+    timing = provenance.run_timing(cfg, args.est, EVAL_ALGORITHM)
+    case = {"reference": args.ref, "estimate": args.est, "algorithm": EVAL_ALGORITHM}
+    doc = provenance.document(
+        "case",
+        cfg,
+        provenance.case_inputs(args.ref, args.est, timing),
+        workflow_dir=Path(__file__).resolve().parents[3],
+        extra={"case": case},
+    )
+    provenance.write(args.out, doc)
 
 
 def _traj(args) -> None:
@@ -409,6 +430,10 @@ def main(argv=None) -> int:
 
             elapsed, written = one_stage.run(args.name, args.case_dir, args.configfile)
             print(f"{args.name}: {elapsed:.3f} s, wrote " + ", ".join(map(str, written)))
+        elif args.command == "verify":
+            from epa.workflow import verify
+
+            return verify.run(args)
         elif args.command == "simulate":
             from epa import simulate
 
