@@ -10,7 +10,7 @@ from epa.core.errors import EpaError
 from snakemake.exceptions import WorkflowError
 from epa import readers as epa_readers
 from epa.outputs import report as epa_report, tables as epa_tables
-from epa.outputs import provenance as epa_provenance
+from epa.outputs import paper as epa_paper, provenance as epa_provenance
 from epa.readers import bags as epa_bags
 from epa.workflow import (
     chain as epa_chain,

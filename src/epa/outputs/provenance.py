@@ -75,9 +75,7 @@ def run_timing(cfg: dict, estimate, algorithm: str):
     from epa.core.errors import EpaError
 
     try:
-        return readers.timing_file(
-            estimate, readers.options(cfg, "estimate", algorithm=algorithm)
-        )
+        return readers.timing_file(estimate, readers.options(cfg, "estimate", algorithm=algorithm))
     except EpaError:
         return None
 

@@ -38,8 +38,10 @@ def compared_files(results) -> list[str]:
     results = Path(results)
     names = [n for n in GRID_FILES if (results / n).is_file()]
     names += sorted(str(p.relative_to(results)) for p in (results / "tables").glob("*.tex"))
-    names += sorted(
-        str(p.relative_to(results)) for p in results.glob("cases/**/metrics.json") if p.is_file()
+    names += sorted(  # the metrics stage's (10_report/ holds a copy for the reader)
+        str(p.relative_to(results))
+        for p in results.glob("cases/**/metrics.json")
+        if p.is_file() and "10_report" not in p.parts
     )
     names += sorted(
         str(p.relative_to(results)) for p in results.glob("[0-9][0-9]_*/metrics.json")
@@ -124,7 +126,9 @@ def regenerate_grid(
     print("epa verify: " + " ".join(cmd[2:]) + f"  (in {workdir})", file=log, flush=True)
     env = dict(os.environ)
     src = str(Path(__file__).resolve().parents[2])  # this epica, not another installed one
-    env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "") if env.get("PYTHONPATH") else src
+    env["PYTHONPATH"] = (
+        src + os.pathsep + env.get("PYTHONPATH", "") if env.get("PYTHONPATH") else src
+    )
     run = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True)
     if run.returncode != 0:
         tail = "\n".join((run.stdout + run.stderr).strip().splitlines()[-15:])
@@ -210,7 +214,10 @@ def verify(
             print(f"  ... and {len(diffs) - 50} more", file=log)
     ok = not diffs and not problems
     verdict = "IDENTICAL" if ok else "NOT VERIFIED"
-    print(f"epa verify: {len(names) - len(diffs)} of {len(names)} files byte-identical: {verdict}", file=log)
+    print(
+        f"epa verify: {len(names) - len(diffs)} of {len(names)} files byte-identical: {verdict}",
+        file=log,
+    )
     return 0 if ok else 1
 
 
@@ -222,7 +229,9 @@ def add_parser(sub) -> None:
     v.add_argument("results", help="a results folder (or an `epa eval --out` folder)")
     v.add_argument("--cores", type=int, default=2, help="cores of the re-run (default 2)")
     v.add_argument("--snakefile", help="the workflow (default: this checkout's Snakefile)")
-    v.add_argument("--keep", help="regenerate into this folder and keep it (default: a temporary one)")
+    v.add_argument(
+        "--keep", help="regenerate into this folder and keep it (default: a temporary one)"
+    )
     v.add_argument(
         "--force", action="store_true", help="re-run and compare even when inputs changed"
     )
