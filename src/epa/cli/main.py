@@ -258,6 +258,7 @@ def _eval(args) -> None:
     cfg = _eval_config(args)
     out = CaseFolder(args.out)
     chain.clear_arrays(out)
+    _eval_provenance(args, cfg)  # first: the report (--report) lists the inputs from it
     clock = {"stage": None, "t": time.perf_counter()}
     size_mb = sum(_input_bytes(p) for p in (args.ref, args.est)) / 1e6
     progress = args.verbose or size_mb >= LARGE_INPUT_MB
@@ -288,7 +289,6 @@ def _eval(args) -> None:
         est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM),
     )
     on_stage(None)
-    _eval_provenance(args, cfg)
     record = result["metrics"]
     ate = record["ate"]["trans_m"]["rmse"]
     print(
