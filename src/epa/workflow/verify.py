@@ -165,9 +165,11 @@ def verify(
     snakefile=None,
     keep=None,
     force: bool = False,
-    log=sys.stdout,
+    log=None,
 ) -> int:
-    """Check, regenerate, compare; prints what it finds. 0: identical; 1: not; 2: cannot verify."""
+    """Check, regenerate, compare; prints what it finds. 0: identical; 1: not (a raised EpaError:
+    cannot verify)."""
+    log = log or sys.stdout
     results = Path(results_dir)
     try:
         doc = provenance.read(results)
