@@ -17,6 +17,7 @@ import os
 import platform
 import shlex
 import socket
+import stat
 import subprocess
 import sys
 from datetime import UTC, datetime
@@ -54,8 +55,10 @@ def file_record(path) -> dict:
     """An input file as recorded: its path (as the config gives it), size and sha256; or missing."""
     p = Path(path)
     try:
+        if not stat.S_ISREG(p.stat().st_mode):  # a device or a FIFO is never read here
+            return {"path": str(path), "missing": True, "not_a_file": True}
         return {"path": str(path), "size": p.stat().st_size, "sha256": sha256(p)}
-    except OSError:
+    except (OSError, ValueError):
         return {"path": str(path), "missing": True}
 
 
@@ -63,7 +66,12 @@ def case_inputs(truth, estimate, timing=None) -> list[str]:
     """The files one case reads: each side's file or a ROS 2 bag folder's files, and a timing file."""
     from epa.readers import bags
 
-    paths = {str(f) for p in (truth, estimate) for f in bags.bag_files(p)}
+    paths = set()
+    for p in (truth, estimate):
+        try:
+            paths.update(str(f) for f in bags.bag_files(p))
+        except OSError:  # a name the system refuses: recorded as given (and missing)
+            paths.add(str(p))
     if timing:
         paths.add(str(timing))
     return sorted(paths)
@@ -76,7 +84,7 @@ def run_timing(cfg: dict, estimate, algorithm: str):
 
     try:
         return readers.timing_file(estimate, readers.options(cfg, "estimate", algorithm=algorithm))
-    except EpaError:
+    except (EpaError, OSError):
         return None
 
 
