@@ -31,7 +31,8 @@ try:  # a mistake in the config or the folders is one line, not a traceback
 except EpaError as exc:
     raise WorkflowError("epa: error: " + exc.one_line()) from None
 EPA_VERSION = epa.__version__
-# the command line, for provenance.json only (never in a params: a new command line re-runs nothing)
+# the command line, for provenance.json only (an environment variable, not a rule parameter, so a
+# new command line re-runs nothing)
 os.environ[epa_provenance.COMMAND_ENV] = shlex.join(["snakemake", *sys.argv[1:]])
 RESULTS = EPA["results_dir"]
 CASE_BY_KEY = {c.key: c for c in CASES}

@@ -20,6 +20,8 @@ rule paper:
         ],
     log:
         f"{RESULTS}/logs/paper.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/paper.tsv"
     conda:
         "../envs/epica.yaml"
     threads: 1
