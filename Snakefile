@@ -12,6 +12,7 @@ include: "rules/common.smk"
 include: "rules/stages.smk"
 include: "rules/tables.smk"
 include: "rules/figures.smk"
+include: "rules/paper.smk"
 
 
 rule all:
@@ -19,10 +20,16 @@ rule all:
     input:
         rules.tables.output,
         rules.figures.output,
+        rules.paper.output,
         expand(manifest("report"), batch=BATCHES),
 
 
 onsuccess:
-    failures = epa_tables.failure_report(f"{RESULTS}/summary.csv")
-    if failures:
-        print(failures)
+    if os.path.exists(
+        f"{RESULTS}/summary.csv"
+    ):  # not after a run of some stages only
+        print(epa_paper.where_lines(RESULTS, EPA["report"]["per_case"]))
+        failures = epa_tables.failure_report(f"{RESULTS}/summary.csv")
+        print(
+            failures or f"epica: every case has a result ({len(CASE_BY_KEY)} cases)"
+        )

@@ -2,12 +2,15 @@
 # Every stage rule runs one stage for one batch (one case on small grids) in-process; see
 # docs/performance.md for why, with the measurements.
 import os
+import shlex
+import sys
 
 import epa
 from epa.core.errors import EpaError
 from snakemake.exceptions import WorkflowError
 from epa import readers as epa_readers
 from epa.outputs import report as epa_report, tables as epa_tables
+from epa.outputs import paper as epa_paper, provenance as epa_provenance
 from epa.readers import bags as epa_bags
 from epa.workflow import (
     chain as epa_chain,
@@ -33,6 +36,9 @@ try:  # a mistake in the config or the folders is one line, not a traceback
 except EpaError as exc:
     raise WorkflowError("epa: error: " + exc.one_line()) from None
 EPA_VERSION = epa.__version__
+# the command line, for provenance.json only (an environment variable, not a rule parameter, so a
+# new command line re-runs nothing)
+os.environ[epa_provenance.COMMAND_ENV] = shlex.join(["snakemake", *sys.argv[1:]])
 RESULTS = EPA["results_dir"]
 CASE_BY_KEY = {c.key: c for c in CASES}
 BATCHES = epa_jobs.batches(sorted(CASE_BY_KEY), EPA["grid"]["max_batches"])

@@ -1,5 +1,6 @@
 # error_comparison.txt, one .tex per LaTeX table, summary.csv, comparison, results/consistency/:
-# every case, failed ones marked (scripts/tables.py, which also runs on its own).
+# every case, failed ones marked; provenance.json and config.resolved.yaml (scripts/tables.py, which
+# also runs on its own).
 rule tables:
     input:
         expand(manifest("efficiency"), batch=BATCHES),
@@ -24,6 +25,16 @@ rule tables:
         ),
         comparison_tex=f"{RESULTS}/comparison.tex",
         success_curves=f"{RESULTS}/success_curves.csv",
+        provenance=report(
+            f"{RESULTS}/provenance.json",
+            caption="../docs/captions/provenance.rst",
+            category="Provenance",
+        ),
+        config_resolved=report(
+            f"{RESULTS}/config.resolved.yaml",
+            caption="../docs/captions/provenance.rst",
+            category="Provenance",
+        ),
     log:
         f"{RESULTS}/logs/tables.log",
     benchmark:
@@ -47,5 +58,9 @@ rule tables:
             "sources": EPA.get("sources"),
         },
         version=EPA_VERSION,
+        # provenance.json: the resolved config, every input file (hashed when the rule runs), the checkout
+        resolved=EPA,
+        inputs=lambda wc: epa_provenance.grid_inputs(EPA, CASES, idle_truths()),
+        workflow_dir=workflow.basedir,
     script:
         "../scripts/tables.py"

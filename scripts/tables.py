@@ -1,5 +1,6 @@
 """The tables rule's body: read every case's artifacts and write error_comparison.txt, the LaTeX
-tables, summary.csv, comparison.txt/.tex and results/consistency/.
+tables, summary.csv, comparison.txt/.tex, results/consistency/, and provenance.json with
+config.resolved.yaml (what made them: docs/reproducibility.md).
 
 Snakemake runs it for the ``tables`` rule (``script:``). It also runs on its own, on a results folder
 a grid has filled, with the grid's config:
@@ -9,9 +10,12 @@ a grid has filled, with the grid's config:
 
 import argparse
 import sys
+from pathlib import Path
 
 from epa.core.errors import EpaError
-from epa.outputs import tables
+from epa.outputs import provenance, tables
+
+WORKFLOW_DIR = Path(__file__).resolve().parents[1]
 
 
 def write(cases, results_dir, settings, idle_truths, log_path) -> list[tuple[str, str]]:
@@ -21,6 +25,12 @@ def write(cases, results_dir, settings, idle_truths, log_path) -> list[tuple[str
     with open(log_path, "w", encoding="utf-8") as fh:
         fh.write("\n".join(lines) + "\n")
     return failed
+
+
+def write_provenance(results_dir, cfg, inputs, workflow_dir) -> None:
+    """provenance.json and config.resolved.yaml (the inputs hashed now, after the tables)."""
+    doc = provenance.document("grid", cfg, inputs, workflow_dir=workflow_dir)
+    provenance.write(results_dir, doc)
 
 
 def main(argv=None) -> int:
@@ -45,6 +55,8 @@ def main(argv=None) -> int:
         failed = write(
             sorted(c.key for c in cases), results, cfg, idle, f"{results}/logs/tables.log"
         )
+        inputs = provenance.grid_inputs(cfg, cases, idle)
+        write_provenance(results, cfg, inputs, WORKFLOW_DIR)
     except EpaError as exc:
         print(f"epa: error: {exc.one_line()}", file=sys.stderr)
         return 2
@@ -57,6 +69,9 @@ if __name__ == "__main__":
         sm = globals()["snakemake"]
         write(
             sm.params.cases, sm.params.results, sm.params.settings, sm.params.idle_truths, sm.log[0]
+        )
+        write_provenance(
+            sm.params.results, sm.params.resolved, sm.params.inputs, sm.params.workflow_dir
         )
     else:
         sys.exit(main())

@@ -55,7 +55,8 @@ def test_every_case_figure_and_document_is_written(case):
         assert 300 < w < 2200 and 200 < h < 2200, (p.name, w, h)
     doc = json.loads((case / "metrics.json").read_text())
     assert set(doc) == {"metrics", "drift", "consistency", "efficiency"}
-    assert "| metrics.ate.trans_m.rmse |" in (case / "report_en.md").read_text()
+    en = (case / "report_en.md").read_text()
+    assert "| ATE (m / deg) |" in en and "| drift rate 8 m (%) |" in en and "## Provenance" in en
     assert "## 步骤 1-3" in (case / "report_zh.md").read_text()
     rows = (case / "metrics_summary.csv").read_text().splitlines()
     assert rows[0] == "section,metric,value" and any(
@@ -361,9 +362,9 @@ def test_figures_are_drawn_for_flagged_cases_and_one_command_draws_the_rest(tmp_
         bundles = {p.stem for p in (out / "10_report/bundles").glob("*.json")}
         assert {"trajectory", "ape_time", "xcorr"} <= bundles
         if label == "diverged":
-            assert drawn == bundles and "Not drawn" not in md
+            assert drawn == bundles and "epa fig --case" not in md
         else:
-            assert drawn == set() and "`epa fig --case .` in the case folder" in md
+            assert drawn == set() and "`epa fig --case ..`" in md and "not flagged" in md
     clean = folders["clean"]
     assert cli.main(["fig", "--case", str(clean)]) == 0
     by_command = {p.name: p.read_bytes() for p in (clean / "10_report/figures").glob("*.png")}

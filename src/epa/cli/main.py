@@ -1,7 +1,7 @@
 """The ``epa`` command: ``epa eval`` (one case, every stage in one process), ``epa ape|rpe|res``
 (evo's command lines, in epa.evo), ``epa rpg`` (rpg_trajectory_evaluation's), ``epa traj``,
-``epa fig``, ``epa config``, ``epa selftest``, ``epa stage`` (one stage of one grid case) and
-``epa simulate``."""
+``epa fig``, ``epa config``, ``epa selftest``, ``epa stage`` (one stage of one grid case),
+``epa verify`` (regenerate a results folder byte for byte) and ``epa simulate``."""
 
 from __future__ import annotations
 
@@ -136,6 +136,10 @@ def _parser() -> argparse.ArgumentParser:
     from epa.rpg import command as rpg_command
 
     rpg_command.add_parser(sub)
+
+    from epa.workflow import verify
+
+    verify.add_parser(sub)
 
     st = sub.add_parser(
         "selftest",
@@ -285,6 +289,7 @@ def _eval(args) -> None:
     document = Path(args.out) / "metrics.json"  # every stage's record in one document
     if document.is_file():  # a previous run's: never beside this run's stage folders
         document.unlink()
+    _eval_provenance(args, cfg)  # first: the report (--report) lists the inputs from it
     clock = {"stage": None, "t": time.perf_counter()}
     size_mb = sum(_input_bytes(p) for p in (args.ref, args.est)) / 1e6
     progress = args.verbose or size_mb >= LARGE_INPUT_MB
@@ -372,6 +377,22 @@ def _fig(args) -> None:
                 raise
             raise EpaError(exc.message, path=str(bundle)) from None
     print("wrote " + ", ".join(map(str, written)))
+
+
+def _eval_provenance(args, cfg) -> None:
+    """provenance.json and config.resolved.yaml of the case (docs/reproducibility.md)."""
+    from epa.outputs import provenance
+
+    timing = provenance.run_timing(cfg, args.est, EVAL_ALGORITHM)
+    case = {"reference": args.ref, "estimate": args.est, "algorithm": EVAL_ALGORITHM}
+    doc = provenance.document(
+        "case",
+        cfg,
+        provenance.case_inputs(args.ref, args.est, timing),
+        workflow_dir=Path(__file__).resolve().parents[3],
+        extra={"case": case},
+    )
+    provenance.write(args.out, doc)
 
 
 def _traj(args) -> None:
@@ -486,6 +507,10 @@ def main(argv=None) -> int:
 
             elapsed, written = one_stage.run(args.name, args.case_dir, args.configfile)
             print(f"{args.name}: {elapsed:.3f} s, wrote " + ", ".join(map(str, written)))
+        elif args.command == "verify":
+            from epa.workflow import verify
+
+            return verify.run(args)
         elif args.command == "simulate":
             from epa import simulate
 

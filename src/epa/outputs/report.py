@@ -20,7 +20,7 @@ import numpy as np
 from epa.artifacts import files as io
 from epa.artifacts.case import CaseData, CaseFolder
 from epa.metrics.accuracy import segment_key
-from epa.outputs import figures, tables
+from epa.outputs import case_report, figures, tables
 
 CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")
 GRID_FIGURES = ("ate", "success_rate", "success_curve", "drift_rate", "rmse_time")
@@ -144,167 +144,6 @@ def summary_csv(doc: dict) -> str:
     return buf.getvalue()
 
 
-TEXT = {
-    "en": {
-        "title": "Evaluation of",
-        "settings": "Settings",
-        "steps": "Steps 1-3",
-        "metrics": "Metrics",
-        "fail": "Fail segments",
-        "figures": "Figures",
-        "undrawn": "Not drawn ({why}): {names}. Draw them with `{command}` in the case folder"
-        " (the one holding 10_report/).",
-        "none": "none",
-        "offset": "Step 1 time offset",
-        "extrinsic": "Step 2 extrinsic",
-        "align": "Step 3 alignment",
-        "used": "used",
-        "not_used": "not used",
-        "source": "evaluated as",
-        "metric": "metric",
-        "value": "value",
-        "start": "start [s]",
-        "end": "end [s]",
-        "consistency": "Consistency",
-        "efficiency": "Efficiency",
-        "unavailable": "not available",
-        "status": "status",
-        "std": "std",
-        "per_axis": "per axis x, y, z",
-        "unobservable": "unobservable",
-    },
-    "zh": {
-        "title": "评估：",
-        "settings": "设置",
-        "steps": "步骤 1-3",
-        "metrics": "指标",
-        "fail": "失效区段",
-        "figures": "图",
-        "undrawn": "未绘制（{why}）：{names}。在案例文件夹（包含 10_report/ 的文件夹）中运行 `{command}` 绘制。",
-        "none": "无",
-        "offset": "步骤 1 时间偏移",
-        "extrinsic": "步骤 2 外参",
-        "align": "步骤 3 对齐",
-        "used": "已使用",
-        "not_used": "未使用",
-        "source": "评估方式",
-        "metric": "指标",
-        "value": "数值",
-        "start": "开始 [s]",
-        "end": "结束 [s]",
-        "consistency": "一致性",
-        "efficiency": "效率",
-        "unavailable": "不可用",
-        "status": "状态",
-        "std": "标准差",
-        "per_axis": "各轴 x, y, z",
-        "unobservable": "不可观",
-    },
-}
-
-
-def _num(v) -> float:
-    """A record's number as a float ("inf" is how JSON artifacts hold infinity; None is nan)."""
-    try:
-        return float(v)
-    except (TypeError, ValueError):
-        return float("nan")
-
-
-def _axis_std(values, factor: float, unit: str, T: dict) -> str:
-    return (
-        " / ".join(T["unobservable"] if v is None else f"{_num(v) * factor:.3g}" for v in values)
-        + f" {unit}"
-    )
-
-
-def report_md(
-    doc: dict,
-    case_name: str,
-    figure_names: list[str],
-    lang: str,
-    fail: dict,
-    undrawn: tuple[list[str], str, str] | None = None,
-) -> str:
-    """A case's report in ``lang``; ``undrawn``: (figure names, why, the command that draws them)."""
-    T = TEXT[lang]
-    m = doc.get("metrics", {})
-    sync, calib, align = m.get("sync", {}), m.get("calibrate", {}), m.get("alignment", {})
-    step1 = sync.get("step1", {})
-    ext = calib.get("extrinsic") or {}
-    lines = [
-        f"# {T['title']} {case_name}",
-        "",
-        f"## {T['settings']}",
-        "",
-        f"- mode `{sync.get('mode')}`, association `{sync.get('policy')}` (max {sync.get('max_diff_s')} s),"
-        f" alignment `{align.get('method')}`",
-        f"- {T['source']}: `{m.get('eval_source')}`",
-        "",
-        f"## {T['steps']}",
-        "",
-        f"- {T['offset']}: {_num(m.get('time_offset_s')) * 1000:.3f} ms"
-        f" ({T['used'] if step1.get('used') else T['not_used']}: {step1.get('reason', '')};"
-        f" peak {_num(step1.get('peak_corr')):.3f}, ratio {_num(step1.get('peak_ratio')):.3f});"
-        f" {T['status']} `{step1.get('status')}`, {T['std']} {_num(step1.get('std')) * 1000:.3f} ms",
-        f"- {T['extrinsic']}: "
-        + (
-            f"{_num(ext.get('rotation_deg')):.3f} deg, {_num(ext.get('translation_norm_m')):.4f} m"
-            f" ({T['used'] if calib.get('plan', {}).get('apply_extrinsic') else T['not_used']}:"
-            f" {calib.get('plan', {}).get('reason', '')})"
-            if ext
-            else T["none"]
-        )
-        + f"; {T['status']} `{calib.get('step2_status')}`",
-        *(
-            [
-                f"  - {T['std']} ({T['per_axis']}): rotation {_axis_std(ext.get('rotation_std_deg'), 1, 'deg', T)},"
-                f" translation {_axis_std(ext.get('translation_std_m'), 1000, 'mm', T)}"
-            ]
-            if ext.get("rotation_std_deg")
-            else []
-        ),
-        f"- {T['align']}: {align.get('method')}, yaw {_num(align.get('yaw_deg')):.3f} deg,"
-        f" scale {_num(align.get('scale')):.6f}",
-        "",
-        f"## {T['metrics']}",
-        "",
-        f"| {T['metric']} | {T['value']} |",
-        "|---|---|",
-    ]
-    for section, metric, value in summary_rows(
-        {k: doc[k] for k in ("metrics", "drift") if k in doc}
-    ):
-        if metric.endswith(("rmse", "mean", "median", "max", "_pct")) or metric in (
-            "n_matched",
-            "ref_length_m",
-        ):
-            lines.append(f"| {section}.{metric} | {value:.6g} |")
-    for key in ("consistency", "efficiency"):
-        rec = doc.get(key, {})
-        lines += ["", f"## {T[key]}", ""]
-        if not rec.get("available"):
-            lines.append(f"{T['unavailable']}: {rec.get('reason', rec.get('failed', ''))}")
-            continue
-        for k, v in rec.items():
-            if isinstance(v, (int, float)) and not isinstance(v, bool):
-                lines.append(f"- {k}: {v:.6g}")
-    lines += ["", f"## {T['fail']}", ""]
-    starts = np.asarray(fail.get("t_start", []), float)
-    if starts.size:  # stamps of the reference clock, as in 07_drift/fail_segments.csv
-        lines += [f"| {T['start']} | {T['end']} |", "|---|---|"]
-        lines += [
-            f"| {s:.3f} | {e:.3f} |" for s, e in zip(starts, np.asarray(fail["t_end"], float))
-        ]
-    else:
-        lines.append(T["none"])
-    lines += ["", f"## {T['figures']}", ""] + [f"![{n}](figures/{n}.png)" for n in figure_names]
-    if undrawn and undrawn[0]:
-        names, why, command = undrawn
-        lines += ["", T["undrawn"].format(why=why, names=", ".join(names), command=command)]
-    return "\n".join(lines) + "\n"
-
-
 def flags(doc: dict) -> list[str]:
     """Why a reader would open this case: what drift detection and Steps 1-2 found (empty: nothing)."""
     m, drift = doc.get("metrics", {}), doc.get("drift", {})
@@ -342,6 +181,14 @@ def case_zip(case_root: Path, out: Path) -> None:
     tmp.replace(out)
 
 
+def _grid_provenance(case_root: Path) -> str:
+    """Where the run's provenance.json is, relative to the case's report: a grid case's is
+    results/provenance.json (written by the tables rule), an `epa eval` case's is beside it."""
+    if (case_root / "provenance.json").exists():
+        return "../provenance.json"
+    return "../../../../../provenance.json"
+
+
 def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
     """The report stage: documents, plot bundles, figures (``report.figures``: flagged cases, all
     or none) and the zip, from the case's artifacts (``data`` reads them)."""
@@ -363,11 +210,20 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
         formats = ("png", "pdf") if c["pdf"] else ("png",)
         bundle = figures.read_bundle(folder / "bundles" / f"{fig_name}.json")
         figures.render(bundle, folder / "figures" / fig_name, formats=formats)
-    reason = "report.figures: none" if c["figures"] == "none" else "the case is not flagged"
-    # run in the case folder: the report reads the same wherever the results are
-    undrawn = ([n for n in bundles if n not in drawn], reason, "epa fig --case .")
+    inputs = case_report.case_inputs(case.root, case.record("load", "load.json"), cfg)
     for lang in ("en", "zh"):
-        md = report_md(doc, name, drawn, lang, data.fail_segments, undrawn)
+        md = case_report.report_md(
+            doc,
+            name,
+            drawn,
+            lang,
+            data.fail_segments,
+            bundles=bundles,
+            every_figure=CASE_FIGURES,
+            cfg_report=c,
+            inputs=inputs,
+            grid_provenance=_grid_provenance(case.root),
+        )
         io.write_text(folder / f"report_{lang}.md", md)
     if c["rerun"]:
         from epa.outputs import recording

@@ -38,7 +38,7 @@ def artifacts(stage) -> tuple[str, ...]:
 
 def settings_for(stage: str, cfg: dict) -> dict:
     """The part of a resolved config one stage reads (what the workflow puts in the rule's params)."""
-    return {k: cfg[k] for k in BY_NAME[stage].SETTINGS}
+    return {k: cfg[k] for k in BY_NAME[stage].SETTINGS if k in cfg}  # folders: only on a grid
 
 
 def previous(stage: str) -> str | None:

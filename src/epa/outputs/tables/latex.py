@@ -210,3 +210,23 @@ def tex_document(title: str, rows: list[str], ncols: int) -> str:
     """A table that \\input's into a paper: a tabular with the report's rows, titled in a comment."""
     spec = "l" + "c" * (ncols - 1)
     return "\n".join([f"% {title}", r"\begin{tabular}{" + spec + "}", *rows, r"\end{tabular}", ""])
+
+
+TABLE_STYLES = ("hline", "booktabs")
+
+
+def restyle(tex: str, style: str = "hline") -> str:
+    """A table in another style of rules: ``hline`` as written; ``booktabs`` puts \\toprule over the
+    header, \\midrule under it (for its \\hline) and \\bottomrule under the last row."""
+    if style == "hline":
+        return tex
+    if style != "booktabs":
+        raise ValueError(f"tables.style: {style!r} is not one of {TABLE_STYLES}")
+    out = []
+    for line in tex.split("\n"):
+        if line.startswith(r"\end{tabular}"):
+            out.append(r"\bottomrule")
+        out.append(line.replace(r" \hline", r" \midrule"))
+        if line.startswith(r"\begin{tabular}"):
+            out.append(r"\toprule")
+    return "\n".join(out)

@@ -12,7 +12,7 @@ from epa.core.errors import EpaError
 from epa.metrics import registry
 from epa.outputs.tables.across_runs import write_across_runs
 from epa.outputs.tables.comparison import comparison_tex, comparison_text, comparisons
-from epa.outputs.tables.latex import build_tables, tex_document
+from epa.outputs.tables.latex import build_tables, restyle, tex_document
 from epa.outputs.tables.ov_eval import ov_eval_text
 from epa.outputs.tables.results import CaseResult, collect, failed_cases, has_result
 from epa.outputs.tables.summary import (
@@ -57,6 +57,7 @@ def write_all(
     segments = cfg["metrics"]["segments"]
     decimals = cfg["tables"]["decimals"]
     spread = cfg["tables"]["spread"]
+    style = cfg["tables"].get("style", "hline")
     text = (
         ov_eval_text(grid, segments, idle_truths)
         if cfg.get("mode") == "ov_eval"
@@ -67,13 +68,15 @@ def write_all(
     for name, title, rows, n in build_tables(
         grid, segments, decimals, metrics=enabled_metrics(cfg), spread=spread
     ):
-        io.write_text(results_dir / "tables" / f"{name}.tex", tex_document(title, rows, n))
+        io.write_text(
+            results_dir / "tables" / f"{name}.tex", restyle(tex_document(title, rows, n), style)
+        )
     io.write_text(
         results_dir / "success_curves.csv", records_csv(SUCCESS_CURVE_COLUMNS, success_curves(grid))
     )
     pairs = comparisons(grid, segments)
     io.write_text(results_dir / "comparison.txt", comparison_text(pairs))
-    io.write_text(results_dir / "comparison.tex", comparison_tex(pairs))
+    io.write_text(results_dir / "comparison.tex", restyle(comparison_tex(pairs), style))
     write_across_runs(grid, results_dir)
 
 

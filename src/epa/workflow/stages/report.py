@@ -7,7 +7,7 @@ from epa.artifacts.case import CaseData
 from epa.outputs import report
 
 NAME = "report"
-SETTINGS = ("report",)
+SETTINGS = ("report", "truth_dir", "load", "sources")  # the inputs in the report's provenance
 RECORDS = ("report.json",)
 ARRAYS = ()
 

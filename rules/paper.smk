@@ -1,0 +1,36 @@
+# results/paper/: every LaTeX table, every grid figure as PDF and paper.tex that \input's them
+# (scripts/paper.py, which also runs on its own); compiles with `pdflatex paper.tex` there.
+rule paper:
+    input:
+        tex=rules.tables.output.tex,
+        comparison_tex=rules.tables.output.comparison_tex,
+        figures=[f"{RESULTS}/figures/{name}.pdf" for name in epa_report.GRID_FIGURES],
+    output:
+        tex=report(
+            f"{RESULTS}/paper/paper.tex",
+            caption="../docs/captions/paper.rst",
+            category="Paper",
+        ),
+        tables=[
+            f"{RESULTS}/paper/tables/{name}.tex"
+            for name in epa_tables.table_names(EPA) + ("comparison",)
+        ],
+        figures=[
+            f"{RESULTS}/paper/figures/{name}.pdf" for name in epa_report.GRID_FIGURES
+        ],
+    log:
+        f"{RESULTS}/logs/paper.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/paper.tsv"
+    conda:
+        "../envs/epica.yaml"
+    threads: 1
+    resources:
+        mem_mb=500,
+        runtime=2,
+    params:
+        results=lambda wc, input: os.path.dirname(input.comparison_tex),
+        captions=os.path.join(workflow.basedir, "docs", "captions"),
+        version=EPA_VERSION,
+    script:
+        "../scripts/paper.py"

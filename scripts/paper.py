@@ -1,0 +1,48 @@
+"""The paper rule's body: results/paper/ (every LaTeX table, every grid figure as PDF, paper.tex).
+
+Snakemake runs it for the ``paper`` rule (``script:``). It also runs on its own, on a results folder
+whose tables and figures are written:
+
+    python scripts/paper.py [--configfile config/config.yaml]
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+from epa.outputs import paper
+
+CAPTIONS = Path(__file__).resolve().parents[1] / "docs" / "captions"
+
+
+def write(results_dir, caption_dir, log_path) -> list:
+    written = paper.write_paper(results_dir, paper.figure_captions(caption_dir))
+    with open(log_path, "w", encoding="utf-8") as fh:
+        fh.write("\n".join(map(str, written)) + "\n")
+    return written
+
+
+def main(argv=None) -> int:
+    from epa.core.errors import EpaError
+    from epa.workflow import settings
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--configfile", default="config/config.yaml")
+    args = parser.parse_args(argv)
+    try:
+        cfg = settings.resolve(settings.load_yaml(args.configfile), source=args.configfile)
+    except EpaError as exc:
+        print(f"epa: error: {exc.one_line()}", file=sys.stderr)
+        return 2
+    results = cfg["results_dir"]
+    written = write(results, CAPTIONS, f"{results}/logs/paper.log")
+    print(f"{len(written)} files in {results}/paper")
+    return 0
+
+
+if __name__ == "__main__":
+    if "snakemake" in globals():  # run by the paper rule
+        sm = globals()["snakemake"]
+        write(sm.params.results, sm.params.captions, sm.log[0])
+    else:
+        sys.exit(main())
