@@ -1,7 +1,12 @@
 """Outputs: what a researcher reads.
 
-- :mod:`epa.outputs.tables`: error_comparison.txt, LaTeX tables, summary.csv, RMSE/NEES across runs.
-- :mod:`epa.outputs.figures`: plot bundles and their rendering (the only place matplotlib is imported).
-- :mod:`epa.outputs.report`: per-case metrics.json, metrics_summary.csv, reports (en, zh), figures,
-  the case zip; the grid figures.
+- :mod:`epa.outputs.tables`: error_comparison.txt, LaTeX tables, summary.csv, comparison, RMSE/NEES
+  across runs (one module per output).
+- :mod:`epa.outputs.report`: a case's 10_report/ (documents, bundles, figures, zip) and the grid
+  figures; :mod:`epa.outputs.case_report` writes the report a person reads.
+- :mod:`epa.outputs.figures`: plot bundles and their rendering (the only place matplotlib is
+  imported); :mod:`epa.outputs.recording`: Rerun recordings.
+- :mod:`epa.outputs.provenance`: what made a results folder; :mod:`epa.outputs.paper`: results/paper/.
 """
+
+__all__ = ["case_report", "figures", "paper", "provenance", "recording", "report", "tables"]
