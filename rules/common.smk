@@ -53,9 +53,10 @@ wildcard_constraints:
 # onstart runs in the main process only, after the DAG, never in a dry run or a cluster job.
 onstart:
     if getattr(workflow.executor_plugin, "name", None) == "slurm":
+        plugin = workflow.executor_settings
         problem = epa_cluster.status_query_problem(
-            getattr(workflow.executor_settings, "status_command", None),
-            getattr(workflow.executor_settings, "init_seconds_before_status_checks", None),
+            getattr(plugin, "status_command", None),
+            getattr(plugin, "init_seconds_before_status_checks", None),
         ) or epa_cluster.cores_problem(workflow.resource_settings.cores)
         if problem:
             raise WorkflowError(f"epa: error: {problem}")
@@ -144,10 +145,11 @@ STAGE_RESOURCES = {
 
 def workers():
     """Worker processes for in-process jobs: the cores Snakemake was given, and no more than this
-    process may use: a cluster job is started with --cores all (the node's), but gets its allocation."""
+    process may use: a cluster job is started with --cores all (the node's), but gets its
+    allocation; without --cores (e.g. a remote job) one, in the calling thread."""
     try:
         cores = int(workflow.cores)
-    except (TypeError, ValueError):  # no --cores (e.g. a remote job): run in the calling thread
+    except (TypeError, ValueError):
         return 1
     return max(1, min(cores, epa_cluster.usable_cpus()))
 
