@@ -160,7 +160,7 @@ def workers():
 # The slurm executor starts it with --jobs 1; as many jobs as the job has CPUs run side by side (they
 # share the worker pool). No effect where the remote process's executor is local. docs/cluster.md.
 if workflow.remote_exec:
-    workflow.localrules(*epa_chain.NAMES, "tables", "figures")
+    workflow.localrules(*epa_chain.NAMES, "tables", "figures", "paper")
     if workflow.nodes is not None:
         workflow.register_resource("_nodes", epa_cluster.usable_cpus())
 
