@@ -204,8 +204,10 @@ def _checked(tab: _Table, rows: np.ndarray, header, header_line) -> _Table:
 
 # From this size on, a body is parsed by pandas' C parser: 3-4x faster than numpy's loadtxt
 # (0.10 s against 0.37 s for a 100k-pose TUM file; same doubles, bit for bit), worth its 0.5 s
-# import; once pandas is imported (a worker that met a large file), for every file.
-C_PARSER_MIN_CHARS = 4_000_000
+# import for a file of about 120,000 poses or more (at 4 MB, a 200 Hz EuRoC reference, a loop of
+# `epa eval` spent 0.5 s a case importing it); once pandas is imported (the workflow's workers
+# preload it), for every file.
+C_PARSER_MIN_CHARS = 12_000_000
 
 
 def _c_parser_rows(body: str, width: int) -> np.ndarray | None:
