@@ -29,7 +29,7 @@ def main(argv=None) -> int:
     parser.add_argument("--configfile", default="config/config.yaml")
     args = parser.parse_args(argv)
     try:
-        cfg = settings.resolve(settings.load_yaml(args.configfile), source=args.configfile)
+        cfg = settings.from_configfile(args.configfile)
     except EpaError as exc:
         print(f"epa: error: {exc.one_line()}", file=sys.stderr)
         return 2

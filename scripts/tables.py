@@ -41,7 +41,7 @@ def main(argv=None) -> int:
     parser.add_argument("--configfile", default="config/config.yaml")
     args = parser.parse_args(argv)
     try:
-        cfg = settings.resolve(settings.load_yaml(args.configfile), source=args.configfile)
+        cfg = settings.from_configfile(args.configfile)
         truth, cases = discovery.discover(
             cfg["truth_dir"], cfg["algorithms_dir"], source=args.configfile, cfg=cfg
         )

@@ -262,7 +262,7 @@ def _config_listing(path) -> str:
     defaults = _flat(settings.defaults())
     if path is None:
         return "".join(f"{k}: {json.dumps(v)}\n" for k, v in defaults.items())
-    effective = _flat(settings.resolve(settings.load_yaml(path), source=str(path)))
+    effective = _flat(settings.from_configfile(path))
     lines = []
     for k, v in effective.items():
         note = (

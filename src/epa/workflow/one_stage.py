@@ -40,7 +40,7 @@ def run(stage: str, case_dir, configfile) -> tuple[float, list[Path]]:
     if stage not in chain.BY_NAME:
         raise EpaError(f"no stage {stage!r}; the stages are {', '.join(chain.NAMES)}")
     source = str(configfile)
-    cfg = settings.resolve(settings.load_yaml(configfile), source=source)
+    cfg = settings.from_configfile(configfile)
     folder = CaseFolder(case_dir, grid_case(case_dir, cfg, source))
     before = chain.previous(stage)
     if before and not folder.has(before, chain.BY_NAME[before].RECORDS[0]):

@@ -235,6 +235,11 @@ def load_yaml(path) -> dict:
     return data
 
 
+def from_configfile(path) -> dict:
+    """A grid's config file, validated, every default filled in (errors name the file and key)."""
+    return resolve(load_yaml(path), source=str(path))
+
+
 def check_user_configs(configfiles, overrides: dict | None) -> None:
     """A grid given with ``--configfile`` must name its own folders: the workflow's config/config.yaml
     (the bundled example) is merged underneath, and its folders must never stand in silently."""
