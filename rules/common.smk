@@ -71,8 +71,9 @@ def batch_log(stage):
     return f"{RESULTS}/batches/{{batch}}/logs/{stage}.log"
 
 
-def batch_benchmark(stage):
-    return f"{RESULTS}/batches/{{batch}}/benchmarks/{stage}.tsv"
+def batch_timing(stage, batch):
+    """Where a stage job writes its wall and CPU seconds (a benchmark file; see rules/stages.smk)."""
+    return f"{RESULTS}/batches/{batch}/benchmarks/{stage}.tsv"
 
 
 def batch_sources(batch):

@@ -21,7 +21,7 @@ rule figures:
         f"{RESULTS}/benchmarks/figures.tsv"
     conda:
         "../envs/epica.yaml"
-    threads: 1
+    threads: 2
     resources:
         mem_mb=1500,
         runtime=5,

@@ -8,13 +8,14 @@ whose tables are written:
 """
 
 import argparse
+import os
 import sys
 
 from epa.outputs import report
 
 
-def write(results_dir, segments, log_path) -> list:
-    written = report.write_grid_figures(results_dir, segments)
+def write(results_dir, segments, log_path, workers: int = 1) -> list:
+    written = report.write_grid_figures(results_dir, segments, workers=workers)
     with open(log_path, "w", encoding="utf-8") as fh:
         fh.write("\n".join(map(str, written)) + "\n")
     return written
@@ -34,7 +35,9 @@ def main(argv=None) -> int:
         print(f"epa: error: {exc.one_line()}", file=sys.stderr)
         return 2
     results = cfg["results_dir"]
-    written = write(results, cfg["metrics"]["segments"], f"{results}/logs/figures.log")
+    written = write(
+        results, cfg["metrics"]["segments"], f"{results}/logs/figures.log", workers=os.cpu_count()
+    )
     print(f"{len(written)} files in {results}/figures")
     return 0
 
@@ -42,6 +45,6 @@ def main(argv=None) -> int:
 if __name__ == "__main__":
     if "snakemake" in globals():  # run by the figures rule
         sm = globals()["snakemake"]
-        write(sm.params.results, sm.params.segments, sm.log[0])
+        write(sm.params.results, sm.params.segments, sm.log[0], workers=sm.threads)
     else:
         sys.exit(main())

@@ -12,6 +12,8 @@ import argparse
 import sys
 from pathlib import Path
 
+import pandas  # noqa: F401 - then the per-case tables are read by its C parser (epa.artifacts.files)
+
 from epa.core.errors import EpaError
 from epa.outputs import provenance, tables
 

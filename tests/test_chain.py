@@ -177,10 +177,13 @@ def test_every_rule_declares_log_benchmark_threads_and_resources():
     rules = Path(__file__).resolve().parents[1] / "rules"
     for smk in sorted(rules.glob("*.smk")):
         text = smk.read_text()
-        if "rule " not in text:
+        if "rule " not in text and "rule:" not in text:
             continue
+        rules_here = text.count("\nrule ") + text.startswith("rule ") + text.count("\n    rule:")
         for directive in ("log:", "benchmark:", "threads:", "resources:", "params:"):
-            assert text.count(directive) == text.count("\nrule ") + text.startswith("rule "), (
-                smk.name,
-                directive,
-            )
+            declared = text.count(directive)
+            if directive == "benchmark:" and smk.name == "stages.smk":
+                # the stage jobs write their own (Snakemake's sampler costs more than the job)
+                assert declared == 0 and "timing_path=batch_timing(" in text
+                continue
+            assert declared == rules_here, (smk.name, directive)

@@ -35,6 +35,25 @@ def test_exact_wilcoxon_matches_scipy(rng):
     assert statistics.min_datasets_for(0.05) == 6  # 2 / 2^6 = 0.031 is the first below 0.05
 
 
+def test_mann_whitney_and_ranks_equal_scipy_bit_for_bit(rng):
+    """Exact (no ties, a side of at most 8), tie-corrected normal (ties) and large samples; the
+    Student-t interval without scipy.stats. Equal floats, not close ones: the tables print them."""
+    for trial in range(600):
+        n1, n2 = rng.integers(1, 14, 2)
+        if trial % 3 == 0:  # ties
+            a, b = rng.integers(0, 4, n1).astype(float), rng.integers(0, 4, n2).astype(float)
+        else:
+            a, b = rng.normal(0.0, 1.0, n1), rng.normal(0.7, 1.0, n2)
+        p = stats.mannwhitneyu(a, b, alternative="two-sided").pvalue
+        assert statistics.mann_whitney(a, b) == float(p), (a, b)
+        assert np.array_equal(statistics.average_ranks(a)[0], stats.rankdata(a))
+    v = rng.normal(size=5)
+    assert statistics.spread(v, "ci") == float(
+        stats.t.ppf(0.975, 4) * v.std(ddof=1) / np.sqrt(5)
+    )
+    assert statistics.mann_whitney([1.0, 1.0], [1.0, 1.0]) == 1.0  # nothing to rank apart
+
+
 def read_summary(path):
     with open(path, newline="") as fh:
         return list(csv.DictReader(fh))

@@ -80,8 +80,8 @@ def test_dry_run_plans_one_submission_per_eight_batches_and_one_for_the_summary(
     )
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
     text = out.stdout + out.stderr
-    # the example: 18 cases, each its own batch (<= grid.max_batches): 8 + 8 + 2 chains, then the summary
-    assert len(re.findall(r"Group job chain ", text)) == 3
+    # the example: 18 cases in grid.max_batches = 8 batches, 8 chains to a submission: one, then the summary
+    assert len(re.findall(r"Group job chain ", text)) == 1
     assert len(re.findall(r"Group job summary ", text)) == 1
 
 

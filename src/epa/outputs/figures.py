@@ -120,6 +120,11 @@ def read_bundle(path) -> dict:
 
 
 # ----------------------------------------------------------------------------- rendering
+def prepare(style: str = "paper") -> None:
+    """Import matplotlib and set the style now (before forking workers that draw)."""
+    _setup(style)
+
+
 def _setup(style: str):
     import matplotlib
 

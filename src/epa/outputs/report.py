@@ -378,12 +378,28 @@ def _success_curve_bundle(curves_path: Path, algs: list[str], datasets: list[str
     )
 
 
-def write_grid_figures(results_dir, segments, style: str = "wide") -> list[Path]:
+def write_grid_figures(
+    results_dir, segments, style: str = "wide", workers: int = 1
+) -> list[Path]:
+    """The grid figures and their bundles. ``workers`` > 1 draws them in that many forked processes:
+    the figures rule is the run's serial tail, and drawing (PDF font subsetting most of all) is most
+    of its time. Each figure is drawn from its bundle alone, so the bytes do not depend on it."""
     results_dir = Path(results_dir)
-    written = []
+    jobs = []
     for name, b in grid_bundles(
         results_dir / "summary.csv", results_dir / "consistency", segments
     ).items():
         figures.write_bundle(results_dir / "figures" / "bundles" / f"{name}.json", b)
-        written += figures.render(b, results_dir / "figures" / name, style=style)
-    return written
+        jobs.append((b, results_dir / "figures" / name))
+    workers = max(1, min(workers, len(jobs)))
+    if workers == 1:
+        return [path for b, stem in jobs for path in figures.render(b, stem, style=style)]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from functools import partial
+
+    figures.prepare(style)  # matplotlib imported once, before the fork
+    draw = partial(figures.render, style=style)
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
+        done = pool.map(draw, *zip(*jobs))
+        return [path for paths in done for path in paths]

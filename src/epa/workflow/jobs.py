@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import re
 import threading
+import time
 import traceback
 import warnings
 import zlib
@@ -191,6 +192,13 @@ def call(workers: int, fn, *args):
     return _pool(workers).submit(fn, *args).result()
 
 
+def _timed(fn, *args):
+    """``fn(*args)`` and the CPU seconds it took in the process that ran it (a worker)."""
+    t0 = time.process_time()
+    out = fn(*args)
+    return out, time.process_time() - t0
+
+
 def run_job(
     stage: str,
     cases: list[dict],
@@ -200,14 +208,17 @@ def run_job(
     upstream_manifest=None,
     log_path=None,
     workers: int = 1,
+    timing_path=None,
 ) -> dict[str, dict]:
     """One workflow job: ``stage`` for a batch of cases, then the batch manifest (written last,
-    atomically, so a killed job leaves no manifest and is re-run)."""
+    atomically, so a killed job leaves no manifest and is re-run). ``timing_path``: the job's wall
+    and CPU seconds, as a Snakemake benchmark file (its ``s`` and ``cpu_time`` columns)."""
     from concurrent.futures.process import BrokenProcessPool
 
+    wall0, cpu = time.perf_counter(), float("nan")
     upstream = upstream_failures(upstream_manifest)
     try:
-        status = call(workers, run_cases, stage, cases, results_dir, cfg, upstream)
+        status, cpu = call(workers, _timed, run_cases, stage, cases, results_dir, cfg, upstream)
     except BrokenProcessPool:
         # a worker died (out of memory, a crash in C): retry case by case, record the one that dies
         status = {}
@@ -223,5 +234,8 @@ def run_job(
         lines = [f"{stage}: {len(status) - len(failed)} ok, {len(failed)} failed"]
         lines += [f"failed {k}: {r}" for k, r in failed.items()]
         io.write_text(log_path, "\n".join(lines) + "\n")
+    if timing_path is not None:
+        wall = time.perf_counter() - wall0
+        io.write_text(timing_path, f"s\tcpu_time\n{wall:.4f}\t{cpu:.4f}\n")
     io.write_json(manifest, {"stage": stage, "cases": status})
     return status
