@@ -48,9 +48,7 @@ def test_mann_whitney_and_ranks_equal_scipy_bit_for_bit(rng):
         assert statistics.mann_whitney(a, b) == float(p), (a, b)
         assert np.array_equal(statistics.average_ranks(a)[0], stats.rankdata(a))
     v = rng.normal(size=5)
-    assert statistics.spread(v, "ci") == float(
-        stats.t.ppf(0.975, 4) * v.std(ddof=1) / np.sqrt(5)
-    )
+    assert statistics.spread(v, "ci") == float(stats.t.ppf(0.975, 4) * v.std(ddof=1) / np.sqrt(5))
     assert statistics.mann_whitney([1.0, 1.0], [1.0, 1.0]) == 1.0  # nothing to rank apart
 
 

@@ -26,7 +26,8 @@ def spread(values, kind: str) -> float:
     std = float(v.std(ddof=1))
     if kind == "std":
         return std
-    from scipy import special  # stdtrit is what scipy.stats.t.ppf evaluates, without its 0.9 s import
+    # stdtrit is what scipy.stats.t.ppf evaluates, without scipy.stats' 0.9 s import
+    from scipy import special
 
     return float(special.stdtrit(v.size - 1, 0.975) * std / np.sqrt(v.size))
 

@@ -378,9 +378,7 @@ def _success_curve_bundle(curves_path: Path, algs: list[str], datasets: list[str
     )
 
 
-def write_grid_figures(
-    results_dir, segments, style: str = "wide", workers: int = 1
-) -> list[Path]:
+def write_grid_figures(results_dir, segments, style: str = "wide", workers: int = 1) -> list[Path]:
     """The grid figures and their bundles. ``workers`` > 1 draws them in that many forked processes:
     the figures rule is the run's serial tail, and drawing (PDF font subsetting most of all) is most
     of its time. Each figure is drawn from its bundle alone, so the bytes do not depend on it."""
