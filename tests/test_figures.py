@@ -334,9 +334,10 @@ def test_report_rerun_without_the_extra_is_refused_at_config_time(monkeypatch):
 
 
 def test_figures_are_drawn_for_flagged_cases_and_one_command_draws_the_rest(tmp_path):
-    """report.figures: flagged (the default) draws a case's figures only when drift detection or
-    Steps 1-2 flagged it; every case keeps its bundles, and its report names the command that draws
-    the rest: `epa fig --case` then gives the figures `report.figures: all` gives."""
+    """report.figures: flagged (the default) draws a case's figures only when drift detection failed
+    it; a Step 2 fallback is flagged, not drawn; every case keeps its bundles, and its report names
+    the command that draws the rest: `epa fig --case` then gives the figures `report.figures: all`
+    gives."""
     from epa.artifacts.case import CaseData, CaseFolder
     from epa.outputs import report as report_module
     from epa.workflow import chain
@@ -346,6 +347,7 @@ def test_figures_are_drawn_for_flagged_cases_and_one_command_draws_the_rest(tmp_
     cases = {
         "clean": ("handheld_office", "vio_body", "run1"),
         "diverged": ("urban_drive", "vo_drifty", "run2"),  # fail segments, globally failed
+        "fallback": ("urban_drive", "vo_drifty", "run1"),  # Step 2 not trusted, no failure
     }
     base = settings_module.resolve({"truth_dir": str(tmp_path), "algorithms_dir": str(tmp_path)})
     base["efficiency"]["sensor_rate_hz"] = 20
@@ -356,7 +358,8 @@ def test_figures_are_drawn_for_flagged_cases_and_one_command_draws_the_rest(tmp_
         chain.run_case(tmp_path / f"sim/truth/{ds}.txt", est, out, base, write_arrays=True)
         folders[label] = out
     for label, out in folders.items():
-        report_module.write_case_report(CaseData(CaseFolder(out)), label, base)
+        done = report_module.write_case_report(CaseData(CaseFolder(out)), label, base)
+        assert bool(done["flags"]) == (label != "clean"), done["flags"]
         md = (out / "10_report/report_en.md").read_text()
         drawn = {p.stem for p in (out / "10_report/figures").glob("*.png")}
         bundles = {p.stem for p in (out / "10_report/bundles").glob("*.json")}
