@@ -267,6 +267,23 @@ def errors(
 MT_ABS = (("rmse_trans", "trans"), ("rmse_rot", "rot"), ("rmse_scale", "scale"))
 
 
+def trial_rmse_statistics(abs_stats: list[dict]) -> dict:
+    """rpg's ``MulTrajError`` absolute statistics: over the trials, the statistics of each trial's RMSE.
+
+    Parameters
+    ----------
+    abs_stats : list of dict
+        Each trial's absolute statistics (``trans``, ``rot``, ``scale``, each with its ``rmse``).
+
+    Returns
+    -------
+    dict
+        ``rmse_trans``, ``rmse_rot``, ``rmse_scale``: :func:`statistics` of the per-trial RMSEs
+        (``analyze_trajectories.py``'s RMSE table prints ``rmse_trans``'s mean, median, min, max).
+    """
+    return {et: statistics(np.array([a[lab]["rmse"] for a in abs_stats])) for et, lab in MT_ABS}
+
+
 def multi_trial_statistics(results: list[dict]) -> dict:
     """rpg's ``MulTrajError``: statistics of the per-trial RMSEs, relative errors pooled over trials per
     distance, and pooled over all distances (``overall``).
@@ -285,6 +302,7 @@ def multi_trial_statistics(results: list[dict]) -> dict:
         pooled vectors per distance), ``rel_stats`` and ``overall``.
     """
     rmse = {et: [r["abs_stats"][lab]["rmse"] for r in results] for et, lab in MT_ABS}
+    abs_stats = trial_rmse_statistics([r["abs_stats"] for r in results])
     rel: dict = {}
     for k, r in enumerate(results):
         for d in r["distances"]:
@@ -297,7 +315,7 @@ def multi_trial_statistics(results: list[dict]) -> dict:
     overall = {m: statistics([x for d in rel for x in rel[d][m].tolist()]) for m in REL_METRICS}
     return {
         "rmse": rmse,
-        "abs_stats": {et: statistics(np.array(v)) for et, v in rmse.items()},
+        "abs_stats": abs_stats,
         "rel": rel,
         "rel_stats": rel_stats,
         "overall": overall,

@@ -191,6 +191,11 @@ def fit(ref: Trajectory, est: Trajectory, method: str, first_n: int = -1):
     -------
     (Similarity, Trajectory)
     """
+    n = len(ref)
+    if method != "none" and not (first_n == -1 or 1 <= first_n <= n):
+        raise EpaError(
+            f"align.first_n is {first_n}, {n} poses matched: rpg aligns on -1 (all) or 1..{n} poses"
+        )
     try:
         s, r, t = align(est.p, ref.p, est.q, ref.q, method, first_n)
     except ValueError as exc:
@@ -198,8 +203,8 @@ def fit(ref: Trajectory, est: Trajectory, method: str, first_n: int = -1):
     p_al, q_al = apply_alignment(s, r, t, est.p, est.q)
     if not (np.isfinite(s) and np.isfinite(r).all() and np.isfinite(t).all()):
         raise EpaError(
-            f"align {method} (rpg): the {len(ref) if first_n < 0 else first_n} poses it uses do not"
-            " determine the alignment (a point, not a path: the fit is not finite)"
+            f"align {method} (rpg): the {n if first_n < 0 else first_n} poses it uses do not"
+            " determine the alignment (they do not move: the fit is not finite)"
         )
     sim = Similarity(np.asarray(r, float), np.asarray(t, float).reshape(3), float(s))
     return sim, dataclasses.replace(sim.apply(est), p=p_al, q=q_al)
