@@ -146,10 +146,8 @@ def write_rpg_tables(grid: list[CaseResult], results_dir, cfg: dict, write) -> N
     style = cfg["tables"].get("style", "hline")
     values, rows, cols, median = rmse_table(grid, cfg["tables"].get("rpg_median_only", False))
     write(results_dir / "rpg_translation_rmse.txt", write_tex_table(values, rows, cols))
-    title = "RPG TRANSLATION RMSE (M) LATEX TABLE: " + (
-        "MEDIAN OVER RUNS OF EACH RUN'S ATE RMSE"
-        if median
-        else "MEAN, MEDIAN (MIN - MAX) OVER RUNS OF EACH RUN'S ATE RMSE"
+    title = "RPG TRANSLATION RMSE LATEX TABLE (ATE M; " + (
+        "MEDIAN OVER RUNS)" if median else "OVER RUNS: MEAN, MEDIAN (MIN - MAX))"
     )
     tex_cols = [latex_escape(c) for c in cols]
     write(
@@ -157,5 +155,5 @@ def write_rpg_tables(grid: list[CaseResult], results_dir, cfg: dict, write) -> N
     )
     values, rows, cols = rel_err_table(grid, results_dir)
     write(results_dir / "rpg_rel_err.txt", write_tex_table(values, rows, cols))
-    title = "RPG RELATIVE ERROR LATEX TABLE: MEAN OVER EVERY PAIR, DISTANCE, DATASET AND RUN"
+    title = "RPG RELATIVE ERROR LATEX TABLE (MEAN OVER EVERY PAIR, DISTANCE, DATASET AND RUN)"
     write(results_dir / "tables/rpg_rel_err.tex", _tex(title, values, rows, cols, style))
