@@ -310,3 +310,24 @@ def test_rpg_policy_is_rpgs_association():
     assert [(j, i) for i, j in rpg_steps.associate(t_est, t_ref, 0.0, 0.25)] == [(1, 0), (0, 1)]
     i_ref, i_est = sync.associate_ov_eval(t_ref, t_est, 0.25)
     assert list(zip(i_ref.tolist(), i_est.tolist())) == [(1, 0), (2, 2)]
+
+
+def test_rpg_scale_through_the_origin_is_left_out(tmp_path, capsys):
+    """rpg's scale error divides by the reference's distance from the origin: where the reference
+    passes through it (a KITTI reference starts there), rpg would print inf or nan; mode rpg leaves
+    the statistic out with a note, and the rest stands."""
+    t = np.arange(200) * 0.05
+    p = np.column_stack([np.sin(t), t - t[0], 0.1 * np.cos(t) - 0.1])  # p[0] is the origin
+    rows = np.column_stack([t, p, np.zeros((200, 3)), np.ones(200)])
+    ref = tmp_path / "ref.txt"
+    np.savetxt(ref, rows, fmt="%.9f")
+    assert (
+        cli.main(["eval", str(ref), str(ref), "--out", str(tmp_path / "o"), "--mode", "rpg"]) == 0
+    )
+    record = json.loads((tmp_path / "o/06_metrics/metrics.json").read_text())
+    assert record["rpg"]["absolute"]["scale"] is None
+    assert record["rpg"]["absolute"]["trans"]["max"] < 1e-9
+    assert any("rpg's scale error divides" in n for n in record["notes"])
+    (name,) = [p.name for p in (tmp_path / "o/06_metrics/rpg").glob("absolute_*")]
+    doc = yaml.safe_load((tmp_path / "o/06_metrics/rpg" / name).read_text())
+    assert sorted(doc) == ["rot", "trans"]

@@ -281,7 +281,14 @@ def trial_rmse_statistics(abs_stats: list[dict]) -> dict:
         ``rmse_trans``, ``rmse_rot``, ``rmse_scale``: :func:`statistics` of the per-trial RMSEs
         (``analyze_trajectories.py``'s RMSE table prints ``rmse_trans``'s mean, median, min, max).
     """
-    return {et: statistics(np.array([a[lab]["rmse"] for a in abs_stats])) for et, lab in MT_ABS}
+    return {
+        et: (
+            None  # mode rpg leaves out a statistic that is not finite
+            if any(a[lab] is None for a in abs_stats)
+            else statistics(np.array([a[lab]["rmse"] for a in abs_stats]))
+        )
+        for et, lab in MT_ABS
+    }
 
 
 def multi_trial_statistics(results: list[dict]) -> dict:
@@ -390,14 +397,38 @@ def compute(
     (record, arrays, notes)
     """
     length = path_length(reference.p)
-    res = errors(unaligned.p, unaligned.q, ref.p, ref.q, transform["scale"], est.p, est.q, length)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a non-finite statistic is noted below
+        res = errors(
+            unaligned.p, unaligned.q, ref.p, ref.q, transform["scale"], est.p, est.q, length
+        )
+    notes = []
+
+    def finite(stats: dict, what: str):
+        """rpg's statistics, or None with a note where one is inf or nan (rpg would print it)."""
+        if all(math.isfinite(v) for k, v in stats.items() if k != "num_samples"):
+            return stats
+        why = (
+            " (rpg's scale error divides by the reference's distance from the origin, 0 where it"
+            " passes through it)"
+            if what == "absolute scale"
+            else ""
+        )
+        notes.append(f"rpg: the {what} error is not finite at some pose{why}: left out")
+        return None
+
     record = {
         "align_type": transform["method"],
         "align_num_frames": transform["first_n"],
         "traj_length_m": length,
         "distances_m": res["distances"],
-        "absolute": res["abs_stats"],
-        "relative": [{"distance_m": d, **rel_labels(e)} for d, e in res["rel"].items()],
+        "absolute": {k: finite(v, f"absolute {k}") for k, v in res["abs_stats"].items()},
+        "relative": [
+            {
+                "distance_m": d,
+                **{k: finite(v, f"{d} m relative {k}") for k, v in rel_labels(e).items()},
+            }
+            for d, e in res["rel"].items()
+        ],
     }
     rows = [(d, e) for d, e in res["rel"].items() if len(e["pairs"])]
     table = {
@@ -406,7 +437,7 @@ def compute(
         "i_end": np.concatenate([e["pairs"][:, 1] for _, e in rows] or [[]]).astype(int),
         **{c: np.concatenate([e[m] for _, e in rows] or [[]]) for m, c in REL_COLUMNS.items()},
     }
-    notes = [
+    notes += [
         f"rpg: fewer than 2 pairs {d} m apart in the {length:.2f} m reference: rpg's statistics at"
         " that distance are its zeros (num_samples 0)"
         for d, e in res["rel"].items()
@@ -426,9 +457,11 @@ def align_str(record: dict) -> str:
 
 def documents(record: dict) -> dict[str, str]:
     """rpg's statistics files of one case, ``{file name: text}``: the bytes ``epa rpg`` writes into a
-    fresh ``saved_results/traj_est/`` (two distances with one ``{:3.1f}`` name: the later one's)."""
-    docs = {f"absolute_err_statistics_{align_str(record)}.yaml": yaml_text(record["absolute"])}
+    fresh ``saved_results/traj_est/`` (two distances with one ``{:3.1f}`` name: the later one's), but
+    for a statistic that is not finite, left out."""
+    absolute = {k: v for k, v in record["absolute"].items() if v is not None}
+    docs = {f"absolute_err_statistics_{align_str(record)}.yaml": yaml_text(absolute)}
     for rel in record["relative"]:
-        stats = {k: v for k, v in rel.items() if k != "distance_m"}
+        stats = {k: v for k, v in rel.items() if k != "distance_m" and v is not None}
         docs[f"relative_error_statistics_{dist_str(rel['distance_m'])}.yaml"] = yaml_text(stats)
     return docs

@@ -91,7 +91,7 @@ def rmse_table(grid: list[CaseResult], median_only: bool = False):
                 row.append(MISSING)
                 continue
             st = rpg.trial_rmse_statistics([c.metrics["rpg"]["absolute"] for c in trials])
-            st = st["rmse_trans"]
+            st = st["rmse_trans"]  # finite: positions are
             if median_only:
                 row.append("{:3.3f}".format(st["median"]))
             else:
