@@ -1,6 +1,6 @@
 # error_comparison.txt, one .tex per LaTeX table, summary.csv, comparison, results/consistency/:
-# every case, failed ones marked; provenance.json and config.resolved.yaml (scripts/tables.py, which
-# also runs on its own).
+# every case, failed ones marked; mode rpg: rpg's summary tables too; provenance.json and
+# config.resolved.yaml (scripts/tables.py, which also runs on its own).
 rule tables:
     input:
         expand(manifest("efficiency"), batch=BATCHES),
@@ -17,6 +17,7 @@ rule tables:
             category="Tables",
         ),
         tex=[f"{RESULTS}/tables/{name}.tex" for name in epa_tables.table_names(EPA)],
+        mode_files=[f"{RESULTS}/{name}" for name in epa_tables.mode_files(EPA)],
         across_runs=f"{RESULTS}/consistency/summary.csv",
         comparison=report(
             f"{RESULTS}/comparison.txt",

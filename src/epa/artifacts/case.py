@@ -198,6 +198,9 @@ class CaseFolder:
         """``to_stage``'s ``name`` is ``from_stage``'s (a stage that changes nothing links it)."""
         return link(self.path(from_stage, name), self.path(to_stage, name))
 
+    def write_text(self, stage: str, name: str, text: str) -> None:
+        files.write_text(self.path(stage, name), text)
+
     def write_optional_table(self, stage: str, name: str, columns: dict | None) -> None:
         """The table, or no file at all (and none left from a previous run) when there is none."""
         if columns:
@@ -210,6 +213,14 @@ class CaseFolder:
         path = self.path(stage, name)
         if path.exists():
             os.unlink(path)
+
+    def remove_folder(self, stage: str, name: str) -> None:
+        """Remove a folder of artifacts a previous run left, with the files in it."""
+        path = self.path(stage, name)
+        if path.is_dir():
+            for f in path.iterdir():
+                os.unlink(f)
+            path.rmdir()
 
     def write_failure(self, stage: str, names, reason: str) -> None:
         for name in names:

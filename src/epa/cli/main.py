@@ -40,11 +40,14 @@ def _parser() -> argparse.ArgumentParser:
         "--config", help="YAML with stage settings (the workflow's keys: sync, align, ...)"
     )
     e.add_argument(
-        "--mode", choices=["epa", "ov_eval"], help="ov_eval: no Step 1/2, one-to-one 0.02 s"
+        "--mode",
+        choices=["epa", "ov_eval", "rpg"],
+        help="ov_eval: no Step 1/2, one-to-one 0.02 s; rpg: rpg_trajectory_evaluation's association,"
+        " alignment (--align, --first-n: its align_type, align_num_frames) and statistics",
     )
     e.add_argument("--align", choices=["se3", "sim3", "posyaw", "none"], help="Step 3 method")
     e.add_argument("--first-n", type=int, help="align on the first N matched poses")
-    e.add_argument("--policy", choices=["ov_eval", "evo"], help="association policy")
+    e.add_argument("--policy", choices=["ov_eval", "evo", "rpg"], help="association policy")
     e.add_argument("--max-diff", type=float, help="association tolerance (s)")
     e.add_argument("--offset", type=float, help="fixed time offset (s), t_ref = t_est + offset")
     e.add_argument("--no-offset-estimate", action="store_true", help="skip Step 1")
@@ -330,6 +333,13 @@ def _eval(args) -> None:
         f"{record['n_matched']} poses matched, eval_source {record['eval_source']}, "
         f"ATE rmse {ate:.4f} m -> {out.path('metrics', 'metrics.json')}"
     )
+    if record.get("rpg"):  # mode rpg: rpg's own statistics files
+        r = record["rpg"]
+        print(
+            f"rpg {r['align_type']}_{r['align_num_frames']}: ATE rmse {r['absolute']['trans']['rmse']:.4f} m,"
+            f" {r['absolute']['rot']['rmse']:.4f} deg; relative errors at"
+            f" {', '.join(f'{d:g}' for d in r['distances_m'])} m -> {out.path('metrics', 'rpg')}"
+        )
     c, e = result["consistency"], result["efficiency"]
     if c.get("available"):
         print(

@@ -10,6 +10,14 @@ A metric module of the registry (:mod:`epa.metrics.registry`) declares:
   table (``ape`` or its own, one of ``ARRAYS`` without ``.csv``) to its columns;
 - ``ARRAYS``: its own per-case files; ``SUMMARY_COLUMNS`` and ``summary(record) -> dict``: its
   ``summary.csv`` columns; ``TABLES``: its paper tables.
+
+Optionally (mode rpg's metric, :mod:`epa.metrics.rpg`, is the one that needs them):
+
+- ``INPUTS``: what ``compute`` needs beyond the aligned matched poses, passed as keywords:
+  ``unaligned`` (the matched estimate before Step 3), ``transform`` (``05_align/transform.json``),
+  ``reference`` (the whole cropped reference); each is read only when such a metric is on;
+- ``documents(record) -> {file name: text}``: small files of its own, written to
+  ``06_metrics/<KEY>/`` (that folder is removed where the metric is off).
 """
 
 from __future__ import annotations

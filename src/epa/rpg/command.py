@@ -40,6 +40,7 @@ import numpy as np
 import yaml
 
 from epa.core.errors import EpaError
+from epa.metrics.rpg import MT_ABS, dist_str, multi_trial_statistics, rel_labels, yaml_text
 from epa.rpg import protocol as P
 
 GT_NAME = "stamped_groundtruth.txt"
@@ -54,7 +55,6 @@ MATCH_NAMES = {
     "ba_estimate": "stamped_ba_gt_matches",
 }
 DEFAULT_ALIGN = ("sim3", -1)
-MT_ABS = (("rmse_trans", "trans"), ("rmse_rot", "rot"), ("rmse_scale", "scale"))
 
 
 def read_stamped(path: Path) -> np.ndarray:
@@ -165,40 +165,21 @@ def evaluate(
     ie, ig = np.array(kept).T
     p_es, q_es, p_gt, q_gt = est[ie, 1:4], est[ie, 4:8], gt[ig, 1:4], gt[ig, 4:8]
     raw = gt[~((gt[:, 0] < start) | (gt[:, 0] > end))]
-    traj_length = P.distance_from_start(raw[:, 1:4])[-1]
-    accum = P.distance_from_start(p_gt)
-    if distances is None:
-        distances = P.boxplot_distances(traj_length)
+    traj_length = P.path_length(raw[:, 1:4])
     try:
         s, r, t = P.align(p_es, p_gt, q_es, q_gt, align_type, align_num_frames)
     except ValueError as exc:
         raise EpaError(str(exc), path=est_path) from None
     p_al, q_al = P.apply_alignment(s, r, t, p_es, q_es)
-    ab = P.absolute_errors(p_al, q_al, p_gt, q_gt)
-    rel = {}
-    for d in distances:
-        if d in rel:
-            continue
-        e = P.relative_errors(p_es, q_es, p_gt, q_gt, d, 0.2 * d, accum, s)
-        e.update({m + "_stats": P.statistics(e[m]) for m in P.REL_METRICS})
-        rel[d] = e
     out.update(
         scale=s,
         rot=r,
         trans=t,
         traj_length=traj_length,
-        distances=list(distances),
-        abs=ab,
         p_es_aligned=p_al,
-        abs_stats={k: P.statistics(ab[k]) for k in ("trans", "rot", "scale")},
-        rel=rel,
+        **P.errors(p_es, q_es, p_gt, q_gt, s, p_al, q_al, traj_length, distances),
     )
     return out
-
-
-def dist_str(d: float) -> str:
-    """rpg's file-name form of a distance: ``'{:3.1f}'`` with ``.`` -> ``_``."""
-    return f"{d:3.1f}".replace(".", "_")
 
 
 def update_and_save(path: Path, labels: dict) -> None:
@@ -211,7 +192,7 @@ def update_and_save(path: Path, labels: dict) -> None:
                 "an existing statistics file rpg would update is not a mapping", path=path
             )
     stats.update(labels)
-    path.write_text(yaml.dump(stats, default_flow_style=False))
+    path.write_text(yaml_text(stats))
 
 
 def _savetxt_column(path: Path, values, fmt: str) -> None:
@@ -271,9 +252,7 @@ def run_case(case_dir, est_type: str = "traj_est", mul_trials: int | None = None
         written.append(abs_path)
         for d, e in res["rel"].items():
             rel_path = save / f"relative_error_statistics_{dist_str(d)}{tag}.yaml"
-            update_and_save(
-                rel_path, {lab: e[m + "_stats"] for m, lab in zip(P.REL_METRICS, P.REL_LABELS)}
-            )
+            update_and_save(rel_path, rel_labels(e))
             written.append(rel_path)
     if not success:
         raise EpaError(
@@ -293,29 +272,6 @@ def run_case(case_dir, est_type: str = "traj_est", mul_trials: int | None = None
         "written": list(dict.fromkeys(written)),
         "align_str": align_str,
         "save_dir": save,
-    }
-
-
-def multi_trial_statistics(results: list[dict]) -> dict:
-    """rpg's ``MulTrajError``: statistics of the per-trial RMSEs, relative errors pooled over trials per
-    distance, and pooled over all distances (``overall``)."""
-    rmse = {et: [r["abs_stats"][lab]["rmse"] for r in results] for et, lab in MT_ABS}
-    rel: dict = {}
-    for k, r in enumerate(results):
-        for d in r["distances"]:
-            e = r["rel"][d]
-            if k == 0:
-                rel[d] = {m: e[m] for m in P.REL_METRICS}
-            else:  # rpg appends once per listed distance, so a repeated distance is appended twice
-                rel[d] = {m: np.concatenate((rel[d][m], e[m])) for m in P.REL_METRICS}
-    rel_stats = {d: {m: P.statistics(v[m]) for m in P.REL_METRICS} for d, v in rel.items()}
-    overall = {m: P.statistics([x for d in rel for x in rel[d][m].tolist()]) for m in P.REL_METRICS}
-    return {
-        "rmse": rmse,
-        "abs_stats": {et: P.statistics(np.array(v)) for et, v in rmse.items()},
-        "rel": rel,
-        "rel_stats": rel_stats,
-        "overall": overall,
     }
 
 

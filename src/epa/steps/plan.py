@@ -12,7 +12,8 @@ def evaluation_plan(cfg: dict, step1: dict, extrinsic: Extrinsic | None = None) 
     An untrusted Step 1 or Step 2 means the case is evaluated the ov_eval way: the configured
     ``sync.offset`` (default 0) instead of an estimated one, no extrinsic, SE3 alignment on all
     poses (see :func:`alignment_of`); it is marked ``eval_source: ov_eval``. ``mode: ov_eval`` is
-    that evaluation by choice, with the configured alignment."""
+    that evaluation by choice, with the configured alignment; ``mode: rpg`` is rpg_trajectory_evaluation's
+    (``eval_source: rpg``: rpg's association, the configured alignment in rpg's arithmetic)."""
     fallback = {
         "eval_source": "ov_eval",
         "fallback": True,
@@ -21,6 +22,8 @@ def evaluation_plan(cfg: dict, step1: dict, extrinsic: Extrinsic | None = None) 
     }
     if cfg["mode"] == "ov_eval":
         return {**fallback, "fallback": False, "reason": "ov_eval mode"}
+    if cfg["mode"] == "rpg":
+        return {**fallback, "eval_source": "rpg", "fallback": False, "reason": "rpg mode"}
     if cfg["sync"]["estimate_offset"] and not step1.get("used", False):
         return {**fallback, "reason": f"Step 1 not trusted: {step1.get('reason')}"}
     if extrinsic is not None and not extrinsic.trusted:

@@ -15,6 +15,7 @@ from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.stamps import nearest_from
 from epa.core.trajectory import Trajectory
+from epa.steps import rpg
 
 
 # ----------------------------------------------------------------------------- association
@@ -64,6 +65,18 @@ def associate_evo(t_ref: np.ndarray, t_est: np.ndarray, max_diff: float, offset:
     return (i_short, i_long) if est_longer else (i_long, i_short)
 
 
+def associate_rpg(t_ref: np.ndarray, t_est: np.ndarray, max_diff: float, offset: float = 0.0):
+    """rpg_trajectory_evaluation's association (:func:`epa.steps.rpg.associate`): every pair closer
+    than max_diff (strictly) is a candidate, taken greedily closest first, each pose at most once;
+    sorted by estimate. rpg adds its offset to the reference stamps, so ``t_ref = t_est + offset`` is
+    its offset ``-offset`` (with 0, rpg's own bits)."""
+    matches = rpg.associate(t_est, t_ref, -offset, max_diff)
+    if not matches:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    i_est, i_ref = np.array(matches, dtype=np.int64).T
+    return i_ref, i_est
+
+
 def associate(
     ref: Trajectory,
     est: Trajectory,
@@ -76,7 +89,7 @@ def associate(
     if policy not in POLICIES:
         raise EpaError(f"unknown sync policy {policy!r}; choose one of {', '.join(POLICIES)}")
     max_diff = POLICIES[policy] if max_diff is None else max_diff
-    fn = associate_ov_eval if policy == "ov_eval" else associate_evo
+    fn = {"ov_eval": associate_ov_eval, "evo": associate_evo, "rpg": associate_rpg}[policy]
     return fn(ref.t, est.t, max_diff, offset)
 
 
@@ -128,13 +141,15 @@ class Step1Status(StrEnum):
 
 
 class Policy(StrEnum):
-    """How poses are associated by stamp: ov_eval's greedy one-to-one, or evo's nearest with reuse."""
+    """How poses are associated by stamp: ov_eval's greedy one-to-one in estimate order, evo's
+    nearest with reuse, or rpg's greedy one-to-one closest pairs first."""
 
     OV_EVAL = "ov_eval"
     EVO = "evo"
+    RPG = "rpg"
 
 
-POLICIES = {Policy.OV_EVAL: 0.02, Policy.EVO: 0.01}  # default max_diff (s) of each policy
+POLICIES = {Policy.OV_EVAL: 0.02, Policy.EVO: 0.01, Policy.RPG: 0.02}  # default max_diff (s)
 JACKKNIFE_BLOCKS = 10
 
 

@@ -77,6 +77,9 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
             )
         raise EpaError(f"{key}: {what}", path=source)
     cfg = apply_mode(_fill(cfg, schema()), given=config or {})
+    first_n = check_first_n(cfg)
+    if first_n:
+        raise EpaError(first_n, path=source)
     crop = cfg["crop"]
     if crop["start"] is not None and crop["end"] is not None and crop["end"] <= crop["start"]:
         raise EpaError(
@@ -159,30 +162,55 @@ def coerce_overrides(config: dict, overrides: dict | None) -> dict:
     return cfg
 
 
-# What `mode: ov_eval` means for the stages, so that no stage has to test the mode.
+# What `mode: ov_eval` and `mode: rpg` mean for the stages, so that no stage has to test the mode
+# for these (the align and metrics stages test mode rpg for rpg's arithmetic and statistics).
 OV_EVAL_SETTINGS = {
     ("sync", "estimate_offset"): False,
     ("sync", "policy"): "ov_eval",
     ("sync", "max_diff"): 0.02,
     ("calibrate", "enabled"): False,
 }
+RPG_SETTINGS = {
+    ("sync", "estimate_offset"): False,
+    ("sync", "policy"): "rpg",
+    ("sync", "max_diff"): 0.02,
+    ("calibrate", "enabled"): False,
+}
+MODE_SETTINGS = {"ov_eval": OV_EVAL_SETTINGS, "rpg": RPG_SETTINGS}
 
 
 def apply_mode(cfg: dict, given: dict) -> dict:
-    """Turn ``mode: ov_eval`` into the stage settings it implies; warn where it overrides a given one."""
-    if cfg.get("mode") != "ov_eval":
+    """Turn ``mode: ov_eval`` or ``mode: rpg`` into the stage settings it implies; warn where it
+    overrides a given one."""
+    implied = MODE_SETTINGS.get(cfg.get("mode"))
+    if implied is None:
         return cfg
     import logging
 
-    for (section, key), value in OV_EVAL_SETTINGS.items():
+    for (section, key), value in implied.items():
         given_section = given.get(section)
         user = given_section.get(key, value) if isinstance(given_section, dict) else value
         if user != value:
             logging.getLogger("epa").warning(
-                "mode ov_eval overrides %s.%s: %r -> %r", section, key, user, value
+                "mode %s overrides %s.%s: %r -> %r", cfg["mode"], section, key, user, value
             )
         cfg[section][key] = value
     return cfg
+
+
+def check_first_n(cfg: dict) -> str | None:
+    """What is wrong with ``align.first_n`` under the mode and method (None: nothing). Fewer than 3
+    poses determine no rotation, so 1 and 2 are rpg's alone: 1 is its first-pose alignment (se3,
+    posyaw), which its sim3 refuses."""
+    n, method = cfg["align"]["first_n"], cfg["align"]["method"]
+    if n in (1, 2) and cfg["mode"] != "rpg":
+        return (
+            f"align.first_n: {n} is not allowed: at least 3 poses determine a rotation (-1 = all;"
+            " 1 and 2 are rpg's, in mode rpg only)"
+        )
+    if n == 1 and method == "sim3":
+        return "align.first_n: 1 is not allowed with align.method sim3: rpg's sim3 needs 2 or more"
+    return None
 
 
 GRID_FOLDERS = ("truth_dir", "algorithms_dir")

@@ -7,7 +7,7 @@
    figure), in the working directory the inputs' relative paths were recorded from;
    (a case folder written by ``epa eval --out`` is evaluated again in this process instead);
 3. every table (``error_comparison.txt``, ``tables/*.tex``, ``comparison.{txt,tex}``,
-   ``success_curves.csv``, ``consistency/summary.csv``), ``summary.csv`` and every case's
+   ``success_curves.csv``, ``consistency/summary.csv``, mode rpg's ``rpg_*.txt``), ``summary.csv`` and every case's
    ``metrics.json`` is compared byte for byte. Exit status 0 only when all are identical.
 See docs/reproducibility.md.
 """
@@ -30,6 +30,8 @@ GRID_FILES = (
     "comparison.tex",
     "success_curves.csv",
     "consistency/summary.csv",
+    "rpg_translation_rmse.txt",  # mode rpg
+    "rpg_rel_err.txt",
 )
 
 

@@ -1,12 +1,13 @@
 """What the tables rule writes: error_comparison.txt (``text``, ``ov_eval``), one LaTeX table per
 .tex file (``latex``, cells in ``cells``), summary.csv and success_curves.csv (``summary``),
-comparison.txt/.tex (``comparison``), results/consistency/ (``across_runs``), all read from the case
+comparison.txt/.tex (``comparison``), results/consistency/ (``across_runs``), mode rpg's
+rpg_translation_rmse.txt, rpg_rel_err.txt and tables/rpg_*.tex (``rpg``), all read from the case
 folders (``results``) and written by ``write.make``."""
 
 from epa.outputs.tables.latex import latex_escape
 from epa.outputs.tables.ov_eval import ov_eval_text
 from epa.outputs.tables.results import CaseResult, has_result
-from epa.outputs.tables.write import failure_report, make, table_names
+from epa.outputs.tables.write import failure_report, make, mode_files, table_names
 
 __all__ = [
     "CaseResult",
@@ -14,6 +15,7 @@ __all__ = [
     "has_result",
     "latex_escape",
     "make",
+    "mode_files",
     "ov_eval_text",
     "table_names",
 ]

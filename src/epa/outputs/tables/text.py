@@ -14,6 +14,12 @@ RULE_SHORT = "=" * 38
 RULE_LONG = "=" * 44
 
 
+def _sources(counts: dict) -> str:
+    """``epa=N, ov_eval=M``, and ``rpg=K`` where mode rpg evaluated any."""
+    text = f"epa={counts['epa']}, ov_eval={counts['ov_eval']}"
+    return text + (f", rpg={counts['rpg']}" if counts["rpg"] else "")
+
+
 def report_text(
     grid: list[CaseResult], segments, decimals: int = 3, spread: str = "none", metrics=()
 ) -> str:
@@ -29,7 +35,7 @@ def report_text(
         else:
             lines.append(f"[COMP]: reference of {ds} could not be loaded")
     lines.append(RULE_SHORT)
-    sources = {"epa": 0, "ov_eval": 0}
+    sources = {"epa": 0, "ov_eval": 0, "rpg": 0}
     for alg in sorted({c.algorithm for c in grid}):
         lines.append(f"[COMP]: processing {alg} algorithm")
         for ds in datasets:
@@ -45,12 +51,12 @@ def report_text(
                 lines.append(
                     f"        ATE: mean_ori = {ate.values[0]:.3f} | mean_pos = {ate.values[1]:.3f} ({len(runs)} runs)"
                 )
-            src = {"epa": 0, "ov_eval": 0}
+            src = {"epa": 0, "ov_eval": 0, "rpg": 0}
             for c in runs:
                 src[c.metrics.get("eval_source", "epa")] += 1
             for k in sources:
                 sources[k] += src[k]
-            lines.append(f"        eval_source: epa={src['epa']}, ov_eval={src['ov_eval']}")
+            lines.append(f"        eval_source: {_sources(src)}")
             if runs:
                 for s in segments:
                     rot, trans = _pooled(runs, "segments", False, s)
@@ -77,7 +83,7 @@ def report_text(
                     lines.append(f"        {c.run}: {c.status}")
     lines += [
         RULE_LONG,
-        f"TOOL SOURCE: epa={sources['epa']}, ov_eval={sources['ov_eval']}",
+        f"TOOL SOURCE: {_sources(sources)}",
         RULE_LONG,
     ]
     for _, title, rows, _ in build_tables(grid, segments, decimals, metrics, spread, text=True):

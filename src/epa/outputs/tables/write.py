@@ -10,6 +10,7 @@ from epa import readers
 from epa.artifacts import files as io
 from epa.core.errors import EpaError
 from epa.metrics import registry
+from epa.outputs.tables import rpg as rpg_tables
 from epa.outputs.tables.across_runs import write_across_runs
 from epa.outputs.tables.comparison import comparison_tex, comparison_text, comparisons
 from epa.outputs.tables.latex import build_tables, restyle, tex_document
@@ -46,7 +47,21 @@ def enabled_metrics(cfg: dict) -> tuple:
 
 def table_names(cfg: dict) -> tuple[str, ...]:
     """The .tex files the tables rule writes under these settings."""
-    return BASE_TABLES + tuple(t.name for m in enabled_metrics(cfg) for t in m.TABLES)
+    return (
+        BASE_TABLES
+        + tuple(t.name for m in enabled_metrics(cfg) for t in m.TABLES)
+        + mode_tables(cfg)
+    )
+
+
+def mode_tables(cfg: dict) -> tuple[str, ...]:
+    """The .tex files of the mode's own summary (mode rpg: rpg's tables)."""
+    return rpg_tables.TABLES if cfg.get("mode") == "rpg" else ()
+
+
+def mode_files(cfg: dict) -> tuple[str, ...]:
+    """The text files of the mode's own summary, relative to the results folder."""
+    return rpg_tables.FILES if cfg.get("mode") == "rpg" else ()
 
 
 def write_all(
@@ -78,6 +93,8 @@ def write_all(
     io.write_text(results_dir / "comparison.txt", comparison_text(pairs))
     io.write_text(results_dir / "comparison.tex", restyle(comparison_tex(pairs), style))
     write_across_runs(grid, results_dir)
+    if cfg.get("mode") == "rpg":
+        rpg_tables.write_rpg_tables(grid, results_dir, cfg, io.write_text)
 
 
 def make(

@@ -1,11 +1,14 @@
 """Step 3: the world-frame fit of the calibrated estimate onto the reference (05_align/).
-Row k of ``aligned.tum`` is matched with row k of ``04_calibrate/pairs.csv``."""
+Row k of ``aligned.tum`` is matched with row k of ``04_calibrate/pairs.csv``. In mode rpg the fit is
+rpg_trajectory_evaluation's (``align.method`` and ``align.first_n`` are its ``align_type`` and
+``align_num_frames``), in rpg's arithmetic."""
 
 from __future__ import annotations
 
 from epa.artifacts.case import CaseData
 from epa.core.trajectory import Trajectory
 from epa.steps import align as alignment
+from epa.steps import rpg
 from epa.steps.plan import alignment_of
 
 NAME = "align"
@@ -17,8 +20,12 @@ ARRAYS = ("aligned.tum",)
 def compute(ref: Trajectory, est: Trajectory, cfg: dict, calib_info: dict):
     plan = calib_info["plan"]
     method, first_n = alignment_of(plan, cfg)
-    fit = alignment.fit(ref, est, method=method, first_n=first_n)
-    return fit.apply(est), {
+    if plan["eval_source"] == "rpg":
+        fit, aligned = rpg.fit(ref, est, method, first_n)
+    else:
+        fit = alignment.fit(ref, est, method=method, first_n=first_n)
+        aligned = fit.apply(est)
+    return aligned, {
         "method": method,
         "first_n": first_n,
         "fallback_se3": plan["fallback"],

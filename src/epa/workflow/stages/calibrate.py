@@ -54,7 +54,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict, croppe
         "extrinsic": None,
         "step2_status": (
             calibration.Step2Status.DISABLED
-            if cfg["mode"] == "ov_eval" or not c["enabled"]
+            if cfg["mode"] in ("ov_eval", "rpg") or not c["enabled"]
             else calibration.Step2Status.NOT_RUN
         ),
     }

@@ -14,7 +14,7 @@ from epa.metrics import accuracy, registry
 log = logging.getLogger("epa")
 
 NAME = "metrics"
-SETTINGS = ("metrics",)
+SETTINGS = ("mode", "metrics")
 RECORDS = ("metrics.json",)
 BASE_ARRAYS = ("ape.csv", "rpe_segments.csv", "rpe_time.csv")
 ARRAYS = BASE_ARRAYS + tuple(a for m in registry.computed_in(NAME) for a in m.ARRAYS)
@@ -36,7 +36,10 @@ def _insert(record: dict, key: str, value, after: str | None) -> dict:
     return out
 
 
-def compute(ref: Trajectory, est: Trajectory, cfg: dict):
+def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = None):
+    """The metrics of the aligned matched poses. ``inputs``: {name: a function giving it} for the
+    registered metrics that declare ``INPUTS`` (mode rpg's: ``unaligned``, ``transform``,
+    ``reference``); each is asked for only when such a metric is on."""
     c = cfg["metrics"]
     length = ref.length()
     if length < MIN_PATH_M:
@@ -62,7 +65,8 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict):
     ]
     for metric in registry.computed_in(NAME):
         if metric.enabled(cfg):
-            record, arrays, notes = metric.compute(ref, est, cfg)
+            extra = {k: inputs[k]() for k in getattr(metric, "INPUTS", ())}
+            record, arrays, notes = metric.compute(ref, est, cfg, **extra)
             summary = _insert(summary, metric.KEY, record, after=metric.AFTER)
             for name, columns in arrays.items():
                 tables.setdefault(name, {}).update(columns)
@@ -96,7 +100,12 @@ def case_record(
 
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     folder = data.folder
-    summary, tables = compute(data.matched[0], data.aligned, cfg)
+    inputs = {
+        "unaligned": lambda: data.calibrated[1],
+        "transform": lambda: data.transform,
+        "reference": lambda: data.cropped[0],
+    }
+    summary, tables = compute(data.matched[0], data.aligned, cfg, inputs)
     record = case_record(
         data.load_record, data.sync_record, data.calibrate_record, data.transform, summary
     )
@@ -112,4 +121,10 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
             folder.write_table(NAME, name, table)
         elif name not in BASE_ARRAYS:  # from a run with that metric on
             folder.remove(NAME, name)
+    for metric in registry.computed_in(NAME):
+        if hasattr(metric, "documents"):  # small files of its own, in 06_metrics/<KEY>/
+            folder.remove_folder(NAME, metric.KEY)
+            if metric.KEY in record:
+                for name, text in metric.documents(record[metric.KEY]).items():
+                    folder.write_text(NAME, f"{metric.KEY}/{name}", text)
     folder.write_record(NAME, "metrics.json", record)
