@@ -6,7 +6,7 @@
 - :mod:`epa.metrics.statistics`: the comparison of algorithms (Wilcoxon, Mann-Whitney).
 - The registered metrics (:mod:`epa.metrics.registry`, declared as :mod:`epa.metrics.spec` says):
   ``ate_2d``, ``consistency`` (NEES, ±3σ), ``efficiency`` (frame times, EA-Drift), ``kitti`` (the
-  devkit metric), ``per_axis``.
+  devkit metric), ``per_axis``, ``sim3_check`` (the scale and SE3 ATE beside a Sim3 ATE).
 """
 
 __all__ = [
@@ -19,6 +19,7 @@ __all__ = [
     "per_axis",
     "registry",
     "relations",
+    "sim3_check",
     "spec",
     "statistics",
 ]

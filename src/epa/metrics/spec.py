@@ -7,15 +7,31 @@ A metric module of the registry (:mod:`epa.metrics.registry`) declares:
   under ``KEY`` in ``metrics.json``) or the name of its own stage (its record is that stage's);
 - ``enabled(cfg)``; for ``STAGE == "metrics"``: ``AFTER`` (the record it follows in metrics.json,
   None: last), ``compute(ref, est, cfg) -> (record, arrays, notes)`` where ``arrays`` maps a per-case
-  table (``ape`` or its own, one of ``ARRAYS`` without ``.csv``) to its columns;
+  table (``ape`` or its own, one of ``ARRAYS`` without ``.csv``) to its columns, and ``notes`` are
+  logged as warnings and listed in metrics.json ``notes``; with ``USES_CASE = True``,
+  ``compute(ref, est, cfg, case)`` also takes a :class:`CaseInfo`;
 - ``ARRAYS``: its own per-case files; ``SUMMARY_COLUMNS`` and ``summary(record) -> dict``: its
   ``summary.csv`` columns; ``TABLES``: its paper tables.
+
+A record's ``warning`` (a sentence, or None) is a finding a reader must not miss: besides the log and
+metrics.json it goes to the case's flags (its report, ``10_report/report.json``) and summary.csv's
+``notes`` column, and a table's ``note`` marks the algorithm.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class CaseInfo:
+    """What the earlier stages recorded about a case that its matched poses do not tell:
+    ``alignment`` (Step 3's ``transform.json``: method, scale, first_n, ...) and ``estimate_source``
+    (the estimate's source settings, as ``load.json`` records them)."""
+
+    alignment: dict
+    estimate_source: dict
 
 
 @dataclass(frozen=True)
@@ -36,5 +52,7 @@ class Table:
     missing: str | Callable[[list[dict]], str] | None = None  # or of the algorithm's records
     per_algorithm: Callable[[list[dict]], tuple] | None = None
     header: tuple[str, ...] = ()
+    # per_dataset: a note after an algorithm's name, its cells kept, of its runs' records (None: none)
+    note: Callable[[list[dict]], str | None] | None = None
     after: str | None = None  # the base table it follows; None: after the base tables
     in_text: bool = True  # also in error_comparison.txt

@@ -10,11 +10,12 @@ from epa.artifacts.case import CaseData
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.metrics import accuracy, registry
+from epa.metrics.spec import CaseInfo
 
 log = logging.getLogger("epa")
 
 NAME = "metrics"
-SETTINGS = ("metrics",)
+SETTINGS = ("metrics", "align")  # align: which registered metrics apply (sim3_check)
 RECORDS = ("metrics.json",)
 BASE_ARRAYS = ("ape.csv", "rpe_segments.csv", "rpe_time.csv")
 ARRAYS = BASE_ARRAYS + tuple(a for m in registry.computed_in(NAME) for a in m.ARRAYS)
@@ -36,7 +37,9 @@ def _insert(record: dict, key: str, value, after: str | None) -> dict:
     return out
 
 
-def compute(ref: Trajectory, est: Trajectory, cfg: dict):
+def compute(ref: Trajectory, est: Trajectory, cfg: dict, case: CaseInfo | None = None):
+    """The metrics of the aligned matched poses; ``case``: what the registered metrics that declare
+    ``USES_CASE`` need of the earlier stages' records."""
     c = cfg["metrics"]
     length = ref.length()
     if length < MIN_PATH_M:
@@ -62,7 +65,8 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict):
     ]
     for metric in registry.computed_in(NAME):
         if metric.enabled(cfg):
-            record, arrays, notes = metric.compute(ref, est, cfg)
+            extra = (case,) if getattr(metric, "USES_CASE", False) else ()
+            record, arrays, notes = metric.compute(ref, est, cfg, *extra)
             summary = _insert(summary, metric.KEY, record, after=metric.AFTER)
             for name, columns in arrays.items():
                 tables.setdefault(name, {}).update(columns)
@@ -96,7 +100,8 @@ def case_record(
 
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     folder = data.folder
-    summary, tables = compute(data.matched[0], data.aligned, cfg)
+    case = CaseInfo(data.transform, data.load_record.get("sources", {}).get("estimate") or {})
+    summary, tables = compute(data.matched[0], data.aligned, cfg, case)
     record = case_record(
         data.load_record, data.sync_record, data.calibrate_record, data.transform, summary
     )
