@@ -7,7 +7,6 @@ import json
 
 import numpy as np
 import pytest
-from conftest import run_stages
 
 from epa.artifacts import files as io
 from epa.cli import main as cli
@@ -145,9 +144,10 @@ def test_no_scale_to_check_when_step_3_fitted_se3():
 
 @pytest.fixture(scope="module")
 def grid(tmp_path_factory):
-    """Two algorithms on one dataset, Sim3: `stereo` declared metric, its estimate at 0.5 scale
-    (a failure the scale hides); `mono` undeclared, 1.02 scale (healthy). Every stage, the report
-    included, each stage reading the previous one's artifacts; then the tables."""
+    """Two algorithms on one dataset, Sim3, run by Snakemake: `stereo` declared metric, its estimate
+    at 0.5 scale (a failure the scale hides); `mono` undeclared, 1.02 scale (healthy)."""
+    from test_workflow import smk
+
     root = tmp_path_factory.mktemp("sim3")
     ref = _path()
     io.write_trajectory(root / "truth/office.txt", ref, "tum")
@@ -155,36 +155,17 @@ def grid(tmp_path_factory):
         io.write_trajectory(
             root / f"algs/{alg}/office/run1.txt", _estimate(ref, scale, 0.01), "tum"
         )
-    cfg = settings.resolve(
-        {
-            "truth_dir": str(root / "truth"),
-            "algorithms_dir": str(root / "algs"),
-            "align": {"method": "sim3"},
-            "sync": {"estimate_offset": False},
-            "calibrate": {"enabled": False},
-            "sources": {"algorithms": {"stereo": {"metric_scale": True}}},
-        }
+    (root / "cfg.yaml").write_text(
+        "truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\nalign: {method: sim3}\n"
+        "sync: {estimate_offset: false}\ncalibrate: {enabled: false}\n"
+        "sources: {algorithms: {stereo: {metric_scale: true}}}\n"
     )
-    from epa import readers
-
-    cases = [
-        {
-            "key": f"{alg}/office/run1",
-            "truth": str(root / "truth/office.txt"),
-            "estimate": str(root / f"algs/{alg}/office/run1.txt"),
-            "truth_source": readers.options(cfg, "reference", dataset="office"),
-            "estimate_source": readers.options(cfg, "estimate", algorithm=alg),
-        }
-        for alg in ("stereo", "mono")
-    ]
-    out = root / "results"
-    run_stages(cases, out, cfg)
-    assert tables.make([c["key"] for c in cases], out, cfg) == []
-    return out, cfg
+    smk(root)
+    return root / "results"
 
 
 def test_the_warning_reaches_metrics_json_the_log_summary_the_table_and_the_report(grid):
-    out, cfg = grid
+    out = grid
     case = out / "cases/stereo/office/run1"
     m = json.loads((case / "06_metrics/metrics.json").read_text())
     assert list(m).index("sim3_check") == list(m).index("ate") + 1
