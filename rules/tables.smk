@@ -53,6 +53,7 @@ rule tables:
         settings={
             "tables": EPA["tables"],
             "metrics": EPA["metrics"],
+            "align": EPA["align"],  # which registered metrics apply (sim3_check)
             "efficiency": EPA["efficiency"],
             "mode": EPA["mode"],
             "load": EPA["load"],

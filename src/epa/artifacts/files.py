@@ -145,12 +145,24 @@ def _cov_columns(traj: Trajectory) -> np.ndarray | None:
     )
 
 
+# A KITTI file's rotation blocks as printed, row-major (Trajectory.r_printed), after the other columns.
+PRINTED_HEADER = ["r11", "r12", "r13", "r21", "r22", "r23", "r31", "r32", "r33"]
+_WIDTH = {8: (False, False), 20: (True, False), 17: (False, True), 29: (True, True)}
+
+
 def write_tum(path, traj: Trajectory) -> None:
     """A stage's trajectory artifact: TUM, plus the orientation and position covariance upper
-    triangles (the OpenVINS layout, 20 columns) when the trajectory has covariance."""
+    triangles (the OpenVINS layout, 20 columns) when the trajectory has covariance, plus the 9
+    printed rotation entries when it keeps a KITTI file's (17 or 29 columns)."""
     cov = _cov_columns(traj)
-    data = np.column_stack([traj.t, traj.p, traj.q] + ([] if cov is None else [cov]))
-    header = TUM_HEADER[2:] + ("" if cov is None else " " + " ".join(COV_HEADER))
+    printed = None if traj.r_printed is None else traj.r_printed.reshape(len(traj), 9)
+    extra = [c for c in (cov, printed) if c is not None]
+    data = np.column_stack([traj.t, traj.p, traj.q] + extra)
+    header = " ".join(
+        [TUM_HEADER[2:]]
+        + ([] if cov is None else COV_HEADER)
+        + ([] if printed is None else PRINTED_HEADER)
+    )
     _atomic_write(path, lambda fh: savetxt(fh, data, header=header))
 
 
@@ -175,7 +187,7 @@ def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
     ):  # write_tum adds the covariance columns (OpenVINS's layout) when there are some
         return write_tum(path, traj)
     if fmt == "kitti":
-        m = np.concatenate([traj.r, traj.p[:, :, None]], axis=2).reshape(len(traj), 12)
+        m = np.concatenate([traj.r_as_printed, traj.p[:, :, None]], axis=2).reshape(len(traj), 12)
         _atomic_write(path.with_name(path.stem + "_times.txt"), lambda fh: savetxt(fh, traj.t))
         return _atomic_write(path, lambda fh: savetxt(fh, m))
     if fmt == "euroc":
@@ -237,15 +249,13 @@ def _numbers(path, delimiter: str, skip: int) -> np.ndarray:
 def read_tum_file(path) -> Trajectory:
     """Read a TUM artifact this project wrote (no detection, no repair)."""
     rows = _numbers(path, " ", skip=0)
-    if rows.shape[1] == 20:  # with covariance (see write_tum)
-        return Trajectory(
-            rows[:, 0],
-            rows[:, 1:4],
-            rows[:, 4:8],
-            cov_rot=upper_to_full(rows[:, 8:14]),
-            cov_pos=upper_to_full(rows[:, 14:20]),
-        )
-    return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8])
+    cov, printed = _WIDTH.get(rows.shape[1], (False, False))  # the columns write_tum wrote
+    extra = {}
+    if cov:
+        extra.update(cov_rot=upper_to_full(rows[:, 8:14]), cov_pos=upper_to_full(rows[:, 14:20]))
+    if printed:
+        extra["r_printed"] = np.ascontiguousarray(rows[:, -9:]).reshape(len(rows), 3, 3)
+    return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8], **extra)
 
 
 def write_pair_indices(path, i_ref, i_est, t_ref, t_est) -> None:

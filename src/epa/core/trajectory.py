@@ -21,7 +21,8 @@ class Trajectory:
     # The full 6x6 pose covariance as ROS gives it (x y z, rotation about x y z), when the source is ROS.
     cov_ros: np.ndarray | None = field(default=None, repr=False)
     # Rotation blocks (N, 3, 3) exactly as a KITTI file prints them (orthonormal only to ~1e-7), kept
-    # for evo's commands alone: evo computes on the printed matrices, epica elsewhere on ``q``.
+    # for the two tools that compute on them: evo's commands and the KITTI devkit metric. Every other
+    # number is computed on ``q`` (their nearest rotations).
     r_printed: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
@@ -29,7 +30,14 @@ class Trajectory:
 
     @property
     def r(self) -> np.ndarray:
-        return geometry.quat_to_rot(self.q) if self.r_printed is None else self.r_printed
+        """Rotation matrices (N, 3, 3) of ``q``: orthonormal, also for a KITTI file's poses."""
+        return geometry.quat_to_rot(self.q)
+
+    @property
+    def r_as_printed(self) -> np.ndarray:
+        """The rotation blocks as the file printed them (``r_printed``), else ``r``: what evo and the
+        KITTI devkit compute on."""
+        return self.r if self.r_printed is None else self.r_printed
 
     def select(self, idx) -> Trajectory:
         return replace(
@@ -56,8 +64,7 @@ class Trajectory:
 
     @staticmethod
     def from_rp(t, r, p, **extra) -> Trajectory:
-        """From rotation matrices; when they are printed ones (``r_printed``), q is their nearest rotation."""
-        rot = r if extra.get("r_printed") is None else geometry.nearest_rotation(r)
+        """From rotation matrices ``r`` (``extra``: the other fields, printed rotation blocks included)."""
         return Trajectory(
-            np.asarray(t, float), np.asarray(p, float), geometry.rot_to_quat(rot), **extra
+            np.asarray(t, float), np.asarray(p, float), geometry.rot_to_quat(r), **extra
         )

@@ -130,7 +130,7 @@ def align(
             fit = alignment.Similarity(np.eye(3), np.zeros(3), fit.s)
         return fit.apply(est), fit
     if o.align_origin:
-        r0, p0 = ref.r[0], est.r[0]
+        r0, p0 = ref.r_as_printed[0], est.r_as_printed[0]
         rot = r0 @ p0.T
         fit = alignment.Similarity(rot, ref.p[0] - rot @ est.p[0], 1.0)
         return fit.apply(est), fit
@@ -141,7 +141,7 @@ def project(traj: Trajectory, plane: str) -> Trajectory:
     """evo's projection: the out-of-plane coordinate set to 0 and the orientation replaced by its
     rotation about the plane's normal (that axis's static-xyz Euler angle)."""
     normal = {"xy": 2, "xz": 1, "yz": 0}[plane]
-    m = traj.r
+    m = traj.r_as_printed
     cy = np.hypot(m[:, 0, 0], m[:, 1, 0])
     regular = cy > 4 * np.finfo(float).eps
     angle = [

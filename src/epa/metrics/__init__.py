@@ -6,7 +6,8 @@
 - :mod:`epa.metrics.statistics`: the comparison of algorithms (Wilcoxon, Mann-Whitney).
 - The registered metrics (:mod:`epa.metrics.registry`, declared as :mod:`epa.metrics.spec` says):
   ``ate_2d``, ``consistency`` (NEES, ±3σ), ``efficiency`` (frame times, EA-Drift), ``kitti`` (the
-  devkit metric), ``per_axis``, ``rpg`` (rpg_trajectory_evaluation's statistics, mode rpg only).
+  devkit metric), ``per_axis``, ``rpg`` (rpg_trajectory_evaluation's statistics, mode rpg only),
+  ``sim3_check`` (the scale and SE3 ATE beside a Sim3 ATE).
 """
 
 __all__ = [
@@ -20,6 +21,7 @@ __all__ = [
     "registry",
     "relations",
     "rpg",
+    "sim3_check",
     "spec",
     "statistics",
 ]

@@ -5,9 +5,9 @@ tables."""
 
 from __future__ import annotations
 
-from epa.metrics import ate_2d, consistency, efficiency, kitti, per_axis, rpg
+from epa.metrics import ate_2d, consistency, efficiency, kitti, per_axis, rpg, sim3_check
 
-REGISTRY = (ate_2d, consistency, efficiency, kitti, per_axis, rpg)
+REGISTRY = (ate_2d, consistency, efficiency, kitti, per_axis, rpg, sim3_check)
 
 
 def computed_in(stage: str) -> tuple:

@@ -13,7 +13,7 @@ as evo 1.38 does. From E:
 Vectorised over all poses or pairs; angles come from quaternions (accurate near 0). Translation
 and angle are the library's ATE and RPE formulas; rot_part and full need E itself, as matrices.
 KITTI's printed rotation blocks are orthonormal only to ~1e-7; evo computes on them as printed, so
-when a trajectory carries them (``r_printed``, evo's commands only) every relation is evo's matrix
+when a trajectory carries them (``r_printed``, ``Trajectory.r_as_printed``) every relation is evo's matrix
 arithmetic: that is what matches evo to 1e-6 on the smallest RPE statistics.
 """
 
@@ -81,12 +81,12 @@ def _between(
 
 def _ape_error_poses(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     """E = P^-1 Q."""
-    return _between(est.r, est.p, ref.r, ref.p)
+    return _between(est.r_as_printed, est.p, ref.r_as_printed, ref.p)
 
 
 def _rpe_error_poses(ref: Trajectory, est: Trajectory, i, j) -> tuple[np.ndarray, np.ndarray]:
     """E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)."""
-    r_ref, r_est = ref.r, est.r
+    r_ref, r_est = ref.r_as_printed, est.r_as_printed
     motion_ref = _between(r_ref[i], ref.p[i], r_ref[j], ref.p[j])
     motion_est = _between(r_est[i], est.p[i], r_est[j], est.p[j])
     return _between(*motion_ref, *motion_est)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from epa import __version__
+from epa.metrics import registry
 from epa.outputs import provenance
 
 TEXT = {
@@ -48,6 +49,8 @@ TEXT = {
         "s2_found": "found {rot:.3f} deg and {trans:.4f} m but ",
         "s3": "`{method}` fit of the estimate onto the reference: yaw {yaw:.3f} deg, scale {scale:.6f}.",
         "fallback": "The case is evaluated the ov_eval way (no extrinsic, SE3 alignment).",
+        "s3_se3": "An SE3 fit of the same matched poses gives an ATE RMSE of {se3} m against {sim3} m under Sim3 (ratio {ratio}).",
+        "warning": "Warning",
         "meaning": {
             "trusted": "every check passed",
             "disabled": "switched off by the settings",
@@ -120,6 +123,8 @@ TEXT = {
         "s2_found": "求得 {rot:.3f} deg 与 {trans:.4f} m，但",
         "s3": "估计轨迹到参考轨迹的 `{method}` 拟合：航向 {yaw:.3f} deg，尺度 {scale:.6f}。",
         "fallback": "本例按 ov_eval 方式评估（无外参，SE3 对齐）。",
+        "s3_se3": "对同一组匹配位姿做 SE3 拟合，ATE RMSE 为 {se3} m，Sim3 下为 {sim3} m（比值 {ratio}）。",
+        "warning": "警告",
         "meaning": {
             "trusted": "全部检查通过",
             "disabled": "已在设置中关闭",
@@ -221,6 +226,17 @@ def metrics_table(m: dict, T: dict) -> list[str]:
     return lines
 
 
+def metric_warnings(doc: dict) -> list[str]:
+    """The registered metrics' warnings of a case (their records' ``warning``), in registry order."""
+    out = []
+    for metric in registry.REGISTRY:
+        metrics = doc.get("metrics", {})
+        record = metrics.get(metric.KEY) if metric.STAGE == "metrics" else doc.get(metric.STAGE)
+        if isinstance(record, dict) and record.get("warning"):
+            out.append(f"{metric.KEY}: {record['warning']}")
+    return out
+
+
 def _meaning(status, T) -> str:
     return T["meaning"].get(str(status), str(status))
 
@@ -282,6 +298,14 @@ def steps_lines(m: dict, T: dict) -> list[str]:
         yaw=_num(align.get("yaw_deg")),
         scale=_num(align.get("scale")),
     )
+    check = m.get("sim3_check") or {}
+    if check.get("available"):
+        ratio = check.get("ate_ratio")
+        three += " " + T["s3_se3"].format(
+            se3=_f(check["ate_se3"]["trans_m"]["rmse"]),
+            sim3=_f((m.get("ate") or {}).get("trans_m", {}).get("rmse")),
+            ratio="–" if ratio is None else f"{_num(ratio):.3g}",
+        )
     lines = [
         f"- **{T['step1']}**: {one}",
         f"- **{T['step2']}**: {two}",
@@ -376,6 +400,8 @@ def report_md(
             align=align.get("method"),
         ),
         "",
+        *(f"**{T['warning']}**: {w}" for w in metric_warnings(doc)),
+        *([""] if metric_warnings(doc) else []),
         f"## {T['metrics']}",
         "",
         T["metrics_note"],

@@ -145,7 +145,8 @@ def summary_csv(doc: dict) -> str:
 
 
 def flags(doc: dict) -> list[str]:
-    """Why a reader would open this case: what drift detection and Steps 1-2 found (empty: nothing)."""
+    """Why a reader would open this case: what drift detection and Steps 1-2 found, and the registered
+    metrics' warnings (empty: nothing)."""
     m, drift = doc.get("metrics", {}), doc.get("drift", {})
     out = []
     if drift.get("global_failed"):
@@ -154,7 +155,7 @@ def flags(doc: dict) -> list[str]:
         out.append(f"{drift['n_fail_segments']} fail segments")
     if (m.get("calibrate", {}).get("plan") or {}).get("fallback"):
         out.append("evaluated the ov_eval way (" + m["calibrate"].get("reason", "") + ")")
-    return out
+    return out + case_report.metric_warnings(doc)
 
 
 def failed(doc: dict) -> bool:

@@ -28,6 +28,7 @@ KEYS = (
     "kitti_rate",
     "timing",
     "orientation_covariance",
+    "metric_scale",  # an estimate's declaration, read by metrics.sim3_check (never by a reader)
 )
 TIMING_DEFAULTS = ("{run}_timing.txt", "{run}_timing.csv")
 

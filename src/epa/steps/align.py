@@ -35,9 +35,10 @@ class Similarity:
     def apply(self, traj: Trajectory) -> Trajectory:
         """The trajectory in the target world frame. The local orientation error is unchanged by a
         world rotation; the position covariance turns with it and scales by s^2. Printed rotation
-        blocks (evo's commands on KITTI) turn as evo turns them: R times the printed matrix."""
+        blocks (KITTI) turn as evo and the devkit would turn a raw matrix: R times the printed one
+        (its nearest rotation is R times theirs, so ``q`` turns as ever)."""
         r, p = self.apply_rp(traj.r, traj.p)
-        extra = {} if traj.r_printed is None else {"r_printed": r}
+        extra = {} if traj.r_printed is None else {"r_printed": self.R @ traj.r_printed}
         if traj.cov_rot is not None and traj.cov_pos is not None:
             extra.update(cov_rot=traj.cov_rot, cov_pos=self.s**2 * self.R @ traj.cov_pos @ self.R.T)
         return Trajectory.from_rp(traj.t, r, p, **extra)

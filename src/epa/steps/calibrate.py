@@ -50,13 +50,14 @@ class Extrinsic:
         R_b [t_x]x Cov_rot [t_x]x^T R_b^T to the position block."""
         r_b = est.r @ self.R.T
         p_b = self.scale * est.p - np.einsum("nab,b->na", r_b, self.t)
-        cov = {}
+        # printed rotation blocks (KITTI) take the same right factor: what the devkit's raw matrices would
+        extra = {} if est.r_printed is None else {"r_printed": est.r_printed @ self.R.T}
         if est.cov_rot is not None and est.cov_pos is not None:
             cov_rot = self.R @ est.cov_rot @ self.R.T
             lever = np.einsum("nab,bc->nac", r_b, geometry.skew(self.t))
             cov_pos = self.scale**2 * est.cov_pos + lever @ cov_rot @ lever.transpose(0, 2, 1)
-            cov = {"cov_rot": cov_rot, "cov_pos": cov_pos}
-        return Trajectory.from_rp(est.t, r_b, p_b, **cov)
+            extra.update(cov_rot=cov_rot, cov_pos=cov_pos)
+        return Trajectory.from_rp(est.t, r_b, p_b, **extra)
 
     def to_sensor_rp(self, r_b: np.ndarray, p_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The inverse of :meth:`apply` on rotations and positions: body poses -> sensor poses."""

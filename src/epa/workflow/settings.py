@@ -85,6 +85,16 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
         raise EpaError(
             f"crop.end ({crop['end']}) must be after crop.start ({crop['start']})", path=source
         )
+    sources = cfg["sources"]
+    for key, src in [("reference", sources.get("reference") or {})] + [
+        (f"datasets.{name}", src or {}) for name, src in (sources.get("datasets") or {}).items()
+    ]:
+        if src.get("metric_scale") is not None:
+            raise EpaError(
+                f"sources.{key}.metric_scale: a reference's scale is the metre; metric_scale declares"
+                " an estimate's (sources.algorithms.<algorithm>.metric_scale)",
+                path=source,
+            )
     if cfg["report"]["rerun"]:
         from epa.outputs import recording
 

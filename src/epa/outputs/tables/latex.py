@@ -197,6 +197,10 @@ def _metric_table(grid, algs, metric, spec, decimals, spread, rows_per_dataset, 
         return spec.missing
 
     rows = rows_per_dataset(cell_of, spec.pair, marked)
+    if spec.note is not None:  # rows are in the order of algs
+        rows = [
+            (_noted(name, alg, grid, metric, spec), cells) for alg, (name, cells) in zip(algs, rows)
+        ]
     header = datasets + ["Average"]
     return (
         spec.name,
@@ -204,6 +208,17 @@ def _metric_table(grid, algs, metric, spec, decimals, spread, rows_per_dataset, 
         _latex_rows(header, rows, decimals, spread),
         len(header) + 1,
     )
+
+
+def _noted(name: str, alg: str, grid, metric, spec) -> str:
+    """An algorithm's row name with its table note (of its successful runs that have the metric)."""
+    records = [
+        c.record_of(metric)
+        for c in grid
+        if c.algorithm == alg and c.ok and spec.has(c.record_of(metric))
+    ]
+    text = spec.note(records) if records else None
+    return f"{name} ({text})" if text else name
 
 
 def tex_document(title: str, rows: list[str], ncols: int) -> str:

@@ -98,7 +98,8 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
                 row.update(metric.summary(c.record_of(metric)))
             # a stage after drift that failed (a broken timing file) leaves the accuracy standing
             failed = [r["failed"] for r in c.records.values() if r.get("failed")]
-            row["notes"] = "; ".join(failed) or None
+            warned = [w for w in (c.record_of(m).get("warning") for m in registry.REGISTRY) if w]
+            row["notes"] = "; ".join(failed + warned) or None
             for s in segments:
                 L = segment_key(s)
                 row[f"rpe_{L}m_trans_mean_m"] = _stat(m, "rpe_distance", L, "trans_m", "mean")

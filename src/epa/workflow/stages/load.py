@@ -25,10 +25,17 @@ ARRAYS = ("ref.tum", "est.tum", "timing.csv")
 _LOADED: OrderedDict = OrderedDict()
 
 
+def _read(path, opts: dict, **kwargs) -> Trajectory:
+    """A source read with its settings. A KITTI file also keeps its rotation blocks as printed
+    (orthonormal to 2e-7 only): the KITTI metric computes on them as the devkit does, and they travel
+    in the stage trajectories (``write_tum``'s 9 extra columns). Other formats have none."""
+    return readers.read(path, {**opts, "kitti_printed": True}, **kwargs)
+
+
 def load_reference(ref_path, cfg: dict, opts: dict | None = None) -> tuple[Trajectory, list[str]]:
     notes: list[str] = []
     opts = readers.options(cfg, "reference") if opts is None else opts
-    return readers.read(ref_path, opts, notes=notes), notes
+    return _read(ref_path, opts, notes=notes), notes
 
 
 def compute(
@@ -53,7 +60,7 @@ def compute(
             None if bags.is_bag(ref_path) else text.kitti_times_for(Path(ref_path))
         )
     est_notes: list[str] = []
-    est = readers.read(est_path, est_opts, notes=est_notes, kitti_times=est_times)
+    est = _read(est_path, est_opts, notes=est_notes, kitti_times=est_times)
     info = {
         "ref_file": Path(ref_path).name,
         "est_file": Path(est_path).name,

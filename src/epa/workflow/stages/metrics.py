@@ -14,7 +14,7 @@ from epa.metrics import accuracy, registry
 log = logging.getLogger("epa")
 
 NAME = "metrics"
-SETTINGS = ("mode", "metrics")
+SETTINGS = ("mode", "metrics", "align")  # align: which registered metrics apply (sim3_check)
 RECORDS = ("metrics.json",)
 BASE_ARRAYS = ("ape.csv", "rpe_segments.csv", "rpe_time.csv")
 ARRAYS = BASE_ARRAYS + tuple(a for m in registry.computed_in(NAME) for a in m.ARRAYS)
@@ -104,6 +104,7 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         "unaligned": lambda: data.calibrated[1],
         "transform": lambda: data.transform,
         "reference": lambda: data.cropped[0],
+        "estimate_source": lambda: data.load_record.get("sources", {}).get("estimate") or {},
     }
     summary, tables = compute(data.matched[0], data.aligned, cfg, inputs)
     record = case_record(

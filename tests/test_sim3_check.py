@@ -1,0 +1,244 @@
+"""Scale that hides a failure (metrics.sim3_check): with a Sim3 alignment, the scale and the ATE of an
+SE3 fit of the same poses beside the Sim3 ATE, and a warning when the scale may hide a failure, in
+metrics.json, the log, summary.csv's notes, its table and the case report. Injected scales come back,
+the SE3 ATE is the hand-derived one, and nothing changes under other alignments."""
+
+import json
+
+import numpy as np
+import pytest
+
+from epa.artifacts import files as io
+from epa.cli import main as cli
+from epa.core import geometry
+from epa.core.trajectory import Trajectory
+from epa.metrics import sim3_check
+from epa.outputs import tables
+from epa.steps import align as alignment
+from epa.workflow import chain, settings
+
+
+def _path(n=600):
+    t = np.arange(n) * 0.05
+    p = np.column_stack([4 * np.cos(0.3 * t), 3 * np.sin(0.5 * t), 0.2 * t])
+    q = geometry.rot_to_quat(
+        geometry.so3_exp(np.column_stack([0.1 * np.sin(t), 0.05 * t, 0.3 * t]))
+    )
+    return Trajectory(t, p, q)
+
+
+R0 = geometry.so3_exp(np.array([0.2, -0.1, 1.0]))  # the estimate's own world frame
+
+
+def _estimate(ref, scale, noise=0.0, seed=3):
+    """The reference seen by an estimator of that scale, in another world frame, with noise (m)."""
+    rng = np.random.default_rng(seed)
+    p = scale * (ref.p + rng.normal(0, noise, ref.p.shape)) @ R0.T + [5.0, -2.0, 1.0]
+    return Trajectory(ref.t, p, geometry.rot_to_quat(R0 @ ref.r))
+
+
+def _fit_rmse(src, dst, with_scale):
+    """Test oracle: the RMSE after the least-squares (similarity or rigid) fit of src onto dst,
+    written out from Umeyama's paper."""
+    ms, md = src.mean(0), dst.mean(0)
+    xs, xd = src - ms, dst - md
+    u, d, vt = np.linalg.svd(xd.T @ xs / len(src))
+    e = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    r = u @ e @ vt
+    s = np.trace(np.diag(d) @ e) / np.mean(np.sum(xs**2, 1)) if with_scale else 1.0
+    return np.sqrt(np.mean(np.sum((xd - s * xs @ r.T) ** 2, 1))), s
+
+
+CFG = {"max_log_scale": 0.05, "max_ate_ratio": 10.0, "enabled": True}
+
+
+def _check(ref, est, metric_scale=None, first_n=-1):
+    """The record, as the metrics stage computes it after a Sim3 Step 3."""
+    fit = alignment.fit(ref, est, method="sim3", first_n=first_n)
+    info = {"method": "sim3", "first_n": first_n, "fallback_se3": False, **fit.to_dict()}
+    source = {} if metric_scale is None else {"metric_scale": metric_scale}
+    cfg = {"metrics": {"sim3_check": CFG}, "align": {"method": "sim3"}}
+    record, arrays, notes = sim3_check.compute(
+        ref, fit.apply(est), cfg, transform=info, estimate_source=source
+    )
+    assert arrays == {} and "; ".join(notes) == (record["warning"] or "")
+    return record
+
+
+def test_an_injected_scale_of_a_half_comes_back_with_the_hand_derived_se3_ate():
+    """An estimate at half scale, exactly: the Sim3 fit's scale is 2 and its ATE 0; the SE3 fit of
+    0.5 x onto x is the identity rotation and the centroids' offset, leaving 0.5 (x - mean x):
+    its RMSE is half the path's RMS distance from its centroid."""
+    ref = _path()
+    record = _check(ref, _estimate(ref, 0.5), metric_scale=True)
+    assert record["scale"] == pytest.approx(2.0, rel=1e-12)
+    assert record["log_scale"] == pytest.approx(np.log(2.0), rel=1e-12)
+    spread = np.sqrt(np.mean(np.sum((ref.p - ref.p.mean(0)) ** 2, 1)))
+    assert record["ate_se3"]["trans_m"]["rmse"] == pytest.approx(0.5 * spread, rel=1e-12)
+    assert record["ate_se3"]["rot_deg"]["rmse"] < 1e-9  # the rotation fits exactly
+    assert record["ate_ratio"] > 1e9  # the Sim3 ATE is rounding only
+    assert record["warning"].startswith("Sim3 scale 2 for an algorithm declared metric")
+    assert "hides most of the error" in record["warning"]
+
+
+@pytest.mark.parametrize(
+    "scale, declared, warns",
+    [
+        # 8 % too large, 5 cm noise: |ln s| = 0.077 > 0.05, SE3/Sim3 = 3.6 < 10
+        (1.08, True, ["scale"]),
+        (1.08, None, []),
+        (1.08, False, []),
+        # half scale, 1 cm noise: SE3/Sim3 = 56
+        (0.5, True, ["scale", "ratio"]),
+        (0.5, None, ["ratio"]),
+        (0.5, False, []),  # declared not metric: its scale is arbitrary
+        (1.0, True, []),
+    ],
+)
+def test_each_check_fires_only_where_it_applies(scale, declared, warns):
+    ref = _path()
+    noise = 0.05 if scale == 1.08 else 0.01
+    est = _estimate(ref, scale, noise)
+    record = _check(ref, est, declared)
+    sim3_rmse, s = _fit_rmse(est.p, ref.p, True)
+    se3_rmse, _ = _fit_rmse(est.p, ref.p, False)
+    assert record["scale"] == pytest.approx(s, rel=1e-12)
+    assert record["ate_se3"]["trans_m"]["rmse"] == pytest.approx(se3_rmse, rel=1e-9)
+    assert record["ate_ratio"] == pytest.approx(se3_rmse / sim3_rmse, rel=1e-9)
+    assert record["metric_scale"] == declared
+    got = []
+    if "declared metric" in (record["warning"] or ""):
+        got.append("scale")
+    if "hides most of the error" in (record["warning"] or ""):
+        got.append("ratio")
+    assert got == warns, record
+    if "ratio" in warns and declared is None:
+        assert "declare metric_scale: false if its scale is arbitrary" in record["warning"]
+
+
+def test_the_se3_fit_uses_the_same_first_poses_as_the_sim3_fit():
+    ref = _path()
+    est = _estimate(ref, 0.7, 0.02)
+    record = _check(ref, est, first_n=100)
+    # the oracle: the SE3 fit of the first 100 poses, applied to all
+    src, dst = est.p[:100], ref.p[:100]
+    ms, md = src.mean(0), dst.mean(0)
+    u, _, vt = np.linalg.svd((dst - md).T @ (src - ms))
+    r = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+    err = ref.p - ((est.p - ms) @ r.T + md)
+    want = np.sqrt(np.mean(np.sum(err**2, 1)))
+    assert record["ate_se3"]["trans_m"]["rmse"] == pytest.approx(want, rel=1e-9)
+
+
+def test_no_scale_to_check_when_step_3_fitted_se3():
+    """The ov_eval fallback aligns SE3 even under align.method: sim3: the record says so."""
+    ref = _path()
+    info = {"method": "se3", "first_n": -1, "fallback_se3": True, **alignment.IDENTITY.to_dict()}
+    cfg = {"metrics": {"sim3_check": CFG}, "align": {"method": "sim3"}}
+    record, _, notes = sim3_check.compute(ref, ref, cfg, transform=info, estimate_source={})
+    assert record == {
+        "available": False,
+        "reason": "Step 3 fitted se3 (the ov_eval fallback): no scale",
+    }
+    assert notes == []
+
+
+@pytest.fixture(scope="module")
+def grid(tmp_path_factory):
+    """Two algorithms on one dataset, Sim3, run by Snakemake: `stereo` declared metric, its estimate
+    at 0.5 scale (a failure the scale hides); `mono` undeclared, 1.02 scale (healthy)."""
+    from test_workflow import smk
+
+    root = tmp_path_factory.mktemp("sim3")
+    ref = _path()
+    io.write_trajectory(root / "truth/office.txt", ref, "tum")
+    for alg, scale in (("stereo", 0.5), ("mono", 1.02)):
+        io.write_trajectory(
+            root / f"algs/{alg}/office/run1.txt", _estimate(ref, scale, 0.01), "tum"
+        )
+    (root / "cfg.yaml").write_text(
+        "truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\nalign: {method: sim3}\n"
+        "sync: {estimate_offset: false}\ncalibrate: {enabled: false}\n"
+        "sources: {algorithms: {stereo: {metric_scale: true}}}\n"
+    )
+    smk(root)
+    return root / "results"
+
+
+def test_the_warning_reaches_metrics_json_the_log_summary_the_table_and_the_report(grid):
+    out = grid
+    case = out / "cases/stereo/office/run1"
+    m = json.loads((case / "06_metrics/metrics.json").read_text())
+    assert list(m).index("sim3_check") == list(m).index("ate") + 1
+    check = m["sim3_check"]
+    assert check["scale"] == m["alignment"]["scale"] == pytest.approx(2.0, rel=1e-2)
+    assert check["metric_scale"] is True and check["warning"].startswith("Sim3 scale 2")
+    assert "; ".join(n for n in m["notes"] if "Sim3" in n) == check["warning"]
+    log = "\n".join(p.read_text() for p in out.rglob("*.log"))
+    assert "Sim3 scale 2" in log and "hides most of the error" in log
+    # summary.csv: the warning in the notes column of that case only
+    rows = (out / "summary.csv").read_text().splitlines()
+    stereo = next(r for r in rows if r.startswith("stereo,"))
+    mono = next(r for r in rows if r.startswith("mono,"))
+    assert "Sim3 scale 2" in stereo and "Sim3 scale" not in mono
+    # its table: scale / SE3 ATE per dataset, the algorithm with a warning noted
+    tex = (out / "tables/sim3_check.tex").read_text()
+    assert "stereo (scale warning: 1 of 1 runs) & " in tex
+    mono_m = json.loads((out / "cases/mono/office/run1/06_metrics/metrics.json").read_text())
+    mono_check = mono_m["sim3_check"]
+    assert mono_check["warning"] is None and mono_check["metric_scale"] is None
+    scale, se3 = mono_check["scale"], mono_check["ate_se3"]["trans_m"]["rmse"]
+    assert f"mono & {scale:.3f} / {se3:.3f} & {scale:.3f} / {se3:.3f} \\\\" in tex
+    assert "SIM3 SCALE" in (out / "error_comparison.txt").read_text()
+    # the case report: the warning under the lead, the SE3 ATE beside Step 3, a flag
+    report = (case / "10_report/report_en.md").read_text()
+    assert f"**Warning**: sim3_check: {check['warning']}" in report
+    assert "An SE3 fit of the same matched poses gives an ATE RMSE of" in report
+    assert "**警告**: sim3_check:" in (case / "10_report/report_zh.md").read_text()
+    flags = json.loads((case / "10_report/report.json").read_text())["flags"]
+    assert flags == [f"sim3_check: {check['warning']}"]
+    assert (
+        json.loads((out / "cases/mono/office/run1/10_report/report.json").read_text())["flags"]
+        == []
+    )
+
+
+def test_nothing_is_added_under_other_alignments(tmp_path):
+    ref = _path()
+    io.write_trajectory(tmp_path / "ref.txt", ref, "tum")
+    io.write_trajectory(tmp_path / "est.txt", _estimate(ref, 0.5, 0.01), "tum")
+    base = {"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}}
+    for extra in ({}, {"metrics": {"sim3_check": {"enabled": False}}, "align": {"method": "sim3"}}):
+        cfg = settings.resolve({**base, "calibrate": {"enabled": False}, **extra})
+        m = chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "o", cfg)
+        assert "sim3_check" not in m["metrics"]
+        assert "sim3_check" not in tables.table_names(cfg)
+    assert "sim3_check" in tables.table_names(
+        settings.resolve({**base, "align": {"method": "sim3"}})
+    )
+
+
+@pytest.mark.parametrize(
+    "config, says",
+    [
+        ("sources: {reference: {metric_scale: true}}", "sources.reference.metric_scale: "),
+        ("sources: {datasets: {d: {metric_scale: false}}}", "sources.datasets.d.metric_scale: "),
+        ("metrics: {sim3_check: {max_ate_ratio: 1}}", "metrics.sim3_check.max_ate_ratio: "),
+        ("metrics: {sim3_check: {max_log_scale: 0}}", "metrics.sim3_check.max_log_scale: "),
+        ("sources: {algorithms: {a: {metric_scale: yes please}}}", "metric_scale: "),
+    ],
+)
+def test_a_bad_setting_is_one_line_naming_the_key(tmp_path, capsys, config, says):
+    ref = _path()
+    io.write_trajectory(tmp_path / "ref.txt", ref, "tum")
+    (tmp_path / "cfg.yaml").write_text(config + "\n")
+    argv = [
+        "eval",
+        str(tmp_path / "ref.txt"),
+        str(tmp_path / "ref.txt"),
+        "--out",
+        str(tmp_path / "o"),
+    ]
+    assert cli.main(argv + ["--config", str(tmp_path / "cfg.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("epa: error: ") and says in err and err.count("\n") == 1
