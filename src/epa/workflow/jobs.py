@@ -192,10 +192,10 @@ def call(workers: int, fn, *args):
     return _pool(workers).submit(fn, *args).result()
 
 
-def _timed(fn, *args):
-    """``fn(*args)`` and the CPU seconds it took in the process that ran it (a worker)."""
+def _run_cases_timed(*args):
+    """:func:`run_cases` and the CPU seconds it took in the process that ran it (a worker)."""
     t0 = time.process_time()
-    out = fn(*args)
+    out = run_cases(*args)
     return out, time.process_time() - t0
 
 
@@ -218,7 +218,7 @@ def run_job(
     wall0, cpu = time.perf_counter(), float("nan")
     upstream = upstream_failures(upstream_manifest)
     try:
-        status, cpu = call(workers, _timed, run_cases, stage, cases, results_dir, cfg, upstream)
+        status, cpu = call(workers, _run_cases_timed, stage, cases, results_dir, cfg, upstream)
     except BrokenProcessPool:
         # a worker died (out of memory, a crash in C): retry case by case, record the one that dies
         status = {}
