@@ -131,13 +131,15 @@ def solve(
         min_pairs=min_pairs,
         outlier_iterations=outlier_iterations,
     )
-    ext, cov_rot, null_rot, cov_x, null_x = _fit(ref, est, **fit)
+    motions: dict = {}  # the estimate's motion pairs, shared by the three solves when their pairs are
+    ext, cov_rot, null_rot, cov_x, null_x = _fit(ref, est, **fit, motions=motions)
     if cov_rot is None:
         return ext
     if offset_std > 0:
         ends = []
-        for sign in (1.0, -1.0):
-            ends.append(_fit(ref.at(ref.t + sign * offset_std), est, **fit)[0])
+        for sign in (1.0, -1.0):  # only their solutions are used: no covariances
+            shifted = ref.at(ref.t + sign * offset_std)
+            ends.append(_fit(shifted, est, **fit, motions=motions, solution_only=True)[0])
         d_rot = geometry.so3_log(ends[0].R @ ends[1].R.T) / 2
         d_x = (np.r_[ends[0].t, ends[0].scale] - np.r_[ends[1].t, ends[1].scale])[: len(cov_x)] / 2
         cov_rot, cov_x = cov_rot + np.outer(d_rot, d_rot), cov_x + np.outer(d_x, d_x)
@@ -164,16 +166,27 @@ def _fit(
     max_condition,
     min_pairs,
     outlier_iterations,
+    motions: dict | None = None,
+    solution_only: bool = False,
 ):
     """The solve, and the covariances and unobservable directions of rotation and translation (all
-    None when too little motion left nothing to solve)."""
+    None when too little motion left nothing to solve, or not asked for: ``solution_only``).
+    ``motions`` keeps the estimate's motion pairs from one call to the next: the same pairs give the
+    same motions, so they are computed once."""
     i, j = closest_pairs(ref.t - ref.t[0], pair_step, 0.25 * pair_step, strict=False, skip=1)
     info: dict = {"pairs": int(len(i)), "pair_step_s": pair_step}
     if len(i) < min_pairs:
         return _too_little(f"only {len(i)} motion pairs ({min_pairs} needed)", info)
     qa, ta = geometry.relative_motions(ref.q, ref.p, i, j)
-    qb, tb = geometry.relative_motions(est.q, est.p, i, j)
-    alpha, beta = geometry.quat_log(qa), geometry.quat_log(qb)
+    kept = (motions or {}).get("pairs")
+    if kept is not None and np.array_equal(kept[0], i) and np.array_equal(kept[1], j):
+        qb, tb, beta = motions["estimate"]
+    else:
+        qb, tb = geometry.relative_motions(est.q, est.p, i, j)
+        beta = geometry.quat_log(qb)
+        if motions is not None:
+            motions.update(pairs=(i, j), estimate=(qb, tb, beta))
+    alpha = geometry.quat_log(qa)
     angle = np.degrees(np.linalg.norm(alpha, axis=1))
     use = angle >= min_rotation_deg
     info["rotation_pairs"] = int(use.sum())
@@ -187,11 +200,20 @@ def _fit(
     # Pairs overlap in time, so the residuals are grouped in blocks (see _sandwich).
     block = np.floor((ref.t[i] - ref.t[0]) / (2.0 * pair_step)).astype(int)
     r_x, cov_rot, null_rot = _solve_rotation(
-        alpha, beta, use, block, min_pairs, outlier_iterations, max_condition, info
+        alpha, beta, use, block, min_pairs, outlier_iterations, max_condition, info, solution_only
     )
     # the translation equations need (R_A - I) as matrices
     x, cov_x, null_x = _solve_translation(
-        geometry.quat_to_rot(qa), ta, tb, r_x, cov_rot, block, scale, max_condition, info
+        geometry.quat_to_rot(qa),
+        ta,
+        tb,
+        r_x,
+        cov_rot,
+        block,
+        scale,
+        max_condition,
+        info,
+        solution_only,
     )
     s = float(x[3]) if scale else 1.0
     return Extrinsic(R=r_x, t=x[:3], scale=s, info=info), cov_rot, null_rot, cov_x, null_x
@@ -202,9 +224,12 @@ def _too_little(reason: str, info: dict):
     return ext, None, None, None, None
 
 
-def _solve_rotation(alpha, beta, use, block, min_pairs, outlier_iterations, max_condition, info):
+def _solve_rotation(
+    alpha, beta, use, block, min_pairs, outlier_iterations, max_condition, info, solution_only=False
+):
     """R_X from the rotation vectors of the motion pairs (alpha = R_X beta) by Kabsch, rejecting
-    pairs beyond 3 median residuals; its covariance and unobservable directions."""
+    pairs beyond 3 median residuals; its covariance and unobservable directions (None, None with
+    ``solution_only``)."""
     keep = use.copy()
     for _ in range(outlier_iterations + 1):
         r_x, sv = _kabsch(beta[keep], alpha[keep])
@@ -221,6 +246,8 @@ def _solve_rotation(alpha, beta, use, block, min_pairs, outlier_iterations, max_
         rotation_singular_values=sv.tolist(),
         rotation_condition=float(sv[0] / sv[1]) if sv[1] > 0 else float("inf"),
     )
+    if solution_only:
+        return r_x, None, None
     # residual alpha - Exp(d) R beta ~ r + [R beta]x d, perturbing R on the left (body axes)
     jac_r = geometry.skew(beta[keep] @ r_x.T)
     cov_rot, null_rot, _ = _sandwich(
@@ -229,9 +256,12 @@ def _solve_rotation(alpha, beta, use, block, min_pairs, outlier_iterations, max_
     return r_x, cov_rot, null_rot
 
 
-def _solve_translation(ra, ta, tb, r_x, cov_rot, block, scale, max_condition, info):
+def _solve_translation(
+    ra, ta, tb, r_x, cov_rot, block, scale, max_condition, info, solution_only=False
+):
     """t_X (and the scale) from every pair, the rotation now known: (R_A - I) t_X = R_X t_B - t_A
-    (with scale: s R_X t_B). Its covariance carries the rotation's uncertainty."""
+    (with scale: s R_X t_B). Its covariance carries the rotation's uncertainty (None, None with
+    ``solution_only``)."""
     m = ra - np.eye(3)  # (K, 3, 3)
     rtb = tb @ r_x.T  # R_X t_B
     if scale:
@@ -241,6 +271,8 @@ def _solve_translation(ra, ta, tb, r_x, cov_rot, block, scale, max_condition, in
         b = rtb - ta
     x, keep_t, tinfo = _robust_lstsq(m, b, max_condition)
     info.update(tinfo)
+    if solution_only:
+        return x, None, None
     s = float(x[3]) if scale else 1.0
     cov_x, null_x, h_pinv = _sandwich(
         m[keep_t], np.einsum("kab,b->ka", m[keep_t], x) - b[keep_t], block[keep_t], max_condition
