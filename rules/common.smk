@@ -71,6 +71,22 @@ def batch_log(stage):
     return f"{RESULTS}/batches/{{batch}}/logs/{stage}.log"
 
 
+def stage_job(params, input, output, log, wildcards):
+    """The arguments of a stage job's body, epa.workflow.jobs.run_job. params.stage, not the rule
+    loop's variable: the loop has moved on when the job runs."""
+    return dict(
+        stage=params.stage,
+        cases=params.cases,
+        results_dir=RESULTS,
+        cfg=params.settings,
+        manifest=output.manifest,
+        upstream_manifest=input.get("upstream"),
+        log_path=log[0],
+        workers=workers(),
+        timing_path=batch_timing(params.stage, wildcards.batch),
+    )
+
+
 def batch_timing(stage, batch):
     """Where a stage job writes its wall and CPU seconds (a benchmark file; see rules/stages.smk)."""
     return f"{RESULTS}/batches/{batch}/benchmarks/{stage}.tsv"

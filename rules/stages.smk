@@ -22,15 +22,4 @@ for stage_name in epa_chain.NAMES:
             **stage_params(stage_name),
             stage=stage_name,
         run:
-            # params.stage, not the loop variable: the loop has moved on when the job runs
-            epa_jobs.run_job(
-                params.stage,
-                params.cases,
-                RESULTS,
-                params.settings,
-                output.manifest,
-                input.get("upstream"),
-                log[0],
-                workers=workers(),
-                timing_path=batch_timing(params.stage, wildcards.batch),
-            )
+            epa_jobs.run_job(**stage_job(params, input, output, log, wildcards))
