@@ -42,7 +42,7 @@ rule tables:
         f"{RESULTS}/benchmarks/tables.tsv"
     conda:
         "../envs/epica.yaml"
-    threads: 1
+    threads: 2
     resources:
         mem_mb=lambda wc: 1000 + len(CASE_BY_KEY) // 10,
         runtime=lambda wc: 2 + len(CASE_BY_KEY) // 2000,

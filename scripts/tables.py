@@ -9,6 +9,7 @@ a grid has filled, with the grid's config:
 """
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -20,8 +21,8 @@ from epa.outputs import provenance, tables
 WORKFLOW_DIR = Path(__file__).resolve().parents[1]
 
 
-def write(cases, results_dir, settings, idle_truths, log_path) -> list[tuple[str, str]]:
-    failed = tables.make(cases, results_dir, settings, idle_truths)
+def write(cases, results_dir, settings, idle_truths, log_path, workers=1) -> list[tuple[str, str]]:
+    failed = tables.make(cases, results_dir, settings, idle_truths, workers)
     lines = [f"{len(cases)} cases, {len(failed)} without a result"]
     lines += [f"{key}: {reason}" for key, reason in failed]
     with open(log_path, "w", encoding="utf-8") as fh:
@@ -55,7 +56,12 @@ def main(argv=None) -> int:
         )
         results = cfg["results_dir"]
         failed = write(
-            sorted(c.key for c in cases), results, cfg, idle, f"{results}/logs/tables.log"
+            sorted(c.key for c in cases),
+            results,
+            cfg,
+            idle,
+            f"{results}/logs/tables.log",
+            workers=os.cpu_count() or 1,
         )
         inputs = provenance.grid_inputs(cfg, cases, idle)
         write_provenance(results, cfg, inputs, WORKFLOW_DIR)
@@ -70,7 +76,12 @@ if __name__ == "__main__":
     if "snakemake" in globals():  # run by the tables rule
         sm = globals()["snakemake"]
         write(
-            sm.params.cases, sm.params.results, sm.params.settings, sm.params.idle_truths, sm.log[0]
+            sm.params.cases,
+            sm.params.results,
+            sm.params.settings,
+            sm.params.idle_truths,
+            sm.log[0],
+            workers=sm.threads,
         )
         write_provenance(
             sm.params.results, sm.params.resolved, sm.params.inputs, sm.params.workflow_dir

@@ -86,3 +86,20 @@ def test_case_artifacts_are_the_golden_bytes(example):
     want = (GOLDEN / "artifacts.sha256").read_text()
     changed = sorted(set(got.splitlines()) ^ set(want.splitlines()))
     assert not changed, "artifacts that differ from the golden copy:\n" + "\n".join(changed[:20])
+
+
+def test_tables_from_cases_read_in_parallel_are_the_same_bytes(example, tmp_path, monkeypatch):
+    """The tables rule reads a large grid's cases in forked processes (results.collect): the same
+    tables, here forced on the example's 18 cases."""
+    from epa.outputs.tables import results
+
+    monkeypatch.setattr(results, "PARALLEL_FROM_CASES", 2)
+    out = tmp_path / "results"
+    out.mkdir()
+    (out / "cases").symlink_to(example / "cases")
+    cfg = settings.resolve(settings.load_yaml(ROOT / "config/config.yaml"))
+    keys = sorted("/".join(p.parts[-3:]) for p in (example / "cases").glob("*/*/*"))
+    assert len(results.collect(keys, out, workers=2)) == len(keys) == 18
+    assert tables.make(keys, out, cfg, workers=2) == []
+    for name in GRID_FILES:
+        assert (out / name).read_bytes() == (example / name).read_bytes(), name

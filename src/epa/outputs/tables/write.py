@@ -98,12 +98,12 @@ def write_all(
 
 
 def make(
-    keys: list[str], results_dir, cfg: dict, idle_truths: dict | None = None
+    keys: list[str], results_dir, cfg: dict, idle_truths: dict | None = None, workers: int = 1
 ) -> list[tuple[str, str]]:
     """The tables rule: read every case, write every table; returns the failed cases.
     ``idle_truths`` ({dataset: path}, mode ov_eval): references without any run, read here for the
-    [COMP] line ov_eval prints for every reference."""
-    grid = collect(keys, results_dir)
+    [COMP] line ov_eval prints for every reference. ``workers``: processes that read the cases."""
+    grid = collect(keys, results_dir, workers)
     idle = {}
     for ds, path in (idle_truths or {}).items():
         try:
