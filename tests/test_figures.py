@@ -333,6 +333,21 @@ def test_report_rerun_without_the_extra_is_refused_at_config_time(monkeypatch):
         settings.resolve({"truth_dir": "t", "algorithms_dir": "a", "report": {"rerun": True}})
 
 
+def test_the_cases_drawn_by_default_are_the_failed_and_the_warned():
+    from epa.outputs import report as report_module
+
+    fallback = {"calibrate": {"plan": {"fallback": True}, "reason": "Step 2 not trusted"}}
+    assert not report_module.failed({"drift": {}, "metrics": fallback})
+    assert report_module.failed({"drift": {"n_fail_segments": 2}, "metrics": {}})
+    assert report_module.failed({"drift": {"global_failed": True}, "metrics": {}})
+    warned = {"sim3_check": {"warning": "scale 0.5 for an algorithm declared metric"}}
+    assert report_module.failed({"drift": {}, "metrics": warned})
+    assert report_module.flags({"drift": {}, "metrics": {**fallback, **warned}}) == [
+        "evaluated the ov_eval way (Step 2 not trusted)",
+        "sim3_check: scale 0.5 for an algorithm declared metric",
+    ]
+
+
 def test_figures_are_drawn_for_flagged_cases_and_one_command_draws_the_rest(tmp_path):
     """report.figures: flagged (the default) draws a case's figures only when drift detection failed
     it; a Step 2 fallback is flagged, not drawn; every case keeps its bundles, and its report names

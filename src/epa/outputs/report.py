@@ -159,12 +159,17 @@ def flags(doc: dict) -> list[str]:
 
 
 def failed(doc: dict) -> bool:
-    """Whether drift detection failed the case (globally, or on segments): the cases
+    """Whether the case failed or hides a failure: drift detection failed it (globally, or on
+    segments) or a registered metric warned (the Sim3 scale check). These are the cases
     ``report.figures: flagged`` draws. A Step 1-2 fallback is flagged in the text, not drawn: it is a
     routine outcome (21 of the 52 real EuRoC cases), whose numbers are the standard ones, and drawing
     them made the reports half of that grid's work (docs/performance.md)."""
     drift = doc.get("drift", {})
-    return bool(drift.get("global_failed") or drift.get("n_fail_segments"))
+    return bool(
+        drift.get("global_failed")
+        or drift.get("n_fail_segments")
+        or case_report.metric_warnings(doc)
+    )
 
 
 def case_zip(case_root: Path, out: Path) -> None:
