@@ -1,7 +1,7 @@
 import glob
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from epa.core import geometry
@@ -73,6 +73,7 @@ def test_segment_pairs_random_with_plateaus(steps, length):
     st.lists(st.floats(0.001, 0.08), min_size=1, max_size=80),
     st.floats(0.005, 0.05),
 )
+@example(dr=[0.0625], de=[0.03125], max_diff=0.03125)  # exactly max_diff apart: no match in ov_eval
 def test_ov_eval_association_matches_greedy(dr, de, max_diff):
     t_ref, t_est = np.cumsum(dr), np.cumsum(de)
     i_ref, i_est = sync.associate_ov_eval(t_ref, t_est, max_diff)

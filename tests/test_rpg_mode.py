@@ -302,14 +302,15 @@ def test_epa_eval_mode_rpg_refuses_in_one_line(tmp_path, capsys):
 
 def test_rpg_policy_is_rpgs_association():
     """Closest pairs first, each pose once, crossings allowed, strictly within max_diff: rpg keeps the
-    crossing pair ov_eval's association (estimate order, never back) cannot, and leaves out the pair
-    exactly max_diff apart that ov_eval keeps (dyadic stamps: the differences are exact)."""
+    crossing pair ov_eval's association (estimate order, never back) cannot; both leave out the pair
+    exactly max_diff apart (ov_eval's best difference starts at max_difference and must shrink;
+    dyadic stamps: the differences are exact)."""
     t_ref, t_est = np.array([0.0, 0.1875, 4.0]), np.array([0.15625, 0.21875, 4.25])
     i_ref, i_est = sync.associate_rpg(t_ref, t_est, 0.25)
     assert list(zip(i_ref.tolist(), i_est.tolist())) == [(1, 0), (0, 1)]
     assert [(j, i) for i, j in rpg_steps.associate(t_est, t_ref, 0.0, 0.25)] == [(1, 0), (0, 1)]
     i_ref, i_est = sync.associate_ov_eval(t_ref, t_est, 0.25)
-    assert list(zip(i_ref.tolist(), i_est.tolist())) == [(1, 0), (2, 2)]
+    assert list(zip(i_ref.tolist(), i_est.tolist())) == [(1, 0)]
 
 
 def test_rpg_scale_through_the_origin_is_left_out(tmp_path, capsys):

@@ -31,7 +31,9 @@ def associate_ov_eval(t_ref: np.ndarray, t_est: np.ndarray, max_diff: float, off
     lo = np.zeros(n_est, dtype=np.int64)
     while True:
         j = nearest_from(t_ref, x, lo)
-        ok = np.abs(t_ref[j] - x) <= max_diff
+        # strictly within: ov_eval starts its best difference at max_difference and keeps only a
+        # smaller one, so a stamp exactly max_difference away is no match
+        ok = np.abs(t_ref[j] - x) < max_diff
         jm = np.where(ok, j, -1)
         prev = np.maximum.accumulate(np.concatenate([[-1], jm[:-1]]))
         clash = ok & (j <= prev)
