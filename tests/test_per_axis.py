@@ -3,6 +3,7 @@ to the ATE and the RPE, and the metric reaches metrics.json, ape.csv and its tab
 
 import numpy as np
 import pytest
+from conftest import smooth_path
 
 from epa import simulate
 from epa.core import geometry
@@ -11,17 +12,8 @@ from epa.metrics import accuracy, per_axis
 from epa.workflow import chain, settings
 
 
-def _path(n=600):
-    t = np.arange(n) * 0.05
-    p = np.column_stack([4 * np.cos(0.3 * t), 3 * np.sin(0.5 * t), 0.2 * t])
-    q = geometry.rot_to_quat(
-        geometry.so3_exp(np.column_stack([0.1 * np.sin(t), 0.05 * t, 0.3 * t]))
-    )
-    return Trajectory(t, p, q)
-
-
 def test_an_injected_offset_and_roll_are_on_their_axes():
-    ref = _path()
+    ref = smooth_path()
     roll = geometry.so3_exp(np.array([np.radians(2.0), 0.0, 0.0]))  # a body-frame roll error
     est = Trajectory(ref.t, ref.p + [0.1, -0.2, 0.0], geometry.rot_to_quat(ref.r @ roll))
     e = per_axis.ate_errors(ref, est)
@@ -30,7 +22,7 @@ def test_an_injected_offset_and_roll_are_on_their_axes():
 
 
 def test_the_axes_add_up_to_the_ate_and_the_rpe():
-    ref = _path()
+    ref = smooth_path()
     rng = np.random.default_rng(5)
     noise = geometry.so3_exp(rng.normal(0, 0.01, (len(ref), 3)))
     est = Trajectory(

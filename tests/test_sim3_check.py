@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import smooth_path
 
 from epa.artifacts import files as io
 from epa.cli import main as cli
@@ -16,16 +17,6 @@ from epa.metrics import sim3_check
 from epa.outputs import tables
 from epa.steps import align as alignment
 from epa.workflow import chain, settings
-
-
-def _path(n=600):
-    t = np.arange(n) * 0.05
-    p = np.column_stack([4 * np.cos(0.3 * t), 3 * np.sin(0.5 * t), 0.2 * t])
-    q = geometry.rot_to_quat(
-        geometry.so3_exp(np.column_stack([0.1 * np.sin(t), 0.05 * t, 0.3 * t]))
-    )
-    return Trajectory(t, p, q)
-
 
 R0 = geometry.so3_exp(np.array([0.2, -0.1, 1.0]))  # the estimate's own world frame
 
@@ -69,7 +60,7 @@ def test_an_injected_scale_of_a_half_comes_back_with_the_hand_derived_se3_ate():
     """An estimate at half scale, exactly: the Sim3 fit's scale is 2 and its ATE 0; the SE3 fit of
     0.5 x onto x is the identity rotation and the centroids' offset, leaving 0.5 (x - mean x):
     its RMSE is half the path's RMS distance from its centroid."""
-    ref = _path()
+    ref = smooth_path()
     record = _check(ref, _estimate(ref, 0.5), metric_scale=True)
     assert record["scale"] == pytest.approx(2.0, rel=1e-12)
     assert record["log_scale"] == pytest.approx(np.log(2.0), rel=1e-12)
@@ -96,7 +87,7 @@ def test_an_injected_scale_of_a_half_comes_back_with_the_hand_derived_se3_ate():
     ],
 )
 def test_each_check_fires_only_where_it_applies(scale, declared, warns):
-    ref = _path()
+    ref = smooth_path()
     noise = 0.05 if scale == 1.08 else 0.01
     est = _estimate(ref, scale, noise)
     record = _check(ref, est, declared)
@@ -117,7 +108,7 @@ def test_each_check_fires_only_where_it_applies(scale, declared, warns):
 
 
 def test_the_se3_fit_uses_the_same_first_poses_as_the_sim3_fit():
-    ref = _path()
+    ref = smooth_path()
     est = _estimate(ref, 0.7, 0.02)
     record = _check(ref, est, first_n=100)
     # the oracle: the SE3 fit of the first 100 poses, applied to all
@@ -132,7 +123,7 @@ def test_the_se3_fit_uses_the_same_first_poses_as_the_sim3_fit():
 
 def test_no_scale_to_check_when_step_3_fitted_se3():
     """The ov_eval fallback aligns SE3 even under align.method: sim3: the record says so."""
-    ref = _path()
+    ref = smooth_path()
     info = {"method": "se3", "first_n": -1, "fallback_se3": True, **alignment.IDENTITY.to_dict()}
     cfg = {"metrics": {"sim3_check": CFG}, "align": {"method": "sim3"}}
     record, _, notes = sim3_check.compute(ref, ref, cfg, transform=info, estimate_source={})
@@ -150,7 +141,7 @@ def grid(tmp_path_factory):
     from test_workflow import smk
 
     root = tmp_path_factory.mktemp("sim3")
-    ref = _path()
+    ref = smooth_path()
     io.write_trajectory(root / "truth/office.txt", ref, "tum")
     for alg, scale in (("stereo", 0.5), ("mono", 1.02)):
         io.write_trajectory(
@@ -204,7 +195,7 @@ def test_the_warning_reaches_metrics_json_the_log_summary_the_table_and_the_repo
 
 
 def test_nothing_is_added_under_other_alignments(tmp_path):
-    ref = _path()
+    ref = smooth_path()
     io.write_trajectory(tmp_path / "ref.txt", ref, "tum")
     io.write_trajectory(tmp_path / "est.txt", _estimate(ref, 0.5, 0.01), "tum")
     base = {"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}}
@@ -229,7 +220,7 @@ def test_nothing_is_added_under_other_alignments(tmp_path):
     ],
 )
 def test_a_bad_setting_is_one_line_naming_the_key(tmp_path, capsys, config, says):
-    ref = _path()
+    ref = smooth_path()
     io.write_trajectory(tmp_path / "ref.txt", ref, "tum")
     (tmp_path / "cfg.yaml").write_text(config + "\n")
     argv = [

@@ -38,9 +38,10 @@ def average_ranks(x) -> tuple[np.ndarray, np.ndarray]:
     x = np.asarray(x, float)
     order = np.argsort(x, kind="mergesort")
     ordered = x[order]
-    starts = np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]])
+    first = np.r_[True, ordered[1:] != ordered[:-1]]  # where each group of equal values starts
+    starts = np.flatnonzero(first)
     ends = np.r_[starts[1:], x.size]  # one past each group's last position
-    group = np.cumsum(np.r_[True, ordered[1:] != ordered[:-1]]) - 1
+    group = np.cumsum(first) - 1
     ranks = np.empty(x.size)
     ranks[order] = 0.5 * (starts[group] + 1 + ends[group])
     return ranks, ends - starts

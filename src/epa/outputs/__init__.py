@@ -7,6 +7,16 @@
 - :mod:`epa.outputs.figures`: plot bundles and their rendering (the only place matplotlib is
   imported); :mod:`epa.outputs.recording`: Rerun recordings.
 - :mod:`epa.outputs.provenance`: what made a results folder; :mod:`epa.outputs.paper`: results/paper/.
+- :mod:`epa.outputs.parallel`: the once-per-grid scripts' work in forked processes.
 """
 
-__all__ = ["case_report", "figures", "paper", "provenance", "recording", "report", "tables"]
+__all__ = [
+    "case_report",
+    "figures",
+    "paper",
+    "parallel",
+    "provenance",
+    "recording",
+    "report",
+    "tables",
+]

@@ -9,6 +9,7 @@ figure's bundle in ``bundles/<name>.json``, and ``<run>.zip`` (every artifact pl
 from __future__ import annotations
 
 import csv
+import functools
 import hashlib
 import io as _io
 import json
@@ -20,7 +21,7 @@ import numpy as np
 from epa.artifacts import files as io
 from epa.artifacts.case import CaseData, CaseFolder
 from epa.metrics.accuracy import segment_key
-from epa.outputs import case_report, figures, tables
+from epa.outputs import case_report, figures, parallel, tables
 
 CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")
 GRID_FIGURES = ("ate", "success_rate", "success_curve", "drift_rate", "rmse_time")
@@ -404,15 +405,7 @@ def write_grid_figures(results_dir, segments, style: str = "wide", workers: int 
     ).items():
         figures.write_bundle(results_dir / "figures" / "bundles" / f"{name}.json", b)
         jobs.append((b, results_dir / "figures" / name))
-    workers = max(1, min(workers, len(jobs)))
-    if workers == 1:
-        return [path for b, stem in jobs for path in figures.render(b, stem, style=style)]
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-    from functools import partial
-
-    figures.prepare(style)  # matplotlib imported once, before the fork
-    draw = partial(figures.render, style=style)
-    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
-        done = pool.map(draw, *zip(*jobs))
-        return [path for paths in done for path in paths]
+    if workers > 1:
+        figures.prepare(style)  # matplotlib imported once, before the fork
+    draw = functools.partial(figures.render, style=style)
+    return [path for paths in parallel.map_forked(draw, jobs, workers) for path in paths]

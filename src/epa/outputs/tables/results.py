@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 from epa.artifacts.case import Case, CaseFolder
 from epa.core.errors import EpaError
+from epa.outputs import parallel
 
 
 def has_result(status: str) -> bool:
@@ -53,17 +54,11 @@ def collect(keys: list[str], results_dir, workers: int = 1) -> list[CaseResult]:
     """Read every case's artifacts (``<results_dir>/cases/<algorithm>/<dataset>/<run>/``), in the
     order of ``keys``. ``workers`` > 1 reads contiguous shares of a large grid in forked processes:
     reading is most of the tables rule, the grid's serial tail (10 of 15 s on 1,000 cases)."""
-    workers = min(workers, len(keys) // (PARALLEL_FROM_CASES // 2))
-    if workers <= 1:
+    if workers <= 1 or len(keys) < PARALLEL_FROM_CASES:
         return _collect(keys, results_dir)
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
     step = -(-len(keys) // workers)
-    shares = [keys[k : k + step] for k in range(0, len(keys), step)]
-    with ProcessPoolExecutor(len(shares), mp_context=multiprocessing.get_context("fork")) as pool:
-        parts = pool.map(_collect, shares, [results_dir] * len(shares))
-        return [c for part in parts for c in part]
+    shares = [(keys[k : k + step], results_dir) for k in range(0, len(keys), step)]
+    return [c for part in parallel.map_forked(_collect, shares, workers) for c in part]
 
 
 def _collect(keys: list[str], results_dir) -> list[CaseResult]:
