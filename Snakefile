@@ -25,6 +25,7 @@ rule all:
 
 
 onsuccess:
+    quick_exit()
     if os.path.exists(
         f"{RESULTS}/summary.csv"
     ):  # not after a run of some stages only
@@ -33,3 +34,7 @@ onsuccess:
         print(
             failures or f"epica: every case has a result ({len(CASE_BY_KEY)} cases)"
         )
+
+
+onerror:
+    quick_exit()

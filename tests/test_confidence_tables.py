@@ -52,6 +52,16 @@ def test_mann_whitney_and_ranks_equal_scipy_bit_for_bit(rng):
     assert statistics.mann_whitney([1.0, 1.0], [1.0, 1.0]) == 1.0  # nothing to rank apart
 
 
+def test_binomial_equals_scipy_bit_for_bit():
+    """The exact Mann-Whitney p divides by C(n1 + n2, n1) as scipy.special.binom computes it (its
+    float loop below k = 20, its own formula beyond), without importing scipy.special."""
+    from scipy import special
+
+    for n in range(0, 600):
+        for k in range(0, min(n, 40) + 1):
+            assert statistics._binom(n, k) == float(special.binom(n, k)), (n, k)
+
+
 def read_summary(path):
     with open(path, newline="") as fh:
         return list(csv.DictReader(fh))
