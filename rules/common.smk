@@ -171,6 +171,11 @@ def workers():
     return max(1, min(cores, epa_cluster.usable_cpus()))
 
 
+# The worker pool's fork server starts now, so that its imports overlap the DAG's construction.
+if workers() > 1:
+    epa_jobs.warm_up()
+
+
 # Inside a cluster job (a `--mode remote` Snakemake; with the slurm executor, the job-step process
 # that runs a submission's jobs) every job of the submission runs in this process, in threads, as a
 # local rule, instead of each under `srun` in a Snakemake of its own: one interpreter per submission.
@@ -199,6 +204,7 @@ def quick_exit():
     import gc
     import threading
 
+    epa_jobs.close_pool()
     for thread in threading.enumerate():
         if isinstance(thread, threading.Timer):
             thread.cancel()
