@@ -171,8 +171,10 @@ def workers():
     return max(1, min(cores, epa_cluster.usable_cpus()))
 
 
-# The worker pool's fork server starts now, so that its imports overlap the DAG's construction.
-if workers() > 1:
+# The worker pool's fork server starts now, so that its imports overlap the DAG's construction:
+# where this process runs the jobs (no --jobs: a local run; or a cluster job). A dry run cannot be
+# told apart yet: it starts one too, which ends with it.
+if workers() > 1 and (workflow.remote_exec or workflow.nodes is None):
     epa_jobs.warm_up()
 
 

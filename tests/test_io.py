@@ -98,3 +98,41 @@ def test_okvis_unpadded_nsec_repair(data):
         text.read_trajectory(p)
     t = text.read_trajectory(p, time_unit="sec_nsec")
     assert np.all(np.diff(t.t) > 0) and abs(t.t[-1] - t.t[0] - 184.07) < 0.01
+
+
+ROWS = "\n".join(f"{1e9 + k * 0.01:.6f} {k * 0.1:.4f} 0.5 0.25 0 0 0 1" for k in range(300))
+FAST_PATH_CASES = {
+    "header": "# t x y z qx qy qz qw\n" + ROWS + "\n",
+    "crlf": ("# t x y z qx qy qz qw\n" + ROWS + "\n").replace("\n", "\r\n"),
+    "tabs": ROWS.replace(" ", "\t"),
+    "trailing spaces": ROWS.replace("\n", " \n"),
+    "bad token": ROWS.replace("0.25 0 0 0 1\n", "0.25 0 0 x 1\n", 1),
+    "short row": ROWS.replace("0.25 0 0 0 1\n", "0.25 0 0 1\n", 9),
+    "nan": ROWS.replace("0.25 0 0 0 1\n", "nan 0 0 0 1\n", 3),
+    "comment mid-file": ROWS.replace("0.25 0 0 0 1\n", "0.25 0 0 0 1\n# mid\n", 5),
+    "repeated stamp": ROWS.replace("1000000000.010000", "1000000000.000000", 1),
+    "named csv": "t,x,y,z,qx,qy,qz,qw\n" + ROWS.replace(" ", ",") + "\n",
+    "utf-8 comment": "# café t x y z qx qy qz qw\n" + ROWS + "\n",
+}
+
+
+@pytest.mark.parametrize("name", sorted(FAST_PATH_CASES))
+def test_c_parser_fast_path_reads_as_the_general_path(tmp_path, monkeypatch, name):
+    """With pandas imported, a file goes whole to its C parser without its body being decoded
+    (text._read_in_c); the trajectory, the notes and every error (with its line) are the general
+    reader's, bit for bit."""
+    pytest.importorskip("pandas")
+    path = tmp_path / "f.txt"
+    path.write_bytes(FAST_PATH_CASES[name].encode())
+
+    def read():
+        notes: list = []
+        try:
+            tr = text.read_trajectory(path, notes=notes)
+        except EpaError as exc:
+            return str(exc)
+        return [a.tobytes() for a in (tr.t, tr.p, tr.q)] + notes
+
+    fast = read()
+    monkeypatch.setattr(text, "_read_in_c", lambda path, data: (None, False))
+    assert read() == fast

@@ -107,7 +107,7 @@ def read_table(path: Path) -> _Table:
     except OSError as exc:
         raise EpaError(f"cannot read: {exc.strerror}", path=str(path)) from None
     _check_text(path, data[:4096])
-    whole = _read_in_c(path, data)
+    whole, refused = _read_in_c(path, data)
     if whole is not None:
         return whole
     try:
@@ -124,39 +124,39 @@ def read_table(path: Path) -> _Table:
     if found[0] == len(raw) and len(text) > HEAD_CHARS:  # comments beyond the head: whole file
         raw = text.splitlines(keepends=True)
         found = _scan_header(path, raw)
-    return _read_body(path, text, raw, found, raw_bytes)
+    return _read_body(path, text, raw, found, raw_bytes, try_c_parser=not refused)
 
 
 HEAD_CHARS = 1 << 16
 
 
-def _read_in_c(path: Path, data: bytes) -> _Table | None:
+def _read_in_c(path: Path, data: bytes) -> tuple[_Table | None, bool]:
     """A file the C parser takes whole, read without decoding or copying its body (0.4 s of a
     million-pose file's 1.3 s): only the head is decoded, to find the header; the body's text is
-    decoded only if a later check names a line. None wherever the general path must decide (a
-    byte-order mark, comments beyond the head, anything the C parser refuses), which then reads the
-    file as before and says what is wrong."""
+    decoded only if a later check names a line. (None, refused) wherever the general path must
+    decide (a byte-order mark, comments beyond the head, a body the C parser refused: ``refused``,
+    so that it is not parsed again), which then reads the file as before and says what is wrong."""
     if not _c_parser_wanted(len(data)) or data.startswith(b"\xef\xbb\xbf"):
-        return None
+        return None, False
     head = data[:HEAD_CHARS]
     try:
         head_text = head.decode("utf-8")
     except UnicodeDecodeError as exc:  # a character cut by the head's end is fine; else not here
         if len(data) <= HEAD_CHARS or exc.start < len(head) - 3:
-            return None
+            return None, False
         head_text = head[: exc.start].decode("utf-8")
     raw = head_text.splitlines(keepends=True)
     if len(data) > HEAD_CHARS:
         raw = raw[:-1]  # the last line of the head may be cut
     start, header, header_line = _scan_header(path, raw)
     if start == len(raw) or (";" in raw[start] and "," in raw[start]):
-        return None
+        return None, False
     offset = len("".join(raw[:start]).encode("utf-8"))
     rows = _c_parser_rows(data, offset, len(_split(raw[start])))
     if rows is None:
-        return None
+        return None, True
     tab = _Table(path, np.zeros((0, 0)), (data, offset), start + 1, header)
-    return _checked(tab, rows, header, header_line)
+    return _checked(tab, rows, header, header_line), False
 
 
 def _scan_header(path: Path, raw: list[str]):
@@ -189,7 +189,9 @@ def _scan_header(path: Path, raw: list[str]):
     return start, header, header_line
 
 
-def _read_body(path: Path, text: str, raw: list[str], found, raw_bytes=None) -> _Table:
+def _read_body(
+    path: Path, text: str, raw: list[str], found, raw_bytes=None, try_c_parser: bool = True
+) -> _Table:
     """``raw_bytes``: the file's bytes as ``text`` decodes (None after a decoding error): the C
     parser takes the body's bytes from it, not re-encoded from the text (0.2 s a million poses)."""
     start, header, header_line = found
@@ -204,7 +206,10 @@ def _read_body(path: Path, text: str, raw: list[str], found, raw_bytes=None) -> 
             line=start + 1,
         )
     tab = _Table(path, np.zeros((0, 0)), body_text, start + 1, header)
-    if raw_bytes is None:
+    rows = None
+    if not try_c_parser or not _c_parser_wanted(len(body_text)):
+        pass
+    elif raw_bytes is None:
         rows = _c_parser_rows(body_text.encode("utf-8"), 0, len(_split(first)))
     else:
         rows = _c_parser_rows(raw_bytes, len(head.encode("utf-8")), len(_split(first)))
