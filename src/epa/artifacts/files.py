@@ -233,8 +233,12 @@ def _numbers(path, delimiter: str, skip: int) -> np.ndarray:
             )
         except pd.errors.EmptyDataError:  # a header and no rows is an empty table
             return np.zeros((0, 0))
-        # row-major like loadtxt's: numpy's sums over a column depend on the memory layout
-        return np.ascontiguousarray(frame.to_numpy()).reshape(len(frame), -1)
+        # row-major like loadtxt's: numpy's sums over a column depend on the memory layout (filled
+        # column by column: one copy where to_numpy() and a contiguous copy of it were two)
+        rows = np.empty(frame.shape)
+        for k in range(frame.shape[1]):
+            rows[:, k] = frame.iloc[:, k].to_numpy()
+        return rows.reshape(len(frame), -1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # a header and no rows: an empty table
         return np.loadtxt(
