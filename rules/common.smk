@@ -163,10 +163,11 @@ STAGE_RESOURCES = {
 def workers():
     """Worker processes for in-process jobs: the cores Snakemake was given, and no more than this
     process may use: a cluster job is started with --cores all (the node's), but gets its
-    allocation; without --cores (e.g. a remote job) one, in the calling thread."""
+    allocation; without --cores (e.g. a remote job, or `snakemake --report`, where Snakemake
+    refuses the question) one, in the calling thread."""
     try:
         cores = int(workflow.cores)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, WorkflowError):
         return 1
     return max(1, min(cores, epa_cluster.usable_cpus()))
 

@@ -455,3 +455,21 @@ def test_bag_grid_with_per_source_settings(tmp_path):
     assert loads == ["bagged_office_ros1_run1"] or (loads and all("bagged" in b for b in loads)), (
         loads
     )
+
+
+def test_commands_without_cores_parse_the_workflow(tmp_path):
+    """`snakemake --unlock` and `--report` give no --cores, and Snakemake refuses `workflow.cores`
+    then: the Snakefile's parse-time code (the worker pool's warm-up) must take that as one core,
+    not stop the command (CI's `snakemake --report` found it)."""
+    (tmp_path / "cfg.yaml").write_text(
+        f"truth_dir: {ROOT / 'example/truth'}\nalgorithms_dir: {ROOT / 'example/algorithms'}\n"
+        f"results_dir: {tmp_path / 'results'}\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--unlock"]
+        + ["--directory", str(tmp_path), "--configfile", str(tmp_path / "cfg.yaml")],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0 and "Unlocked" in out.stdout + out.stderr, out.stdout + out.stderr
