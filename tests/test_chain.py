@@ -189,3 +189,22 @@ def test_every_rule_declares_log_benchmark_threads_and_resources():
                 assert "timing_path=batch_timing(" in common
                 continue
             assert declared == rules_here, (smk.name, directive)
+
+
+def test_values_let_go_are_read_by_no_later_stage():
+    """run_case drops a trajectory after the last stage that reads it (chain.LAST_READER): no later
+    stage module, nor the report or the recording, may read it (in `epa eval` without --artifacts
+    there is no file to read it back from)."""
+    import inspect
+    import re
+
+    from epa.outputs import recording, report
+    from epa.workflow import chain
+
+    order = {name: k for k, name in enumerate(chain.NAMES)}
+    for slot, last in chain.LAST_READER.items():
+        uses = re.compile(rf"\.{slot}\b")
+        readers = [s.NAME for s in chain.STAGES if uses.search(inspect.getsource(s))]
+        assert readers and max(readers, key=order.get) == last, (slot, readers)
+        for module in (report, recording):
+            assert not uses.search(inspect.getsource(module)), (slot, module.__name__)

@@ -271,6 +271,11 @@ class CaseData:
         """Whether ``name`` is already in memory (set by a stage or read before)."""
         return "_" + name in self.__dict__
 
+    def forget(self, *names: str) -> None:
+        """Let values go that no later stage reads (read again from the case folder if one did)."""
+        for name in names:
+            self.__dict__.pop("_" + name, None)
+
     # load
     loaded = _slot("loaded", lambda s: (s.f.tum("load", "ref.tum"), s.f.tum("load", "est.tum")))
     load_record = _slot("load_record", lambda s: s.f.record("load", "load.json"))
