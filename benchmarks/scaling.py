@@ -71,7 +71,7 @@ def make_pair(folder: Path, n: int) -> tuple[Path, Path]:
     files.write_trajectory(folder / "est.txt", est, "openvins")
     ms = 20.0 * np.exp(rng.normal(0, 0.2, n))  # <run>_timing.txt: stamp and milliseconds per frame
     files.write_text(
-        folder / "est_timing.txt",
+        timing_path(folder / "est.txt"),
         "".join(f"{a:.6f} {b:.3f}\n" for a, b in zip(est.t, ms)),
     )
     return folder / "ref.txt", folder / "est.txt"
@@ -92,12 +92,17 @@ def stage_times(ref_path, est_path, out: Path, cfg: dict, artifacts: bool) -> di
     return times
 
 
+def timing_path(est_path: Path) -> Path:
+    """The estimate's timing file by the naming rule the load stage follows (<run>_timing.txt)."""
+    return est_path.with_name(est_path.stem + "_timing.txt")
+
+
 def c_parser_floor(ref_path, est_path) -> float:
     """pandas' C parser on the files the load stage reads: both trajectories and the timing file."""
     import pandas as pd
 
     t0 = CLOCK()
-    for p in (ref_path, est_path, est_path.with_name(est_path.stem + "_timing.txt")):
+    for p in (ref_path, est_path, timing_path(est_path)):
         pd.read_csv(p, sep=" ", header=None, comment="#", engine="c").to_numpy()
     return CLOCK() - t0
 

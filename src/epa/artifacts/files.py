@@ -14,7 +14,7 @@ import numpy as np
 
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
-from epa.readers.text import FORMATS, upper_to_full
+from epa.readers.text import FORMATS, frame_rows, upper_to_full
 
 # ----------------------------------------------------------------------------- artifacts
 _UMASK = os.umask(0o022)
@@ -233,12 +233,7 @@ def _numbers(path, delimiter: str, skip: int) -> np.ndarray:
             )
         except pd.errors.EmptyDataError:  # a header and no rows is an empty table
             return np.zeros((0, 0))
-        # row-major like loadtxt's: numpy's sums over a column depend on the memory layout (filled
-        # column by column: one copy where to_numpy() and a contiguous copy of it were two)
-        rows = np.empty(frame.shape)
-        for k in range(frame.shape[1]):
-            rows[:, k] = frame.iloc[:, k].to_numpy()
-        return rows.reshape(len(frame), -1)
+        return frame_rows(frame).reshape(len(frame), -1)  # row-major, like loadtxt's
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # a header and no rows: an empty table
         return np.loadtxt(

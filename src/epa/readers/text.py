@@ -116,10 +116,7 @@ def read_table(path: Path) -> _Table:
         text, raw_bytes = data.decode("utf-8", errors="replace"), None
     if text.startswith("\ufeff"):  # a byte-order mark (spreadsheet exports) is not part of the data
         text, raw_bytes = text[1:], None if raw_bytes is None else raw_bytes[3:]
-    # the header is in the first lines: split only those (the whole file is split only on error)
-    raw = text[:HEAD_CHARS].splitlines(keepends=True)
-    if len(text) > HEAD_CHARS:
-        raw = raw[:-1]  # the last line of the head may be cut
+    raw = _head_lines(text, len(text) > HEAD_CHARS)
     found = _scan_header(path, raw)
     if found[0] == len(raw) and len(text) > HEAD_CHARS:  # comments beyond the head: whole file
         raw = text.splitlines(keepends=True)
@@ -128,6 +125,13 @@ def read_table(path: Path) -> _Table:
 
 
 HEAD_CHARS = 1 << 16
+
+
+def _head_lines(text: str, cut: bool) -> list[str]:
+    """The header is in the first lines: only those are split (the whole file only on error).
+    ``cut``: the file goes on beyond ``text[:HEAD_CHARS]``, whose last line may be incomplete."""
+    raw = text[:HEAD_CHARS].splitlines(keepends=True)
+    return raw[:-1] if cut else raw
 
 
 def _read_in_c(path: Path, data: bytes) -> tuple[_Table | None, bool]:
@@ -145,9 +149,7 @@ def _read_in_c(path: Path, data: bytes) -> tuple[_Table | None, bool]:
         if len(data) <= HEAD_CHARS or exc.start < len(head) - 3:
             return None, False
         head_text = head[: exc.start].decode("utf-8")
-    raw = head_text.splitlines(keepends=True)
-    if len(data) > HEAD_CHARS:
-        raw = raw[:-1]  # the last line of the head may be cut
+    raw = _head_lines(head_text, len(data) > HEAD_CHARS)
     start, header, header_line = _scan_header(path, raw)
     if start == len(raw) or (";" in raw[start] and "," in raw[start]):
         return None, False
@@ -207,12 +209,13 @@ def _read_body(
         )
     tab = _Table(path, np.zeros((0, 0)), body_text, start + 1, header)
     rows = None
-    if not try_c_parser or not _c_parser_wanted(len(body_text)):
-        pass
-    elif raw_bytes is None:
-        rows = _c_parser_rows(body_text.encode("utf-8"), 0, len(_split(first)))
-    else:
-        rows = _c_parser_rows(raw_bytes, len(head.encode("utf-8")), len(_split(first)))
+    if try_c_parser and _c_parser_wanted(len(body_text)):  # (a body is encoded only if so)
+        data, offset = (
+            (body_text.encode("utf-8"), 0)
+            if raw_bytes is None
+            else (raw_bytes, len(head.encode("utf-8")))
+        )
+        rows = _c_parser_rows(data, offset, len(_split(first)))
     if rows is not None:
         return _checked(tab, rows, header, header_line)
     body = body_text.splitlines()
@@ -285,15 +288,21 @@ def _c_parser_rows(data: bytes, offset: int, width: int) -> np.ndarray | None:
             continue
         if frame.shape[1] != width:
             continue
-        # row-major, as the rest expects, filled column by column: one copy where to_numpy() and
-        # a contiguous copy of it were two (0.4 s and 160 MB for a million poses with covariance)
-        rows = np.empty(frame.shape)
-        for k in range(width):
-            rows[:, k] = frame.iloc[:, k].to_numpy()
+        rows = frame_rows(frame)
         # a short line reads as NaN: the line-by-line reader names it
         if np.isfinite(rows).all():
             return rows
     return None
+
+
+def frame_rows(frame) -> np.ndarray:
+    """A pandas frame's numbers, row-major as the rest expects (numpy's sums over a column depend on
+    the memory layout), filled column by column: one copy where to_numpy() and a contiguous copy of
+    it were two (0.4 s and 160 MB for a million poses with covariance)."""
+    rows = np.empty(frame.shape)
+    for k in range(frame.shape[1]):
+        rows[:, k] = frame.iloc[:, k].to_numpy()
+    return rows
 
 
 # Files that are not text trajectories, by their first bytes: say what they are.
