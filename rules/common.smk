@@ -19,6 +19,26 @@ from epa.workflow import (
 )
 from epa.workflow import cluster as epa_cluster, settings as epa_settings
 
+
+def workers():
+    """Worker processes for in-process jobs: the cores Snakemake was given, and no more than this
+    process may use: a cluster job is started with --cores all (the node's), but gets its
+    allocation; without --cores (e.g. a remote job, or `snakemake --report`, where Snakemake
+    refuses the question) one, in the calling thread."""
+    try:
+        cores = int(workflow.cores)
+    except (TypeError, ValueError, WorkflowError):
+        return 1
+    return max(1, min(cores, epa_cluster.usable_cpus()))
+
+
+# The worker pool's fork server starts first of all, so that its imports overlap the parse and the
+# DAG's construction, where this process runs the jobs (no --jobs: a local run; or a cluster job). A
+# dry run cannot be told apart yet: it starts one too, which ends with it.
+if workers() > 1 and (workflow.remote_exec or workflow.nodes is None):
+    epa_jobs.warm_up()
+
+
 try:  # a mistake in the config or the folders is one line, not a traceback
     epa_settings.check_user_configs(
         workflow.overwrite_configfiles, workflow.config_settings.overwrite_config
@@ -158,25 +178,6 @@ STAGE_RESOURCES = {
     "mem_mb": lambda wc: 1000 + 20 * len(BATCHES[wc.batch]),
     "runtime": lambda wc: 2 + len(BATCHES[wc.batch]) // 20,
 }
-
-
-def workers():
-    """Worker processes for in-process jobs: the cores Snakemake was given, and no more than this
-    process may use: a cluster job is started with --cores all (the node's), but gets its
-    allocation; without --cores (e.g. a remote job, or `snakemake --report`, where Snakemake
-    refuses the question) one, in the calling thread."""
-    try:
-        cores = int(workflow.cores)
-    except (TypeError, ValueError, WorkflowError):
-        return 1
-    return max(1, min(cores, epa_cluster.usable_cpus()))
-
-
-# The worker pool's fork server starts now, so that its imports overlap the DAG's construction:
-# where this process runs the jobs (no --jobs: a local run; or a cluster job). A dry run cannot be
-# told apart yet: it starts one too, which ends with it.
-if workers() > 1 and (workflow.remote_exec or workflow.nodes is None):
-    epa_jobs.warm_up()
 
 
 # Inside a cluster job (a `--mode remote` Snakemake; with the slurm executor, the job-step process

@@ -208,3 +208,29 @@ def test_values_let_go_are_read_by_no_later_stage():
         assert readers and max(readers, key=order.get) == last, (slot, readers)
         for module in (report, recording):
             assert not uses.search(inspect.getsource(module)), (slot, module.__name__)
+
+
+def test_pool_workers_do_not_rerun_the_main_script(tmp_path):
+    """multiprocessing re-runs the parent's main script in every new worker; under Snakemake's
+    console script that is an import of its whole command line before the first job's work. The
+    pool's workers leave it out; any other process keeps it (the control)."""
+    import subprocess
+    import sys
+
+    marker = tmp_path / "imported"
+    script = tmp_path / "main_script.py"
+    script.write_text(
+        "import os, sys\n"
+        "if __name__ == '__mp_main__':\n"
+        f"    open({str(marker)!r}, 'a').write(sys.argv[-1] + '\\n')\n"
+        "if __name__ == '__main__':\n"
+        "    import multiprocessing\n"
+        "    from epa.workflow import jobs\n"
+        "    print(jobs.call(2, os.getpid))\n"
+        "    jobs.close_pool()\n"
+        "    ctx = multiprocessing.get_context('forkserver')\n"
+        "    p = ctx.Process(target=os.getpid)\n"
+        "    p.start(); p.join()\n"
+    )
+    subprocess.run([sys.executable, str(script)], check=True, capture_output=True, cwd=tmp_path)
+    assert marker.read_text().count("\n") == 1  # the plain process only

@@ -136,3 +136,32 @@ def test_c_parser_fast_path_reads_as_the_general_path(tmp_path, monkeypatch, nam
     fast = read()
     monkeypatch.setattr(text, "_read_in_c", lambda path, data: (None, False))
     assert read() == fast
+
+
+def test_artifact_text_is_np_savetxt_byte_for_byte():
+    """Stage artifacts are written by files.savetxt (whole-number columns such as indices and flags
+    with %d, the rest with %.17g, a block of rows at a time): the bytes must be np.savetxt's with
+    %.17g, including -0, nan, inf and integers at the edge of exact float representation."""
+    import io
+
+    from epa.artifacts import files
+
+    rng = np.random.default_rng(7)
+    edge = [0.0, -0.0, 1.0, -3.0, 2.0**53, 2.0**53 - 1, -(2.0**53 - 1), 1e16, 1e17, np.nan, np.inf]
+    for _ in range(300):
+        n, m = rng.integers(1, 40), rng.integers(1, 6)
+        table = rng.normal(size=(n, m)) * 10.0 ** rng.integers(-5, 18)
+        for k in range(m):
+            kind = rng.integers(0, 5)
+            if kind == 0:
+                table[:, k] = np.round(table[:, k])
+            elif kind == 1:
+                table[:, k] = rng.integers(-1000, 1000, n)
+            elif kind == 2:
+                table[:, k] = rng.choice(edge, n)
+        for kw in ({}, {"delimiter": ",", "header": "a,b", "comments": ""}):
+            expected = io.BytesIO()
+            np.savetxt(expected, table, fmt="%.17g", **kw)
+            written = io.StringIO()
+            files.savetxt(written, table, **kw)
+            assert written.getvalue() == expected.getvalue().decode()

@@ -127,13 +127,36 @@ def savetxt(fh, data, fmt: str = EXACT, delimiter: str = " ", header: str = "", 
         return np.savetxt(fh, data, fmt=fmt, delimiter=delimiter, header=header, comments=comments)
     if header:
         fh.write(comments + header.replace("\n", "\n" + comments) + "\n")
-    row = delimiter.join([fmt] * data.shape[1]) + "\n"
+    whole = _whole_columns(data) if fmt == EXACT else np.zeros(data.shape[1], dtype=bool)
+    row = delimiter.join(["%d" if w else fmt for w in whole]) + "\n"
     for lo in range(0, len(data), ROWS_PER_BLOCK):
         block = data[lo : lo + ROWS_PER_BLOCK]
-        fh.write((row * len(block)) % tuple(block.ravel().tolist()))
+        if whole.any():
+            cells = np.empty(block.shape, dtype=object)
+            for k, w in enumerate(whole):
+                cells[:, k] = (block[:, k].astype(np.int64) if w else block[:, k]).tolist()
+            values = cells.ravel().tolist()
+        else:
+            values = block.ravel().tolist()
+        fh.write((row * len(block)) % tuple(values))
 
 
 ROWS_PER_BLOCK = 8192  # a few MB of text at a time
+
+
+def _whole_columns(data: np.ndarray) -> np.ndarray:
+    """The columns of whole numbers (indices, flags), which ``%d`` of an int writes as ``%.17g`` of
+    the float does, 10x faster: every value integral, below 2**53 and not -0 (which %.17g keeps)."""
+    return np.array(
+        [
+            len(c) > 0
+            and bool(
+                np.all((np.abs(c) < 2.0**53) & (c == np.floor(c)) & ((c != 0) | ~np.signbit(c)))
+            )
+            for c in data.T
+        ],
+        dtype=bool,
+    )
 
 
 def _cov_columns(traj: Trajectory) -> np.ndarray | None:

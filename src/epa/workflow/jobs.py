@@ -23,6 +23,7 @@ import traceback
 import warnings
 import zlib
 from contextlib import contextmanager
+from multiprocessing import context, spawn
 from pathlib import Path
 
 from epa.artifacts import files as io
@@ -171,14 +172,39 @@ _POOL = None
 _POOL_LOCK = threading.Lock()
 
 
-def _context():
-    import multiprocessing
+class EpaWorker(context.ForkServerProcess):
+    """A pool worker (named EpaWorker-N, which :func:`_without_main_module` recognises)."""
 
+
+class EpaContext(context.ForkServerContext):
     # forkserver: Snakemake's process has threads, which fork() must not copy
-    ctx = multiprocessing.get_context("forkserver")
+    Process = EpaWorker
+
+
+def _context():
+    if not getattr(spawn.get_preparation_data, "epa_without_main", False):
+        spawn.get_preparation_data = _without_main_module(spawn.get_preparation_data)
+    ctx = EpaContext()
     # pandas: its C parser reads the artifacts (epa.artifacts.files); imported once here
     ctx.set_forkserver_preload(["epa.workflow.jobs", "pandas"])
     return ctx
+
+
+def _without_main_module(get_preparation_data):
+    """multiprocessing re-runs the parent's main script in each new worker, so that functions
+    defined there can be unpickled. Under the ``snakemake`` console script that is an import of
+    Snakemake's whole command line (1-2.5 s per worker, before the first job's work). A worker runs
+    epa's functions only, so its preparation leaves the main module out; other processes keep it."""
+
+    def prepared(name):
+        data = get_preparation_data(name)
+        if name.startswith(EpaWorker.__name__ + "-"):
+            data.pop("init_main_from_path", None)
+            data.pop("init_main_from_name", None)
+        return data
+
+    prepared.epa_without_main = True
+    return prepared
 
 
 def warm_up() -> None:
