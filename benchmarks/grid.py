@@ -29,7 +29,14 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("EPA_SHARED_DATA", ROOT.parent / "shared" / "data"))
-SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile")]
+# the `snakemake` command users run (its console script, not `python -m snakemake`: multiprocessing
+# treats the two differently in the worker pool, see epa.workflow.jobs._without_main_module)
+_CONSOLE = Path(sys.executable).with_name("snakemake")
+SNAKEMAKE = [
+    *([str(_CONSOLE)] if _CONSOLE.exists() else [sys.executable, "-m", "snakemake"]),
+    "-s",
+    str(ROOT / "Snakefile"),
+]
 
 
 def run(cmd, cwd=None, check=True) -> tuple[float, int, str]:
