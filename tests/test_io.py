@@ -100,6 +100,7 @@ def test_okvis_unpadded_nsec_repair(data):
     assert np.all(np.diff(t.t) > 0) and abs(t.t[-1] - t.t[0] - 184.07) < 0.01
 
 
+COV_HEADER = "# t x y z qx qy qz qw pr11 pr12 pr13 pr22 pr23 pr33 pt11 pt12 pt13 pt22 pt23 pt33\n"
 ROWS = "\n".join(f"{1e9 + k * 0.01:.6f} {k * 0.1:.4f} 0.5 0.25 0 0 0 1" for k in range(300))
 FAST_PATH_CASES = {
     "header": "# t x y z qx qy qz qw\n" + ROWS + "\n",
@@ -113,6 +114,17 @@ FAST_PATH_CASES = {
     "repeated stamp": ROWS.replace("1000000000.010000", "1000000000.000000", 1),
     "named csv": "t,x,y,z,qx,qy,qz,qw\n" + ROWS.replace(" ", ",") + "\n",
     "utf-8 comment": "# café t x y z qx qy qz qw\n" + ROWS + "\n",
+    # whole-number columns are parsed as integers first (c_parser_doubles): -0 and stamps beyond
+    # 2**53 must still come out as the float parse gives them
+    "-0 in a whole-number column": "\n".join(
+        f"{1e9 + k * 0.01:.6f} {k % 3 - 1 if k % 7 else '-0'} 0.5 0.25 0 0 0 1" for k in range(300)
+    ),
+    "-0 as the last token": COV_HEADER
+    + "\n".join(f"{1e9 + k * 0.01:.6f} 1 2 3 0 0 0 1 1 0 0 1 0 1 1 0 0 1 0 1" for k in range(300))
+    + "\n1000000003.000000 1 2 3 0 0 0 1 1 0 0 1 0 1 1 0 0 1 0 -0",
+    "nanosecond stamps beyond 2**53": "\n".join(
+        f"{1403636579763555584 + k * 10_000_001} {k * 0.1:.4f} 0.5 0.25 0 0 0 1" for k in range(300)
+    ),
 }
 
 
@@ -120,7 +132,7 @@ FAST_PATH_CASES = {
 def test_c_parser_fast_path_reads_as_the_general_path(tmp_path, monkeypatch, name):
     """With pandas imported, a file goes whole to its C parser without its body being decoded
     (text._read_in_c); the trajectory, the notes and every error (with its line) are the general
-    reader's, bit for bit."""
+    reader's, and the line-by-line reader's, bit for bit."""
     pytest.importorskip("pandas")
     path = tmp_path / "f.txt"
     path.write_bytes(FAST_PATH_CASES[name].encode())
@@ -131,17 +143,20 @@ def test_c_parser_fast_path_reads_as_the_general_path(tmp_path, monkeypatch, nam
             tr = text.read_trajectory(path, notes=notes)
         except EpaError as exc:
             return str(exc)
-        return [a.tobytes() for a in (tr.t, tr.p, tr.q)] + notes
+        covariance = [c.tobytes() for c in (tr.cov_rot, tr.cov_pos) if c is not None]
+        return [a.tobytes() for a in (tr.t, tr.p, tr.q)] + covariance + notes
 
     fast = read()
     monkeypatch.setattr(text, "_read_in_c", lambda path, data: (None, False))
     assert read() == fast
+    monkeypatch.setattr(text, "_c_parser_rows", lambda data, offset, width: None)
+    assert read() == fast  # and the line-by-line reader's
 
 
 def test_artifact_text_is_np_savetxt_byte_for_byte():
-    """Stage artifacts are written by files.savetxt (whole-number columns such as indices and flags
-    with %d, the rest with %.17g, a block of rows at a time): the bytes must be np.savetxt's with
-    %.17g, including -0, nan, inf and integers at the edge of exact float representation."""
+    """Stage artifacts are written by files.savetxt (a block of rows formatted at a time): the bytes
+    must be np.savetxt's with %.17g, including -0, nan, inf and integers at the edge of exact float
+    representation."""
     import io
 
     from epa.artifacts import files

@@ -275,24 +275,65 @@ def _c_parser_rows(data: bytes, offset: int, width: int) -> np.ndarray | None:
         return None
     if offset >= len(data) or width == 0 or any(data.find(c, offset) >= 0 for c in b",;#%"):
         return None
-    import io
-
     import pandas as pd
 
     for sep in (" ", r"\s+"):  # one space (most files: the fastest path), else any whitespace
-        body = io.BytesIO(data)  # shares the bytes; the parser reads from the body's start
-        body.seek(offset)
         try:
-            frame = pd.read_csv(body, sep=sep, header=None, dtype=float, engine="c")
+            rows = c_parser_doubles(data, offset, sep=sep, header=None, engine="c")
         except (ValueError, pd.errors.ParserError):
             continue
-        if frame.shape[1] != width:
+        if rows.shape[1] != width:
             continue
-        rows = frame_rows(frame)
         # a short line reads as NaN: the line-by-line reader names it
         if np.isfinite(rows).all():
             return rows
     return None
+
+
+def c_parser_doubles(data: bytes, offset: int = 0, **options) -> np.ndarray:
+    """``data[offset:]`` as a table of doubles by pandas' C parser (``options`` for read_csv),
+    row-major. The parser first reads it with the column types it infers, faster than with
+    ``dtype=float`` (30 % on columns of decimals, 2-3x on columns of whole numbers such as zero
+    covariance entries or indices); a column of whole numbers is taken as doubles where that is
+    bit for bit what the float parse gives: every value below 2**53, and no ``-0`` (read as +0) in
+    the text. Anything else is read again with ``dtype=float``, as before."""
+    import io
+
+    import pandas as pd
+
+    def parse(**dtype):
+        body = io.BytesIO(data)  # shares the bytes; the parser reads from the body's start
+        body.seek(offset)
+        return pd.read_csv(body, **options, **dtype)
+
+    frame = parse()
+    if _exact_as_doubles(frame, data):
+        return frame_rows(frame)
+    return frame_rows(parse(dtype=float))
+
+
+def _exact_as_doubles(frame, data: bytes) -> bool:
+    zeros = False
+    for k in range(frame.shape[1]):
+        column = frame.iloc[:, k]
+        if column.dtype == np.float64:
+            continue
+        if column.dtype != np.int64:
+            return False
+        values = column.to_numpy()
+        if len(values) and np.abs(values).max() >= 2**53:
+            return False
+        zeros = zeros or bool((values == 0).any())
+    return not (zeros and _negative_zero_token(data))
+
+
+# "-0" ending a token ("1e-0" matches too, which only costs the second parse); one regular
+# expression scans 50 MB in 0.07 s, where a byte search per separator took 0.08 s each
+_NEGATIVE_ZERO = re.compile(rb"-0(?:[ \t\r\n,]|\Z)")
+
+
+def _negative_zero_token(data: bytes) -> bool:
+    return _NEGATIVE_ZERO.search(data) is not None
 
 
 def frame_rows(frame) -> np.ndarray:
