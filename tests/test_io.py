@@ -100,6 +100,10 @@ def test_okvis_unpadded_nsec_repair(data):
     assert np.all(np.diff(t.t) > 0) and abs(t.t[-1] - t.t[0] - 184.07) < 0.01
 
 
+def _turning(angle: float) -> tuple[float, ...]:
+    return np.sin(angle) / 2, -np.sin(angle) / 3, np.sin(angle) / 5, np.cos(angle)
+
+
 COV_HEADER = "# t x y z qx qy qz qw pr11 pr12 pr13 pr22 pr23 pr33 pt11 pt12 pt13 pt22 pt23 pt33\n"
 ROWS = "\n".join(f"{1e9 + k * 0.01:.6f} {k * 0.1:.4f} 0.5 0.25 0 0 0 1" for k in range(300))
 FAST_PATH_CASES = {
@@ -122,6 +126,19 @@ FAST_PATH_CASES = {
     "-0 as the last token": COV_HEADER
     + "\n".join(f"{1e9 + k * 0.01:.6f} 1 2 3 0 0 0 1 1 0 0 1 0 1 1 0 0 1 0 1" for k in range(300))
     + "\n1000000003.000000 1 2 3 0 0 0 1 1 0 0 1 0 1 1 0 0 1 0 -0",
+    "-00 in a whole-number column": "\n".join(
+        f"{1e9 + k * 0.01:.6f} {k % 3 if k % 7 else '-00'} 0.5 0.25 0 0 0 1" for k in range(300)
+    ),
+    # more rows than pandas parses in one chunk: whole numbers in the first, decimals later
+    "-0 in whole numbers before the parser's next chunk of decimals": "\n".join(
+        f"{1e9 + k * 0.005:.6f} {k * 0.001:g} 0.5 0.25 "
+        + (
+            ("-0 0 0 1" if k == 10 else "0 0 0 1")
+            if k < 66_000
+            else " ".join(f"{v:g}" for v in _turning((k - 66_000) * 1e-4))
+        )
+        for k in range(70_000)
+    ),
     "nanosecond stamps beyond 2**53": "\n".join(
         f"{1403636579763555584 + k * 10_000_001} {k * 0.1:.4f} 0.5 0.25 0 0 0 1" for k in range(300)
     ),
@@ -180,3 +197,23 @@ def test_artifact_text_is_np_savetxt_byte_for_byte():
             written = io.StringIO()
             files.savetxt(written, table, **kw)
             assert written.getvalue() == expected.getvalue().decode()
+
+
+def test_artifact_numbers_keep_negative_zero_next_to_a_missing_value(tmp_path):
+    """An artifact column of whole numbers with -0 and a missing value: pandas' inferred parse
+    reads it as float after reading the -0 as an integer; files._numbers must give np.loadtxt's
+    doubles (the same as before the inferred parse), sign of zero included."""
+    pytest.importorskip("pandas")
+    from epa.artifacts import files
+
+    table = np.zeros((5000, 3))
+    table[:, 0] = np.arange(5000) * 0.1 + 0.05
+    table[:, 1] = np.arange(5000) % 4
+    table[7, 1], table[9, 1] = -0.0, np.nan
+    table[:, 2] = np.round(np.random.default_rng(0).normal(size=5000), 3)
+    path = tmp_path / "a.csv"
+    files.write_csv(path, {"a": table[:, 0], "b": table[:, 1], "c": table[:, 2]})
+    assert path.stat().st_size >= files.PANDAS_FROM_BYTES  # the C parser's path
+    read = files._numbers(path, ",", 1)
+    expected = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    assert read.tobytes() == expected.tobytes() and np.signbit(read[7, 1])
