@@ -118,8 +118,8 @@ FAST_PATH_CASES = {
     "repeated stamp": ROWS.replace("1000000000.010000", "1000000000.000000", 1),
     "named csv": "t,x,y,z,qx,qy,qz,qw\n" + ROWS.replace(" ", ",") + "\n",
     "utf-8 comment": "# café t x y z qx qy qz qw\n" + ROWS + "\n",
-    # whole-number columns are parsed as integers first (c_parser_doubles): -0 and stamps beyond
-    # 2**53 must still come out as the float parse gives them
+    # a parse that takes whole-number columns as integers (faster in pandas, tried and not landed:
+    # docs/performance.md, the fourth round) loses -0 and may round big stamps differently
     "-0 in a whole-number column": "\n".join(
         f"{1e9 + k * 0.01:.6f} {k % 3 - 1 if k % 7 else '-0'} 0.5 0.25 0 0 0 1" for k in range(300)
     ),
@@ -200,9 +200,9 @@ def test_artifact_text_is_np_savetxt_byte_for_byte():
 
 
 def test_artifact_numbers_keep_negative_zero_next_to_a_missing_value(tmp_path):
-    """An artifact column of whole numbers with -0 and a missing value: pandas' inferred parse
-    reads it as float after reading the -0 as an integer; files._numbers must give np.loadtxt's
-    doubles (the same as before the inferred parse), sign of zero included."""
+    """An artifact column of whole numbers with -0 and a missing value: files._numbers (pandas' C
+    parser) must give np.loadtxt's doubles, sign of zero included (a parse that infers the column
+    as integers, then float because of the missing value, would give +0)."""
     pytest.importorskip("pandas")
     from epa.artifacts import files
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
-from epa.readers.text import FORMATS, c_parser_doubles, upper_to_full
+from epa.readers.text import FORMATS, frame_rows, upper_to_full
 
 # ----------------------------------------------------------------------------- artifacts
 _UMASK = os.umask(0o022)
@@ -227,12 +227,13 @@ def _numbers(path, delimiter: str, skip: int) -> np.ndarray:
     if "pandas" in sys.modules and os.path.getsize(path) >= PANDAS_FROM_BYTES:
         import pandas as pd
 
-        with open(path, "rb") as fh:
-            data = fh.read()
-        try:  # row-major, like loadtxt's
-            return c_parser_doubles(data, sep=delimiter, header=None, skiprows=skip, comment="#")
+        try:
+            frame = pd.read_csv(
+                path, sep=delimiter, header=None, skiprows=skip, comment="#", dtype=float
+            )
         except pd.errors.EmptyDataError:  # a header and no rows is an empty table
             return np.zeros((0, 0))
+        return frame_rows(frame).reshape(len(frame), -1)  # row-major, like loadtxt's
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # a header and no rows: an empty table
         return np.loadtxt(

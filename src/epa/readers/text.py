@@ -275,62 +275,24 @@ def _c_parser_rows(data: bytes, offset: int, width: int) -> np.ndarray | None:
         return None
     if offset >= len(data) or width == 0 or any(data.find(c, offset) >= 0 for c in b",;#%"):
         return None
-    import pandas as pd
-
-    for sep in (" ", r"\s+"):  # one space (most files: the fastest path), else any whitespace
-        try:
-            rows = c_parser_doubles(data, offset, sep=sep, header=None, engine="c")
-        except (ValueError, pd.errors.ParserError):
-            continue
-        if rows.shape[1] != width:
-            continue
-        # a short line reads as NaN: the line-by-line reader names it
-        if np.isfinite(rows).all():
-            return rows
-    return None
-
-
-def c_parser_doubles(data: bytes, offset: int = 0, **options) -> np.ndarray:
-    """``data[offset:]`` as a table of doubles by pandas' C parser (``options`` for read_csv),
-    row-major. The parser first reads it with the column types it infers, faster than with
-    ``dtype=float`` (2-3x on columns of whole numbers, such as the zero entries of an OpenVINS
-    covariance); that parse is taken where it is bit for bit the float parse: every column float or
-    whole numbers within +-2**53, and no token the integer parse reads as +0 where the float parse
-    keeps the sign (``-0``, ``-00``, also inside columns pandas turned to float because of a missing
-    value or a later chunk of decimals). Anything else is read again with ``dtype=float``."""
     import io
 
     import pandas as pd
 
-    def parse(**dtype):
+    for sep in (" ", r"\s+"):  # one space (most files: the fastest path), else any whitespace
         body = io.BytesIO(data)  # shares the bytes; the parser reads from the body's start
         body.seek(offset)
-        return pd.read_csv(body, **options, **dtype)
-
-    with warnings.catch_warnings():  # mixed types: the second parse decides, as before
-        warnings.simplefilter("ignore", pd.errors.DtypeWarning)
-        frame = parse()
-    if _whole_or_float(frame) and not _NEGATIVE_ZERO.search(data, offset):
-        return frame_rows(frame)
-    return frame_rows(parse(dtype=float))
-
-
-def _whole_or_float(frame) -> bool:
-    for k in range(frame.shape[1]):
-        column = frame.iloc[:, k]
-        if column.dtype == np.float64:
+        try:
+            frame = pd.read_csv(body, sep=sep, header=None, dtype=float, engine="c")
+        except (ValueError, pd.errors.ParserError):
             continue
-        if column.dtype != np.int64:
-            return False
-        values = column.to_numpy()
-        if len(values) and (values.min() <= -(2**53) or values.max() >= 2**53):
-            return False
-    return True
-
-
-# A negative zero written as a whole number ("-0", "-00", followed by anything but a digit, a point
-# or an exponent): one scan, 1.8 ns a byte
-_NEGATIVE_ZERO = re.compile(rb"-0+(?![0-9.eE])")
+        if frame.shape[1] != width:
+            continue
+        rows = frame_rows(frame)
+        # a short line reads as NaN: the line-by-line reader names it
+        if np.isfinite(rows).all():
+            return rows
+    return None
 
 
 def frame_rows(frame) -> np.ndarray:
