@@ -202,6 +202,9 @@ def bench_example(tmp: Path) -> dict:
     return out
 
 
+GRID_RULES = ("tables", "figures", "paper")
+
+
 def timeline(results: Path, started: float) -> dict:
     """Where a run's time went, in seconds from its start, from the files it wrote: each stage job's
     end (its manifest) less its wall seconds (its benchmark file) is its start; the once-per-grid
@@ -220,9 +223,6 @@ def timeline(results: Path, started: float) -> dict:
         "stage_and_report_cpu_s": round(sum(j[3] for j in jobs), 2),
         **{f"{r}_end_s": round(t, 2) for r, t in done.items()},
     }
-
-
-GRID_RULES = ("tables", "figures", "paper")
 
 
 # ----------------------------------------------------------------------------- large simulated grids

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from epa.artifacts import files
 from epa.core.errors import EpaError
 from epa.readers import text
 
@@ -104,7 +105,7 @@ def _turning(angle: float) -> tuple[float, ...]:
     return np.sin(angle) / 2, -np.sin(angle) / 3, np.sin(angle) / 5, np.cos(angle)
 
 
-COV_HEADER = "# t x y z qx qy qz qw pr11 pr12 pr13 pr22 pr23 pr33 pt11 pt12 pt13 pt22 pt23 pt33\n"
+COV_HEADER = files.TUM_HEADER + " " + " ".join(files.COV_HEADER) + "\n"  # OpenVINS layout
 ROWS = "\n".join(f"{1e9 + k * 0.01:.6f} {k * 0.1:.4f} 0.5 0.25 0 0 0 1" for k in range(300))
 FAST_PATH_CASES = {
     "header": "# t x y z qx qy qz qw\n" + ROWS + "\n",
@@ -176,8 +177,6 @@ def test_artifact_text_is_np_savetxt_byte_for_byte():
     representation."""
     import io
 
-    from epa.artifacts import files
-
     rng = np.random.default_rng(7)
     edge = [0.0, -0.0, 1.0, -3.0, 2.0**53, 2.0**53 - 1, -(2.0**53 - 1), 1e16, 1e17, np.nan, np.inf]
     for _ in range(300):
@@ -204,8 +203,6 @@ def test_artifact_numbers_keep_negative_zero_next_to_a_missing_value(tmp_path):
     parser) must give np.loadtxt's doubles, sign of zero included (a parse that infers the column
     as integers, then float because of the missing value, would give +0)."""
     pytest.importorskip("pandas")
-    from epa.artifacts import files
-
     table = np.zeros((5000, 3))
     table[:, 0] = np.arange(5000) * 0.1 + 0.05
     table[:, 1] = np.arange(5000) % 4

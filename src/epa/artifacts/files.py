@@ -233,7 +233,7 @@ def _numbers(path, delimiter: str, skip: int) -> np.ndarray:
             )
         except pd.errors.EmptyDataError:  # a header and no rows is an empty table
             return np.zeros((0, 0))
-        return frame_rows(frame).reshape(len(frame), -1)  # row-major, like loadtxt's
+        return frame_rows(frame)  # row-major, like loadtxt's
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # a header and no rows: an empty table
         return np.loadtxt(
