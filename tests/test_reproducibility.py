@@ -5,6 +5,7 @@ The grid tests run Snakemake on a 4-case grid cut from the bundled example (2 al
 x 2 runs): once with --cores 2, again by `epa verify` with --cores 1, once more in 3 batches.
 """
 
+import json
 import os
 import re
 import shutil
@@ -19,7 +20,7 @@ from packaging.requirements import Requirement
 from packaging.version import Version
 
 from epa.cli import main as cli
-from epa.outputs import paper, provenance
+from epa.outputs import contract, paper, provenance
 from epa.outputs.tables.latex import restyle
 from epa.workflow import settings, verify
 
@@ -196,10 +197,38 @@ def test_provenance_json_records_the_grid(grid):
 
 
 def test_epa_verify_regenerates_every_table_byte_for_byte_with_one_core(grid, capsys):
+    """On the machine that made them, --exact: the same bytes whatever --cores."""
     work, _ = grid
-    assert verify.verify(work / "results", cores=1) == 0
+    assert verify.verify(work / "results", cores=1, exact=True) == 0
     out = capsys.readouterr().out
-    assert "7 inputs have their recorded sha256" in out and "IDENTICAL" in out
+    assert "7 inputs have their recorded sha256" in out
+    assert "epa verify: REPRODUCED byte for byte" in out
+    assert "records: identical " in out and "differs" not in out
+
+
+def test_epa_verify_names_a_tampered_record_and_a_tampered_table(grid, capsys):
+    """A sixth significant digit in one metrics.json and one printed digit in a table: NOT
+    VERIFIED, each named with its place; every other file passes the contract."""
+    work, _ = grid
+    tampered = work / "results_tampered"
+    shutil.copytree(work / "results", tampered)
+    metrics = tampered / "cases/vio_body/drone_figure8/run1/06_metrics/metrics.json"
+    doc = json.loads(metrics.read_text())
+    rmse = doc["ate"]["trans_m"]["rmse"]
+    metrics.write_text(metrics.read_text().replace(repr(rmse), repr(rmse * (1 + 1e-5)), 1))
+    table = tampered / "tables/ate.tex"
+    text = table.read_text()
+    number = re.search(r"\d\.\d{3}", text)
+    last = number.end() - 1
+    table.write_text(text[:last] + str((int(text[last]) + 3) % 10) + text[last + 1 :])
+    assert cli.main(["verify", str(tampered)]) == 1
+    out = capsys.readouterr().out
+    assert (
+        "differs: cases/vio_body/drone_figure8/run1/06_metrics/metrics.json: "
+        "first $.ate.trans_m.rmse: " in out
+    )
+    assert "differs: tables/ate.tex: first line " in out
+    assert out.count("differs: ") == 2 and "NOT VERIFIED" in out
 
 
 def test_three_batches_write_the_same_bytes(grid):
@@ -215,7 +244,9 @@ def test_three_batches_write_the_same_bytes(grid):
     assert jobs[0] == 4 and 1 < jobs[1] <= 3  # one case per job, then 2-3 batches
     names = verify.compared_files(work / "results")
     assert len(names) > 20 and "cases/vo_drifty/drone_figure8/run2/06_metrics/metrics.json" in names
-    assert verify.compare(work / "results", work / "results_batched") == []
+    compared = verify.compare(work / "results", work / "results_batched", exact=True)
+    assert len(compared) == len(names)
+    assert all(c.verdict == contract.Verdict.IDENTICAL for c in compared)
 
 
 @pytest.mark.skipif(PDFLATEX is None, reason="pdflatex is not installed (texlive-latex-base)")
@@ -249,5 +280,5 @@ def test_epa_eval_writes_and_verifies_its_case(tmp_path, capsys):
     doc = provenance.read(out)
     assert doc["kind"] == "case" and len(doc["inputs"]) == 2
     assert (out / provenance.CONFIG).is_file()
-    assert verify.verify(out) == 0
-    assert "IDENTICAL" in capsys.readouterr().out
+    assert verify.verify(out, exact=True) == 0
+    assert "REPRODUCED byte for byte" in capsys.readouterr().out

@@ -399,7 +399,7 @@ def _eval_provenance(args, cfg) -> None:
         "case",
         cfg,
         provenance.case_inputs(args.ref, args.est, timing),
-        workflow_dir=Path(__file__).resolve().parents[3],
+        workflow_dir=provenance.source_checkout(),  # None for an installed package
         extra={"case": case},
     )
     provenance.write(args.out, doc)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.metadata
+import importlib.util
 import json
 import os
 import platform
@@ -40,6 +41,16 @@ RUNTIME_PACKAGES = (
     "snakemake",
 )
 VOLATILE = ("created_utc", "command_line", "host", "workdir", "workflow_dir")
+# the environment variables that change which code paths the numbers run on (docs/reproducibility.md)
+NUMERIC_ENV = (
+    "NPY_DISABLE_CPU_FEATURES",
+    "NPY_ENABLE_CPU_FEATURES",
+    "OPENBLAS_CORETYPE",
+    "OPENBLAS_NUM_THREADS",
+    "OMP_NUM_THREADS",
+    "MKL_NUM_THREADS",
+)
+UNKNOWN = "unknown"  # what could not be read here (no /proc/self/maps, not an OpenBLAS)
 COMMAND_ENV = "EPA_COMMAND_LINE"  # the Snakefile puts Snakemake's command line here for the script
 
 
@@ -98,29 +109,53 @@ def grid_inputs(cfg: dict, cases, idle_truths: dict | None = None) -> list[str]:
     return sorted(paths)
 
 
-def _git(folder, *args) -> str | None:
+def _run(argv, timeout: float = 20) -> str | None:
+    """A command's output, or None when it cannot run or fails."""
     try:
-        out = subprocess.run(
-            ["git", "-C", str(folder), *args], capture_output=True, text=True, timeout=20
-        )
+        out = subprocess.run(argv, capture_output=True, text=True, timeout=timeout)
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.strip() if out.returncode == 0 else None
 
 
+def _git(folder, *args) -> str | None:
+    return _run(["git", "-C", str(folder), *args])
+
+
+def is_checkout(folder) -> bool:
+    """Whether ``folder`` is laid out as epica's own checkout: the Snakefile, pyproject.toml and
+    the package under src/."""
+    folder = Path(folder)
+    return all(
+        (folder / name).is_file() for name in ("Snakefile", "pyproject.toml", "src/epa/__init__.py")
+    )
+
+
+def source_checkout() -> Path | None:
+    """The checkout the running epica comes from (an editable install, or ``src`` on the path);
+    None for an installed package (site-packages), whatever repository encloses it."""
+    package = Path(__file__).resolve().parents[1]  # <checkout>/src/epa
+    root = package.parents[1]
+    return root if package.parent.name == "src" and is_checkout(root) else None
+
+
 def checkout(folder) -> dict:
-    """The workflow's git commit when ``folder`` is a checkout (and whether tracked files differ)."""
-    if folder is None:
+    """The workflow's git commit (and whether tracked files differ) when ``folder`` is epica's
+    checkout and the root of its git repository; nothing for a folder inside another repository
+    (a project's ``.venv``), whose commit is not epica's."""
+    if folder is None or not is_checkout(folder):
         return {}
-    commit = _git(folder, "rev-parse", "HEAD")
-    if not commit:
+    out = _git(folder, "rev-parse", "--show-toplevel", "HEAD")
+    lines = (out or "").splitlines()
+    if len(lines) != 2 or Path(lines[0]).resolve() != Path(folder).resolve():
         return {}
     status = _git(folder, "status", "--porcelain", "--untracked-files=no")
-    return {"git_commit": commit, "git_dirty": bool(status)}
+    return {"git_commit": lines[1], "git_dirty": bool(status)}
 
 
 def environment() -> dict:
-    """Python, every runtime dependency's version and the platform (deterministic on one machine)."""
+    """Python, every runtime dependency's version, the platform and what the numbers ran on
+    (deterministic on one machine with one environment)."""
     packages = {}
     for name in RUNTIME_PACKAGES:
         try:
@@ -139,7 +174,149 @@ def environment() -> dict:
             "machine": platform.machine(),
             "platform": platform.platform(),
         },
+        "numerics": numerics(),
     }
+
+
+def numerics() -> dict:
+    """What the numbers ran on, so that a difference between two machines can be explained: the
+    CPU, the SIMD targets numpy dispatched to, numpy's BLAS/LAPACK and the OpenBLAS core type and
+    threads it runs with, the FFT, and the environment variables that steer them. 1.6-2.1 ms
+    measured with numpy loaded (which loads ctypes): no other import, no library loaded."""
+    import numpy
+
+    build = numpy.show_config(mode="dicts").get("Build Dependencies", {})
+    blas, lapack = build.get("blas", {}), build.get("lapack", {})
+    runtime = _openblas(blas)
+    blas_record = {**_library(blas), **runtime}
+    lapack_record = _library(lapack)
+    if lapack.get("name") == blas.get("name"):  # numpy's LAPACK is its BLAS library's
+        lapack_record.update(runtime)
+    return {
+        "cpu": {"model": _cpu_model(), "machine": platform.machine()},
+        "simd": _simd(),
+        "blas": blas_record,
+        "lapack": lapack_record,
+        # epica's FFT (Step 1's cross-correlation) is numpy.fft: pocketfft, compiled into numpy
+        "fft": {"library": "numpy.fft", "backend": "pocketfft", "numpy": numpy.__version__},
+        # scipy's own OpenBLAS as built: epica calls no scipy BLAS routine (scipy.special and
+        # scipy.stats only), and it is loaded only once they are, so its core is not probed
+        "scipy_blas": _library(_scipy_build().get("blas", {})),
+        "env": {name: os.environ.get(name) for name in NUMERIC_ENV},
+    }
+
+
+def _cpu_model() -> str:
+    """The first "model name" of /proc/cpuinfo (Linux), the CPU brand string (macOS), else
+    ``platform.processor()``."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                key, _, value = line.partition(":")
+                if key.strip() == "model name":
+                    return value.strip()
+    except OSError:
+        pass
+    if sys.platform == "darwin":
+        brand = _run(["sysctl", "-n", "machdep.cpu.brand_string"], timeout=5)
+        if brand:
+            return brand
+    return platform.processor() or UNKNOWN
+
+
+def _simd() -> dict:
+    """numpy's SIMD: the baseline it was compiled for and the dispatch targets it found on this CPU
+    (``numpy.show_runtime()``'s found and not found); NPY_DISABLE_CPU_FEATURES turns targets off."""
+    try:
+        from numpy._core._multiarray_umath import (
+            __cpu_baseline__,
+            __cpu_dispatch__,
+            __cpu_features__,
+        )
+    except ImportError:  # numpy 1.26
+        from numpy.core._multiarray_umath import (
+            __cpu_baseline__,
+            __cpu_dispatch__,
+            __cpu_features__,
+        )
+    return {
+        "baseline": list(__cpu_baseline__),
+        "dispatched": [f for f in __cpu_dispatch__ if __cpu_features__.get(f)],
+        "not_found": [f for f in __cpu_dispatch__ if not __cpu_features__.get(f)],
+    }
+
+
+def _library(build: dict) -> dict:
+    """A BLAS or LAPACK as numpy or scipy was built with it: its name and version."""
+    return {"name": build.get("name"), "version": build.get("version")}
+
+
+def _scipy_build() -> dict:
+    """scipy's build dependencies from its generated ``__config__.py``, without importing scipy
+    (8 ms, and then scipy is imported in every process that writes a record)."""
+    module = sys.modules.get("scipy.__config__")
+    if module is None:
+        try:
+            spec = importlib.util.find_spec("scipy")
+            origin = spec and spec.submodule_search_locations
+            if not origin:
+                return {}
+            path = Path(list(origin)[0]) / "__config__.py"
+            spec = importlib.util.spec_from_file_location("_epa_scipy_config", path)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+        except Exception:  # another layout of scipy's: its BLAS is then not recorded
+            return {}
+    return module.CONFIG.get("Build Dependencies", {})
+
+
+def _openblas(build: dict) -> dict:
+    """The core type, thread count and configuration numpy's OpenBLAS runs with (chosen at load time
+    from the CPU and OPENBLAS_CORETYPE), read through ctypes from the library already loaded:
+    /proc/self/maps lists it; its symbols are numpy's build's family (scipy-openblas64: the
+    ``scipy_`` prefix and ``64_`` suffix), so scipy's own copy, loaded or not, is never read.
+    "unknown" without /proc/self/maps (macOS) or an OpenBLAS."""
+    unknown = {"core": UNKNOWN, "threads": UNKNOWN, "config": UNKNOWN}
+    try:
+        with open("/proc/self/maps", encoding="utf-8", errors="replace") as fh:
+            paths = sorted(
+                {
+                    fields[5].strip()
+                    for fields in (line.split(maxsplit=5) for line in fh)
+                    if len(fields) == 6 and "openblas" in fields[5].lower()
+                }
+            )
+    except OSError:
+        return unknown
+    import ctypes
+
+    handles = []
+    for path in paths:
+        try:  # RTLD_NOLOAD: a handle to a library already there, never a new one
+            handles.append(ctypes.CDLL(path, mode=os.RTLD_NOLOAD | os.RTLD_NOW | os.RTLD_LOCAL))
+        except (OSError, AttributeError):
+            continue
+    scipy_built = str(build.get("name", "")).startswith("scipy-openblas")
+    ilp64 = "USE64BITINT" in str(build.get("openblas configuration", ""))
+    prefixes = ("scipy_", "") if scipy_built else ("", "scipy_")
+    suffixes = ("64_", "64", "") if ilp64 else ("", "64_", "64")
+    for prefix in prefixes:
+        for suffix in suffixes:
+            for handle in handles:
+                try:
+                    corename = getattr(handle, f"{prefix}openblas_get_corename{suffix}")
+                    config = getattr(handle, f"{prefix}openblas_get_config{suffix}")
+                    threads = getattr(handle, f"{prefix}openblas_get_num_threads{suffix}")
+                except AttributeError:
+                    continue
+                corename.restype = config.restype = ctypes.c_char_p
+                threads.restype = ctypes.c_int
+                return {
+                    "core": corename().decode(errors="replace"),
+                    "threads": threads(),
+                    "config": config().decode(errors="replace").strip(),
+                }
+    return unknown
 
 
 def config_yaml(cfg: dict) -> str:

@@ -6,23 +6,29 @@
    subprocess with the workflow's Snakefile, target ``tables`` (every stage, no per-case report or
    figure), in the working directory the inputs' relative paths were recorded from;
    (a case folder written by ``epa eval --out`` is evaluated again in this process instead);
-3. every table (``error_comparison.txt``, ``tables/*.tex``, ``comparison.{txt,tex}``,
-   ``success_curves.csv``, ``consistency/summary.csv``, mode rpg's ``rpg_*.txt``), ``summary.csv`` and every case's
-   ``metrics.json`` is compared byte for byte. Exit status 0 only when all are identical.
+3. every regenerated file is compared by the numeric contract (epa.outputs.contract): each printed
+   output (``error_comparison.txt``, ``tables/*.tex``, ``summary.csv``, ``comparison.{txt,tex}``,
+   ``success_curves.csv``, ``consistency/summary.csv``, mode rpg's ``rpg_*.txt``) as text, each
+   record (every case's stage artifacts, ``consistency/<alg>/<dataset>.csv``) number by number. Exit
+   status 0 only when every printed output is identical (or differs only by digits flipped at a
+   rounding boundary) and every record is within the contract; ``exact`` compares bytes instead.
 See docs/reproducibility.md.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
+from epa.artifacts.case import FOLDERS
 from epa.core.errors import EpaError
-from epa.outputs import provenance
+from epa.outputs import contract, provenance
 
+REPORT_FOLDER = FOLDERS["report"]
 GRID_FILES = (
     "error_comparison.txt",
     "summary.csv",
@@ -36,34 +42,97 @@ GRID_FILES = (
 
 
 def compared_files(results) -> list[str]:
-    """The files ``epa verify`` compares, relative to ``results`` (those that exist there)."""
+    """The files ``epa verify`` compares, relative to ``results`` (those that exist there): the
+    printed outputs, then the records."""
     results = Path(results)
     names = [n for n in GRID_FILES if (results / n).is_file()]
     names += sorted(str(p.relative_to(results)) for p in (results / "tables").glob("*.tex"))
-    names += sorted(  # the metrics stage's (10_report/ holds a copy for the reader)
-        str(p.relative_to(results))
-        for p in results.glob("cases/**/metrics.json")
-        if p.is_file() and "10_report" not in p.parts
-    )
+    records = [  # every stage's artifacts (10_report/ holds copies for the reader)
+        *results.glob("cases/*/*/*/[0-9][0-9]_*/**/*"),
+        *results.glob("consistency/*/*.csv"),
+        *results.glob("[0-9][0-9]_*/**/*"),  # a case folder of `epa eval --out`
+    ]
     names += sorted(
-        str(p.relative_to(results)) for p in results.glob("[0-9][0-9]_*/metrics.json")
-    )  # a case folder of `epa eval --out`
+        str(p.relative_to(results))
+        for p in records
+        if p.is_file() and REPORT_FOLDER not in p.parts and not p.name.startswith(".")
+    )
     return names
 
 
-def compare(a, b) -> list[str]:
-    """Differences between two results folders over :func:`compared_files` of either, one line each."""
+def kind_of(name: str) -> str:
+    """``printed`` (a table a reader reads) or ``record`` (full-precision numbers)."""
+    return "printed" if name in GRID_FILES or name.startswith("tables/") else "record"
+
+
+def compare(a, b, *, exact: bool = False) -> list[contract.Comparison]:
+    """Every file of :func:`compared_files` of the results ``a`` against the regenerated ``b``."""
     a, b = Path(a), Path(b)
+    names = compared_files(a)
+    extra = [n for n in compared_files(b) if kind_of(n) == "printed" and n not in names]
     out = []
-    for name in sorted(set(compared_files(a)) | set(compared_files(b))):
-        pa, pb = a / name, b / name
-        if not pa.is_file():
-            out.append(f"only in the regenerated results: {name}")
-        elif not pb.is_file():
-            out.append(f"not regenerated: {name}")
-        elif pa.read_bytes() != pb.read_bytes():
-            out.append(f"differs: {name}")
+    for name in names + extra:
+        kind = kind_of(name)
+        if exact:
+            out.append(_compare_bytes(a, b, name, kind))
+        else:
+            out.append(contract.compare_files(a, b, name, kind))
     return out
+
+
+def _compare_bytes(a: Path, b: Path, name: str, kind: str) -> contract.Comparison:
+    pa, pb = a / name, b / name
+    if not pb.is_file():
+        return contract.Comparison(name, kind, contract.Verdict.MISSING)
+    if not pa.is_file():
+        return contract.Comparison(name, kind, contract.Verdict.EXTRA)
+    if pa.read_bytes() == pb.read_bytes():
+        return contract.Comparison(name, kind, contract.Verdict.IDENTICAL)
+    la, lb = pa.read_bytes().splitlines(), pb.read_bytes().splitlines()
+    i = next((k for k, (x, y) in enumerate(zip(la, lb)) if x != y), min(len(la), len(lb)))
+    text = [lines[i].decode("utf-8", "replace") if i < len(lines) else "" for lines in (la, lb)]
+    return contract.Comparison(
+        name, kind, contract.Verdict.DIFFERS, contract.Place(f"line {i + 1}", *text)
+    )
+
+
+def summary_rows(results: list[contract.Comparison]) -> list[tuple[str, str, str]]:
+    """The closing table: each printed output, then the records grouped by their file in every
+    case (``cases/*/*/*/06_metrics/metrics.json``); the verdict of a group is its worst."""
+    rows = [(r.name, str(r.verdict), _worst_text(r)) for r in results if r.kind == "printed"]
+    groups: dict[str, list[contract.Comparison]] = {}
+    for r in results:
+        if r.kind == "record":
+            groups.setdefault(_group(r.name), []).append(r)
+    for group, members in groups.items():
+        worst = max(members, key=_badness)
+        verdict = str(worst.verdict)
+        if len(members) > 1:
+            group = f"{group} ({len(members)})"
+        rows.append((group, verdict, _worst_text(worst, with_name=len(members) > 1)))
+    return rows
+
+
+def _group(name: str) -> str:
+    parts = name.split("/")
+    if parts[0] == "cases" and len(parts) > 4:  # rpg's files are named by their distances
+        return "/".join(["cases", "*", "*", "*", *parts[4:-1], re.sub(r"\d+", "N", parts[-1])])
+    if parts[0] == "consistency" and len(parts) == 3:
+        return "consistency/*/*.csv"
+    return name
+
+
+def _badness(r: contract.Comparison) -> tuple[int, float]:
+    order = 0 if r.ok else 1
+    ratio = r.worst.diff / r.worst.tol if r.worst and r.worst.tol and r.worst.tol > 0 else 0.0
+    return order * 2 + (r.verdict != contract.Verdict.IDENTICAL), ratio if ratio == ratio else 0.0
+
+
+def _worst_text(r: contract.Comparison, with_name: bool = False) -> str:
+    if r.worst is None:
+        return ""
+    text = r.worst.describe()
+    return f"{r.name}: {text}" if with_name else text
 
 
 def check_inputs(doc: dict, workdir) -> list[str]:
@@ -90,8 +159,8 @@ def check_inputs(doc: dict, workdir) -> list[str]:
 
 def default_snakefile() -> Path | None:
     """The workflow of this checkout (src/epa/workflow -> the repository's Snakefile)."""
-    path = Path(__file__).resolve().parents[3] / "Snakefile"
-    return path if path.is_file() else None
+    root = provenance.source_checkout()
+    return root / "Snakefile" if root else None
 
 
 def _workdir(doc: dict, snakefile: Path | None) -> Path:
@@ -143,7 +212,13 @@ def regenerate_case(doc: dict, results: Path, into: Path, workdir: Path) -> None
     from epa.workflow import chain, settings
 
     cfg = settings.load_yaml(results / provenance.CONFIG)
+    cfg["report"] = {**cfg["report"], "per_case": False}  # the report is not compared
     case = doc["case"]
+    arrays = any(  # `epa eval --artifacts` wrote them: regenerate them to compare them
+        p.is_file() and p.suffix != ".json"
+        for p in results.glob("[0-9][0-9]_*/*")
+        if p.parent.name != REPORT_FOLDER
+    )
     cwd = os.getcwd()
     os.chdir(workdir)
     try:
@@ -152,7 +227,7 @@ def regenerate_case(doc: dict, results: Path, into: Path, workdir: Path) -> None
             case["estimate"],
             str(into / "results"),
             cfg,
-            write_arrays=False,
+            write_arrays=arrays,
             ref_source=readers.options(cfg, "reference"),
             est_source=readers.options(cfg, "estimate", algorithm=case["algorithm"]),
         )
@@ -167,10 +242,11 @@ def verify(
     snakefile=None,
     keep=None,
     force: bool = False,
+    exact: bool = False,
     log=None,
 ) -> int:
-    """Check, regenerate, compare; prints what it finds. 0: identical; 1: not (a raised EpaError:
-    cannot verify)."""
+    """Check, regenerate, compare; prints what it finds. 0: reproduced (within the numeric contract,
+    or byte for byte with ``exact``); 1: not (a raised EpaError: cannot verify)."""
     log = log or sys.stdout
     results = Path(results_dir)
     try:
@@ -206,29 +282,48 @@ def verify(
             regenerate_case(doc, results, into, workdir)
         else:
             regenerate_grid(doc, results, into, snakefile, workdir, cores, log)
-        names = compared_files(results)
-        diffs = compare(results, into / "results")
+        compared = compare(results, into / "results", exact=exact)
     finally:
         tmp.cleanup()
-    if diffs:
-        print(f"epa verify: {len(diffs)} of {len(names)} files are not identical:", file=log)
-        for line in diffs[:50]:
-            print("  " + line, file=log)
-        if len(diffs) > 50:
-            print(f"  ... and {len(diffs) - 50} more", file=log)
-    ok = not diffs and not problems
-    verdict = "IDENTICAL" if ok else "NOT VERIFIED"
-    print(
-        f"epa verify: {len(names) - len(diffs)} of {len(names)} files byte-identical: {verdict}",
-        file=log,
-    )
+    ok = report(compared, exact=exact, log=log) and not problems
+    how = "byte for byte" if exact else "within the numeric contract"
+    print(f"epa verify: {'REPRODUCED ' + how if ok else 'NOT VERIFIED'}", file=log)
     return 0 if ok else 1
+
+
+def report(compared: list[contract.Comparison], *, exact: bool, log) -> bool:
+    """Print what the comparison found: counts, every file that is not identical (the records that
+    differ first, at most 50 lines), and the closing table. True when all of it passes."""
+    for kind, label in (("printed", "printed outputs"), ("record", "records")):
+        mine = [r for r in compared if r.kind == kind]
+        counts: dict[str, int] = {}
+        for r in mine:
+            counts[str(r.verdict)] = counts.get(str(r.verdict), 0) + 1
+        said = ", ".join(f"{k} {v}" for k, v in counts.items()) or "none"
+        print(f"epa verify: {len(mine)} {label}: {said}", file=log)
+    failed = [r for r in compared if not r.ok]
+    flipped = [r for r in compared if r.verdict == contract.Verdict.ROUNDING]
+    for r in (failed + flipped)[:50]:
+        print("  " + r.line(), file=log)
+        for place in r.flips[1:10]:
+            print("    also " + place.describe(), file=log)
+    if len(failed + flipped) > 50:
+        print(f"  ... and {len(failed + flipped) - 50} more", file=log)
+    rows = summary_rows(compared)
+    width = max(len(r[0]) for r in rows) if rows else 4
+    vwidth = max(len(r[1]) for r in rows) if rows else 7
+    print(f"\n{'file':<{width}}  {'verdict':<{vwidth}}  worst difference", file=log)
+    for name, verdict, worst in rows:
+        print(f"{name:<{width}}  {verdict:<{vwidth}}  {worst}".rstrip(), file=log)
+    print("", file=log)
+    return not failed
 
 
 def add_parser(sub) -> None:
     v = sub.add_parser(
         "verify",
-        help="check a results folder's inputs against provenance.json and regenerate it byte for byte",
+        help="check a results folder's inputs against provenance.json, regenerate it and compare "
+        "by the numeric contract (docs/reproducibility.md)",
     )
     v.add_argument("results", help="a results folder (or an `epa eval --out` folder)")
     v.add_argument("--cores", type=int, default=2, help="cores of the re-run (default 2)")
@@ -239,9 +334,19 @@ def add_parser(sub) -> None:
     v.add_argument(
         "--force", action="store_true", help="re-run and compare even when inputs changed"
     )
+    v.add_argument(
+        "--exact",
+        action="store_true",
+        help="compare byte for byte (a check on the machine that made the results)",
+    )
 
 
 def run(args) -> int:
     return verify(
-        args.results, cores=args.cores, snakefile=args.snakefile, keep=args.keep, force=args.force
+        args.results,
+        cores=args.cores,
+        snakefile=args.snakefile,
+        keep=args.keep,
+        force=args.force,
+        exact=args.exact,
     )
