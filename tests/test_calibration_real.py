@@ -61,7 +61,9 @@ def test_mono_recovers_extrinsic_and_scale(data, euroc):
     assert ext.trusted
     assert np.degrees(geometry.rotation_angle(ext.R.T @ t0[:3, :3])) < 0.25
     assert 100 * np.linalg.norm(ext.t - t0[:3, 3]) < 1.0
-    assert ext.scale == pytest.approx(5.171, rel=0.005)
+    # unit-less; a band for the solve's accuracy, not for rounding: measured 5.17381 on both CPU paths
+    # (default and restricted differ by 2e-15)
+    assert ext.scale == pytest.approx(5.171, abs=0.026)
 
 
 def test_body_frame_estimate_gives_near_identity(data, euroc):

@@ -1,5 +1,6 @@
 """`epa ape` / `epa rpe` give evo 1.38.1's numbers (test oracle only) on every trajectory file of evo's
-sample data, option by option: the statistics to 1e-6 relative and the title line for line."""
+sample data, option by option: the statistics to TOL (absolute, per pose relation) and the title line
+for line."""
 
 import copy
 import sys
@@ -36,7 +37,25 @@ try:
 except ImportError:
     HAVE_TF2 = False
 
-REL = 1e-6
+# |epa - evo| per pose relation, absolute in the relation's unit, for rmse, mean, median, std, min and
+# max. Measured worst over every file and option below, default / restricted CPU path
+# (NPY_DISABLE_CPU_FEATURES, OPENBLAS_CORETYPE):
+TOL = {
+    "full": 1e-11,  # unit-less |E - I| (metres in its translation column); 5.2e-14 / 1.1e-13
+    "trans_part": 1e-11,  # m; 1.2e-13 / 3.0e-13 (KITTI 00, 3.7 km)
+    "rot_part": 1e-12,  # unit-less |R - I|; 3.7e-15 / 3.7e-15
+    "angle_deg": 1e-11,  # deg; 1.2e-13 / 9.1e-14
+    "angle_rad": 1e-13,  # rad; 2.1e-15 / 1.6e-15
+    "point_distance": 1e-11,  # m; 5.2e-14 / 1.1e-13
+    # |d_ref - d_est| / d_ref: a short reference segment magnifies the rounding
+    "point_distance_error_ratio": 1e-10,  # %; 1.6e-12 / 1.6e-12
+}
+# -a --n_to_align 50 on KITTI 00 fits the first 50 poses, a nearly straight 45 m (singular values
+# 95 : 0.19 : 0.08 m): the roll about that line is fixed by centimetres, and the fit's rounding is
+# levered over the whole drive (measured 3.7e-10 / 1.9e-12 m on max = 278 m)
+FIRST_50_OF_KITTI = {**TOL, "trans_part": 1e-8}  # m
+
+
 RELATION = {
     "full": em.PoseRelation.full_transformation,
     "trans_part": em.PoseRelation.translation_part,
@@ -207,7 +226,17 @@ def options_for(form, paths, opts):
     return evo_protocol.EvoOptions(**opts)
 
 
-def compare(kind, name, opts, data, rel=REL):
+def assert_near(ours: float, theirs: dict, relation: str, stat: str, where: str = "", tol=TOL):
+    """|ours - theirs[stat]| within tol[relation]. sse, the sum of the n squared errors, in the unit
+    squared: an error d on each of them moves it by at most 2 d n mean + n d^2 (n = sse / rmse^2)."""
+    d, value = tol[relation], theirs[stat]
+    if stat == "sse":
+        n = value / theirs["rmse"] ** 2 if theirs["rmse"] else 0.0
+        d = 2 * d * n * theirs["mean"] + n * d**2
+    assert abs(ours - value) <= d, (where, relation, stat, ours, value, d)
+
+
+def compare(kind, name, opts, data):
     if name in TF and not HAVE_TF2:
         pytest.skip(
             "evo needs tf2_py for a TF chain: apt install python3-tf2 python3-geometry-msgs"
@@ -228,18 +257,15 @@ def compare(kind, name, opts, data, rel=REL):
     )
     assert got.title == title
     assert set(got.stats) == set(want)
-    for stat, value in want.items():
-        assert got.stats[stat] == pytest.approx(value, rel=rel, abs=1e-12), (
-            stat,
-            got.stats[stat],
-            value,
-        )
+    tol = FIRST_50_OF_KITTI if form == "kitti" and o.n_to_align > 0 else TOL
+    for stat in want:
+        assert_near(got.stats[stat], want, o.relation, stat, f"{kind} {name} {opts}", tol)
     return None
 
 
 # KITTI's printed rotation blocks are orthonormal only to ~2e-7; `epa ape|rpe kitti` keeps them as
 # printed (Trajectory.r_printed) and computes on them as evo does. With the nearest rotations instead,
-# the smallest RPE statistics differed from evo's by up to 5e-5 relative; now all agree to 1e-9.
+# the smallest RPE statistics differed from evo's by up to 5e-5 relative; now all agree to TOL.
 @pytest.mark.parametrize("name", list(FILES))
 @pytest.mark.parametrize(
     "opts", APE_OPTIONS, ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()) or "defaults"

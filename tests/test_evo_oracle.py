@@ -14,7 +14,23 @@ from epa.readers import text  # noqa: E402
 from epa.steps import align as alignment  # noqa: E402
 from epa.steps import sync  # noqa: E402
 
-REL = 1e-6
+# |epa - evo| per quantity, absolute in its unit, for each statistic compared (ATE rmse, mean, median,
+# max; RPE rmse, mean). Measured worst, default / restricted CPU path (NPY_DISABLE_CPU_FEATURES,
+# OPENBLAS_CORETYPE), when both compute on the same rotations:
+TOL = {
+    "trans_m": 1e-11,  # m; 5.2e-14 / 7.6e-14: the alignment's rounding (values 0.005 - 8 m)
+    "rot_deg": 1e-11,  # deg; 1.6e-13 / 1.6e-13: angles from quaternions, no arccos near 1
+}
+# evo computes on KITTI's rotation blocks as printed (the ground truth to 7 digits, ORB-SLAM's from
+# float32: orthonormal to 2e-7 and 8e-7), epica's metrics on their nearest rotations: each relative
+# translation moves by that defect times the segment. Measured 7.7e-8 m (SPTAM, 10-frame RPE mean) on
+# both CPU paths: set by the files' digits, not by rounding. test_kitti_00 also runs evo on epica's
+# rotations, to TOL.
+KITTI_PRINTED = {**TOL, "trans_m": 3e-7}  # m
+
+
+def assert_near(ours: float, theirs: float, qty: str, where: str = "", tol: dict = TOL):
+    assert abs(ours - theirs) <= tol[qty], (where, qty, ours, theirs, tol[qty])
 
 
 def evo_stats(ref, est, rel, delta=None, unit=None, all_pairs=False, max_diff=0.01, scale=False):
@@ -48,20 +64,24 @@ EVO_SPECS = [
 ]
 
 
-def check(eref, eest, ref, est, scale=False):
+RELATIONS = {
+    "trans_m": em.PoseRelation.translation_part,
+    "rot_deg": em.PoseRelation.rotation_angle_deg,
+}
+
+
+def check(eref, eest, ref, est, scale=False, tol=TOL, keys=tuple(RELATIONS)):
     s = ours(ref, est, SPECS, scale)
-    for rel, key in (
-        (em.PoseRelation.translation_part, "trans_m"),
-        (em.PoseRelation.rotation_angle_deg, "rot_deg"),
-    ):
+    for key in keys:
+        rel = RELATIONS[key]
         ev = evo_stats(eref, eest, rel, scale=scale)
         for stat in ("rmse", "mean", "median", "max"):
-            assert s["ate"][key][stat] == pytest.approx(ev[stat], rel=REL)
+            assert_near(s["ate"][key][stat], ev[stat], key, f"ate {stat}", tol)
         for spec, (d, u, ap) in zip(s["rpe"], EVO_SPECS):
             ev = evo_stats(eref, eest, rel, d, u, ap, scale=scale)
             assert spec[key]["n"] > 0
-            assert spec[key]["rmse"] == pytest.approx(ev["rmse"], rel=REL)
-            assert spec[key]["mean"] == pytest.approx(ev["mean"], rel=REL)
+            for stat in ("rmse", "mean"):
+                assert_near(spec[key][stat], ev[stat], key, f"rpe {d} {u.value} {ap} {stat}", tol)
 
 
 def test_tum_fr1_xyz(data):
@@ -103,9 +123,14 @@ def test_kitti_00(data, name):
     eref = PoseTrajectory3D(poses_se3=eref.poses_se3, timestamps=times)
     eest = PoseTrajectory3D(poses_se3=eest.poses_se3, timestamps=times)
     times_file = d / "KITTI_00_gt_times.txt"
-    check(
-        eref,
-        eest,
-        text.read_trajectory(d / "KITTI_00_gt.txt", kitti_times=times_file),
-        text.read_trajectory(d / name, kitti_times=times_file),
+    ref = text.read_trajectory(d / "KITTI_00_gt.txt", kitti_times=times_file)
+    est = text.read_trajectory(d / name, kitti_times=times_file)
+    check(eref, eest, ref, est, tol=KITTI_PRINTED)
+    # the translations again, evo on the rotations epica computes on (the nearest ones): rounding only
+    ref_q, est_q = (
+        PoseTrajectory3D(
+            positions_xyz=t.p, orientations_quat_wxyz=t.q[:, [3, 0, 1, 2]], timestamps=t.t
+        )
+        for t in (ref, est)
     )
+    check(ref_q, est_q, ref, est, keys=("trans_m",))
