@@ -148,9 +148,9 @@ FAST_PATH_CASES = {
 
 @pytest.mark.parametrize("name", sorted(FAST_PATH_CASES))
 def test_c_parser_fast_path_reads_as_the_general_path(tmp_path, monkeypatch, name):
-    """With pandas imported, a file goes whole to its C parser without its body being decoded
-    (text._read_in_c); the trajectory, the notes and every error (with its line) are the general
-    reader's, and the line-by-line reader's, bit for bit."""
+    """Asked for (c_parser_min_bytes=0), a file goes whole to pandas' C parser without its body being
+    decoded (text._read_in_c); the trajectory, the notes and every error (with its line) are the
+    general reader's, and the line-by-line reader's, bit for bit."""
     pytest.importorskip("pandas")
     path = tmp_path / "f.txt"
     path.write_bytes(FAST_PATH_CASES[name].encode())
@@ -158,13 +158,16 @@ def test_c_parser_fast_path_reads_as_the_general_path(tmp_path, monkeypatch, nam
     def read():
         notes: list = []
         try:
-            tr = text.read_trajectory(path, notes=notes)
+            tr = text.read_trajectory(path, notes=notes, c_parser_min_bytes=0)
         except EpaError as exc:
             return str(exc)
         covariance = [c.tobytes() for c in (tr.cov_rot, tr.cov_pos) if c is not None]
         return [a.tobytes() for a in (tr.t, tr.p, tr.q)] + covariance + notes
 
+    in_c, real = [], text._read_in_c
+    monkeypatch.setattr(text, "_read_in_c", lambda path, data: in_c.append(1) or real(path, data))
     fast = read()
+    assert in_c  # the C parser had the file
     monkeypatch.setattr(text, "_read_in_c", lambda path, data: (None, False))
     assert read() == fast
     monkeypatch.setattr(text, "_c_parser_rows", lambda data, offset, width: None)

@@ -1,7 +1,8 @@
 """The ``epa`` command: ``epa eval`` (one case, every stage in one process), ``epa ape|rpe|res``
 (evo's command lines, in epa.evo), ``epa rpg`` (rpg_trajectory_evaluation's), ``epa traj``,
 ``epa fig``, ``epa config``, ``epa selftest``, ``epa stage`` (one stage of one grid case),
-``epa verify`` (regenerate a results folder byte for byte) and ``epa simulate``."""
+``epa verify`` (regenerate a results folder or package and compare it by the numeric contract),
+``epa pack`` (a replication package) and ``epa simulate``."""
 
 from __future__ import annotations
 
@@ -20,8 +21,21 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="epa", description="Trajectory evaluation for SLAM/VIO.")
     p.add_argument("--version", action="version", version=f"epica {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
+    # in the order `epa --help` lists them
+    _add_eval(sub)
+    _add_traj(sub)
+    _add_fig(sub)
+    _add_config(sub)
+    _add_evo_rpg_verify(sub)
+    _add_selftest(sub)
+    _add_stage(sub)
+    _add_simulate(sub)
+    return p
 
+
+def _add_eval(sub) -> None:
     e = sub.add_parser("eval", help="evaluate one estimate against one reference")
+    e.set_defaults(func=_eval)
     e.add_argument("ref", help="reference trajectory file")
     e.add_argument("est", help="estimated trajectory file")
     e.add_argument(
@@ -54,19 +68,7 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--no-calibrate", action="store_true", help="skip Step 2")
     e.add_argument("--scale", action="store_true", help="Step 2 also solves a scale (monocular)")
     e.add_argument("--segments", type=float, nargs="+", help="distance-RPE segment lengths (m)")
-    e.add_argument("--ref-format", help="reference format (auto, tum, kitti, euroc, openvins, csv)")
-    e.add_argument("--est-format", help="estimate format")
-    e.add_argument("--unsorted", choices=["error", "sort"], help="repeated/backward stamps")
-    e.add_argument("--time-unit", choices=["auto", "s", "ns", "sec_nsec"])
-    e.add_argument("--ref-topic", help="reference bag topic")
-    e.add_argument("--est-topic", help="estimate bag topic (may be another topic of the same bag)")
-    e.add_argument("--ref-frames", nargs=2, metavar=("PARENT", "CHILD"), help="reference TF frames")
-    e.add_argument("--est-frames", nargs=2, metavar=("PARENT", "CHILD"), help="estimate TF frames")
-    e.add_argument(
-        "--stamp",
-        choices=["header", "record"],
-        help="bag stamps: message header (default) or record time",
-    )
+    _add_eval_sources(e)
     e.add_argument(
         "--report",
         action="store_true",
@@ -85,9 +87,29 @@ def _parser() -> argparse.ArgumentParser:
         "--rate", type=float, help="sensor rate (Hz) for EA-Drift (default: from the timing file)"
     )
 
+
+def _add_eval_sources(e) -> None:
+    """How `epa eval` reads its two inputs: formats, stamps, bag topics and TF frames."""
+    e.add_argument("--ref-format", help="reference format (auto, tum, kitti, euroc, openvins, csv)")
+    e.add_argument("--est-format", help="estimate format")
+    e.add_argument("--unsorted", choices=["error", "sort"], help="repeated/backward stamps")
+    e.add_argument("--time-unit", choices=["auto", "s", "ns", "sec_nsec"])
+    e.add_argument("--ref-topic", help="reference bag topic")
+    e.add_argument("--est-topic", help="estimate bag topic (may be another topic of the same bag)")
+    e.add_argument("--ref-frames", nargs=2, metavar=("PARENT", "CHILD"), help="reference TF frames")
+    e.add_argument("--est-frames", nargs=2, metavar=("PARENT", "CHILD"), help="estimate TF frames")
+    e.add_argument(
+        "--stamp",
+        choices=["header", "record"],
+        help="bag stamps: message header (default) or record time",
+    )
+
+
+def _add_traj(sub) -> None:
     tr = sub.add_parser(
         "traj", help="what is in a trajectory file or bag; export a topic to TUM or CSV"
     )
+    tr.set_defaults(func=_traj)
     tr.add_argument("source", help="text trajectory file, .bag, .mcap or ROS 2 bag folder")
     tr.add_argument("--topic", help="bag topic to read (without: list the bag's topics)")
     tr.add_argument(
@@ -108,9 +130,12 @@ def _parser() -> argparse.ArgumentParser:
         " the OpenVINS 20-column layout; CSV: named columns pr11..pt33); an error without covariance",
     )
 
+
+def _add_fig(sub) -> None:
     f = sub.add_parser(
         "fig", help="render a plot bundle again (another style or size), recomputing nothing"
     )
+    f.set_defaults(func=_fig)
     f.add_argument(
         "bundle", nargs="?", help="a bundle .json (10_report/bundles/, results/figures/bundles/)"
     )
@@ -126,11 +151,17 @@ def _parser() -> argparse.ArgumentParser:
     )
     f.add_argument("--pdf", action="store_true", help="also write a vector PDF")
 
+
+def _add_config(sub) -> None:
     c = sub.add_parser(
         "config", help="every setting: the defaults, or the effective settings of a config file"
     )
+    c.set_defaults(func=_config)
     c.add_argument("config", nargs="?", help="a config YAML (without it: the defaults)")
 
+
+def _add_evo_rpg_verify(sub) -> None:
+    """The commands whose parsers their own modules build; their handlers are attached by name."""
     from epa.evo import commands as cli_evo
 
     cli_evo.add_parsers(sub)
@@ -140,14 +171,28 @@ def _parser() -> argparse.ArgumentParser:
 
     rpg_command.add_parser(sub)
 
-    from epa.workflow import verify
+    from epa.workflow import package, verify
 
     verify.add_parser(sub)
+    package.add_parser(sub)
+    handlers = {
+        "ape": cli_evo.run,
+        "rpe": cli_evo.run,
+        "res": cli_evo.res,
+        "rpg": rpg_command.run,
+        "verify": verify.run,
+        "pack": package.run,
+    }
+    for name, func in handlers.items():
+        sub.choices[name].set_defaults(func=func)
 
+
+def _add_selftest(sub) -> None:
     st = sub.add_parser(
         "selftest",
         help="how well Steps 1-2 recover known offsets and extrinsics on a reference's own motion",
     )
+    st.set_defaults(func=_selftest)
     st.add_argument(
         "reference", help="the reference trajectory (a text file, or a bag with --config's sources)"
     )
@@ -161,19 +206,24 @@ def _parser() -> argparse.ArgumentParser:
     st.add_argument("--scale", action="store_true", help="simulate and solve a scale (monocular)")
     st.add_argument("--seed", type=int, default=0)
 
+
+def _add_stage(sub) -> None:
     sg = sub.add_parser(
         "stage", help="run one stage of one grid case from the previous stage's artifacts"
     )
+    sg.set_defaults(func=_stage)
     sg.add_argument("name", help="the stage: load, crop, sync, calibrate, align, metrics, ...")
     sg.add_argument("case_dir", help="the case folder, results/cases/<algorithm>/<dataset>/<run>")
     sg.add_argument(
         "--configfile", default="config/config.yaml", help="the grid's config (its settings apply)"
     )
 
+
+def _add_simulate(sub) -> None:
     s = sub.add_parser("simulate", help="write the deterministic example grid")
+    s.set_defaults(func=_simulate)
     s.add_argument("out", help="folder to write truth/, algorithms/ and manifest.json into")
     s.add_argument("--seed", type=int, default=7)
-    return p
 
 
 def _eval_config(args) -> dict:
@@ -486,52 +536,35 @@ def _selftest(args) -> None:
     print(selftest.report(results, Path(args.reference).name, args.rate), end="")
 
 
+def _config(args) -> None:
+    print(_config_listing(args.config), end="")
+
+
+def _stage(args) -> None:
+    from epa.workflow import one_stage
+
+    elapsed, written = one_stage.run(args.name, args.case_dir, args.configfile)
+    print(f"{args.name}: {elapsed:.3f} s, wrote " + ", ".join(map(str, written)))
+
+
+def _simulate(args) -> None:
+    from epa import simulate
+
+    manifest = simulate.simulate(args.out, seed=args.seed)
+    print(
+        f"wrote {len(manifest['cases'])} estimates and {len(simulate.SEQUENCES)} references to {args.out}"
+    )
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="epa: %(levelname)s: %(message)s")
     try:
-        if args.command == "eval":
-            _eval(args)
-        elif args.command == "fig":
-            _fig(args)
-        elif args.command == "traj":
-            _traj(args)
-        elif args.command in ("ape", "rpe"):
-            from epa.evo import commands as cli_evo
-
-            cli_evo.run(args)
-        elif args.command == "res":
-            from epa.evo import commands as cli_evo
-
-            cli_evo.res(args)
-        elif args.command == "rpg":
-            from epa.rpg import command as rpg_command
-
-            rpg_command.run(args)
-        elif args.command == "config":
-            print(_config_listing(args.config), end="")
-        elif args.command == "selftest":
-            _selftest(args)
-        elif args.command == "stage":
-            from epa.workflow import one_stage
-
-            elapsed, written = one_stage.run(args.name, args.case_dir, args.configfile)
-            print(f"{args.name}: {elapsed:.3f} s, wrote " + ", ".join(map(str, written)))
-        elif args.command == "verify":
-            from epa.workflow import verify
-
-            return verify.run(args)
-        elif args.command == "simulate":
-            from epa import simulate
-
-            manifest = simulate.simulate(args.out, seed=args.seed)
-            print(
-                f"wrote {len(manifest['cases'])} estimates and {len(simulate.SEQUENCES)} references to {args.out}"
-            )
+        status = args.func(args)  # an exit status (epa verify), or None when the command is done
     except EpaError as exc:
         print(f"epa: error: {exc.one_line()}", file=sys.stderr)
         return 2
-    return 0
+    return 0 if status is None else status
 
 
 if __name__ == "__main__":

@@ -383,9 +383,25 @@ def report_md(
 ) -> str:
     T = TEXT[lang]
     m = doc.get("metrics", {})
-    d = doc.get("drift", {})
+    lines = lead_lines(doc, case_name, T)
+    lines += drift_lines(doc.get("drift", {}), T)
+    lines += [T["every_key"], "", f"## {T['steps']}", "", *steps_lines(m, T)]
+    for key in ("consistency", "efficiency"):
+        lines += ["", f"## {T[key]}", "", record_line(key, doc.get(key, {}), T)]
+    lines += ["", f"## {T['fail']}", ""]
+    lines += fail_lines(fail, T)
+    lines += ["", f"## {T['figures']}", ""]
+    lines += figure_lines(drawn, set(bundles), every_figure, cfg_report or {}, T)
+    lines += ["", f"## {T['provenance']}", ""]
+    lines += provenance_lines(inputs or [], grid_provenance, T)
+    return "\n".join(lines) + "\n"
+
+
+def lead_lines(doc: dict, case_name: str, T: dict) -> list[str]:
+    """The title, what was evaluated and how, the metric warnings and the metrics table."""
+    m = doc.get("metrics", {})
     sync, align = m.get("sync", {}), m.get("alignment", {})
-    lines = [
+    return [
         f"# {T['title']} {case_name}",
         "",
         T["lead"].format(
@@ -409,56 +425,53 @@ def report_md(
         *metrics_table(m, T),
         "",
     ]
-    if d:
-        lines.append(
-            T["success"].format(
-                d=_f(d.get("success_rate_distance_pct")),
-                a=_f(d.get("success_auc_pct")),
-                t=_f(d.get("success_rate_time_pct")),
-            )
+
+
+def drift_lines(d: dict, T: dict) -> list[str]:
+    """The success rates and, by what the drift stage found, the drift-valid metrics table."""
+    if not d:
+        return []
+    lines = [
+        T["success"].format(
+            d=_f(d.get("success_rate_distance_pct")),
+            a=_f(d.get("success_auc_pct")),
+            t=_f(d.get("success_rate_time_pct")),
         )
-        if d.get("global_failed"):
-            lines += ["", T["global_failed"]]
-        elif d.get("n_fail_segments"):
-            lines += ["", f"### {T['valid']}", "", *metrics_table(d.get("drift_valid") or {}, T)]
-        else:
-            lines += ["", T["no_fail"]]
-        lines.append("")
-    lines += [T["every_key"], "", f"## {T['steps']}", "", *steps_lines(m, T)]
-    for key in ("consistency", "efficiency"):
-        rec = doc.get(key, {})
-        lines += ["", f"## {T[key]}", ""]
-        if not rec.get("available"):
-            lines.append(f"{T['unavailable']}: {rec.get('reason', rec.get('failed', ''))}")
-        elif key == "consistency":
-            lines.append(
-                T["nees"].format(
-                    r=_num(rec.get("nees_rot_mean")),
-                    p=_num(rec.get("nees_pos_mean")),
-                    o=_num(rec.get("outside_3sigma_pct")),
-                )
-            )
-        else:
-            lines.append(
-                T["eff"].format(
-                    m=_num(rec.get("frame_time_mean_ms")),
-                    p=_num(rec.get("frame_time_p95_ms")),
-                    hz=_num(rec.get("sensor_rate_hz")),
-                    over=_num(rec.get("frames_over_period_pct")),
-                    ea=_num(rec.get("ea_drift")),
-                )
-            )
-    lines += ["", f"## {T['fail']}", ""]
-    starts = np.asarray(fail.get("t_start", []), float)
-    if starts.size:  # stamps of the reference clock, as in 07_drift/fail_segments.csv
-        lines += [f"| {T['start']} | {T['end']} |", "|---:|---:|"]
-        lines += [
-            f"| {s:.3f} | {e:.3f} |" for s, e in zip(starts, np.asarray(fail["t_end"], float))
-        ]
+    ]
+    if d.get("global_failed"):
+        lines += ["", T["global_failed"]]
+    elif d.get("n_fail_segments"):
+        lines += ["", f"### {T['valid']}", "", *metrics_table(d.get("drift_valid") or {}, T)]
     else:
-        lines.append(T["none"])
-    lines += ["", f"## {T['figures']}", ""]
-    lines += figure_lines(drawn, set(bundles), every_figure, cfg_report or {}, T)
-    lines += ["", f"## {T['provenance']}", ""]
-    lines += provenance_lines(inputs or [], grid_provenance, T)
-    return "\n".join(lines) + "\n"
+        lines += ["", T["no_fail"]]
+    return lines + [""]
+
+
+def record_line(key: str, rec: dict, T: dict) -> str:
+    """The one line of the consistency or the efficiency record, or why it is unavailable."""
+    if not rec.get("available"):
+        return f"{T['unavailable']}: {rec.get('reason', rec.get('failed', ''))}"
+    if key == "consistency":
+        return T["nees"].format(
+            r=_num(rec.get("nees_rot_mean")),
+            p=_num(rec.get("nees_pos_mean")),
+            o=_num(rec.get("outside_3sigma_pct")),
+        )
+    return T["eff"].format(
+        m=_num(rec.get("frame_time_mean_ms")),
+        p=_num(rec.get("frame_time_p95_ms")),
+        hz=_num(rec.get("sensor_rate_hz")),
+        over=_num(rec.get("frames_over_period_pct")),
+        ea=_num(rec.get("ea_drift")),
+    )
+
+
+def fail_lines(fail: dict, T: dict) -> list[str]:
+    """The fail segments, a row each, or the word for none."""
+    starts = np.asarray(fail.get("t_start", []), float)
+    if not starts.size:
+        return [T["none"]]
+    # stamps of the reference clock, as in 07_drift/fail_segments.csv
+    return [f"| {T['start']} | {T['end']} |", "|---:|---:|"] + [
+        f"| {s:.3f} | {e:.3f} |" for s, e in zip(starts, np.asarray(fail["t_end"], float))
+    ]

@@ -175,7 +175,14 @@ def read_bag(
                 )
             try:
                 return _read_tf(
-                    reader, path, topic, static_topic, tuple(frames), stamp, notes, tf_rate
+                    reader,
+                    path,
+                    topic,
+                    static_topic,
+                    tuple(frames),
+                    stamp,
+                    notes,
+                    evo_lookup_hz=tf_rate,
                 )
             except EpaError as exc:
                 raise (exc if exc.path else EpaError(exc.message, path=where)) from None
@@ -454,11 +461,49 @@ def _read_tf(
     frames: tuple[str, str],
     stamp: str,
     notes,
-    rate: float | None = None,
+    evo_lookup_hz: float | None = None,
 ):
+    """The poses of the TF chain ``frames`` (parent, child) of ``topic``, through ``static_topic``.
+    ``evo_lookup_hz``: sampled as evo samples a chain, a lookup every 1/evo_lookup_hz s from the
+    topic's first message with stamps through double seconds (:func:`_as_evo_looks_up`); None: at
+    the stamps of the chain's busiest dynamic link."""
     parent, child = (f.lstrip("/") for f in frames)
+    where = f"{path} topic {topic}"
     dynamic, first_ns = _tf_edges(reader, topic, stamp)
     static = _tf_edges(reader, static_topic, stamp)[0] if static_topic in reader.topics else {}
+    steps = _tf_steps(dynamic, static, parent, child, where)
+    series = _tf_series(steps, dynamic, static)
+    moving = [e for e, (_, _, is_static) in series.items() if not is_static]
+    if not moving:
+        raise EpaError(
+            f"the chain {parent} -> {child} is static (only {static_topic}): no trajectory",
+            path=where,
+        )
+    if evo_lookup_hz is not None:
+        series, t_ns = _as_evo_looks_up(series, moving, first_ns, evo_lookup_hz)
+        sampled = f"every {1 / evo_lookup_hz:g} s from the first message of {topic}, as evo"
+    else:
+        # the stamps of the dynamic link with most messages; the others are interpolated within their span
+        t_ns = series[max(moving, key=lambda e: len(series[e][0]))][1]
+        sampled = f"at the stamps of {topic}"
+    for e in moving:
+        ns = series[e][1]
+        t_ns = t_ns[(t_ns >= ns[0]) & (t_ns <= ns[-1])]
+    t_ns = np.unique(t_ns)
+    if evo_lookup_hz is None and len(steps) == 1 and not steps[0][2]:  # one direct link
+        rows = series[(steps[0][0], steps[0][1])][0]
+        return _direct_link(rows, f"{parent} -> {child}", topic, stamp, notes)
+    if len(t_ns) == 0:
+        raise EpaError(f"the transforms of {parent} -> {child} never overlap in time", path=where)
+    r_total, p_total = _compose(series, steps, t_ns)
+    if notes is not None:
+        chain_text = " -> ".join([parent] + [b if not inv else a for a, b, inv in steps])
+        notes.append(f"bag TF {chain_text} ({len(t_ns)} poses {sampled}, {stamp} stamps)")
+    return Trajectory.from_rp(_to_sec(t_ns), r_total, p_total)
+
+
+def _tf_steps(dynamic: dict, static: dict, parent: str, child: str, where: str) -> list:
+    """The chain's steps (:func:`_chain`), or an error naming the frames there are."""
     steps = _chain(set(dynamic) | set(static), parent, child)
     if steps is None:
         known = sorted({f for e in set(dynamic) | set(static) for f in e})
@@ -468,9 +513,13 @@ def _read_tf(
             if missing
             else f"no chain from {parent!r} to {child!r}"
         )
-        raise EpaError(
-            f"{what}; the TF frames are {', '.join(known) or 'none'}", path=f"{path} topic {topic}"
-        )
+        raise EpaError(f"{what}; the TF frames are {', '.join(known) or 'none'}", path=where)
+    return steps
+
+
+def _tf_series(steps: list, dynamic: dict, static: dict) -> dict:
+    """Per link of the chain: its rows and integer-ns stamps in stamp order, and whether it is
+    static; every pose finite, every quaternion one that normalises."""
     series = {}
     for a, b, _ in steps:
         rows, ns = dynamic.get((a, b)) or static[(a, b)]
@@ -485,47 +534,35 @@ def _read_tf(
             k = int(np.argmax(~np.isfinite(rows).all(axis=1)))
             raise EpaError(f"transform {a} -> {b}, message {k + 1}: non-finite pose (nan or inf)")
         _quat_norms(rows[:, 4:8], f"transform {a} -> {b}, message")
-    moving = [e for e, (_, _, is_static) in series.items() if not is_static]
-    if not moving:
-        raise EpaError(
-            f"the chain {parent} -> {child} is static (only {static_topic}): no trajectory",
-            path=f"{path} topic {topic}",
-        )
-    if rate is not None:
-        # evo looks up through ROS 1's tf2_py, which carries every stamp as a double of seconds
-        # (fromSec(to_sec())): up to 1.2e-7 s off for epoch stamps, 1e-7 m in the poses. So do we.
-        series = {
-            e: (rows, _through_double_seconds(ns), is_static)
-            for e, (rows, ns, is_static) in series.items()
-        }
-        t_ns = _through_double_seconds(
-            _evo_lookup_stamps(first_ns, min(int(series[e][1][-1]) for e in moving), rate)
-        )
-        sampled = f"every {1 / rate:g} s from the first message of {topic}, as evo"
-    else:
-        # the stamps of the dynamic link with most messages; the others are interpolated within their span
-        t_ns = series[max(moving, key=lambda e: len(series[e][0]))][1]
-        sampled = f"at the stamps of {topic}"
-    for e in moving:
-        ns = series[e][1]
-        t_ns = t_ns[(t_ns >= ns[0]) & (t_ns <= ns[-1])]
-    t_ns = np.unique(t_ns)
-    if (
-        rate is None and len(steps) == 1 and not steps[0][2]
-    ):  # one direct link: its own poses, bit for bit
-        rows = series[(steps[0][0], steps[0][1])][0]
-        rows = rows[np.concatenate([[True], np.diff(rows[:, 0]) > 0])]
-        if notes is not None:
-            notes.append(
-                f"bag TF {parent} -> {child} ({len(rows)} poses of {topic}, {stamp} stamps)"
-            )
-        q = rows[:, 4:8]
-        return Trajectory(rows[:, 0], rows[:, 1:4], q / np.linalg.norm(q, axis=1, keepdims=True))
-    if len(t_ns) == 0:
-        raise EpaError(
-            f"the transforms of {parent} -> {child} never overlap in time",
-            path=f"{path} topic {topic}",
-        )
+    return series
+
+
+def _as_evo_looks_up(series: dict, moving: list, first_ns: int, lookup_hz: float):
+    """The links' stamps and the lookup instants as evo has them. evo looks up through ROS 1's
+    tf2_py, which carries every stamp as a double of seconds (fromSec(to_sec())): up to 1.2e-7 s off
+    for epoch stamps, 1e-7 m in the poses. So do we."""
+    series = {
+        e: (rows, _through_double_seconds(ns), is_static)
+        for e, (rows, ns, is_static) in series.items()
+    }
+    t_ns = _through_double_seconds(
+        _evo_lookup_stamps(first_ns, min(int(series[e][1][-1]) for e in moving), lookup_hz)
+    )
+    return series, t_ns
+
+
+def _direct_link(rows: np.ndarray, link: str, topic: str, stamp: str, notes) -> Trajectory:
+    """A chain of one direct link: its own poses, bit for bit (the first of repeated stamps)."""
+    rows = rows[np.concatenate([[True], np.diff(rows[:, 0]) > 0])]
+    if notes is not None:
+        notes.append(f"bag TF {link} ({len(rows)} poses of {topic}, {stamp} stamps)")
+    q = rows[:, 4:8]
+    return Trajectory(rows[:, 0], rows[:, 1:4], q / np.linalg.norm(q, axis=1, keepdims=True))
+
+
+def _compose(series: dict, steps: list, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The chain's rotations and positions at ``t_ns``: each link interpolated there, composed from
+    the parent on (an inverted link transposed)."""
     # interpolate in time since the first stamp: ns differences are exact, epoch seconds are not
     origin = int(t_ns[0])
     since = (t_ns - origin) * 1e-9
@@ -544,10 +581,7 @@ def _read_tf(
             p_e = -np.einsum("nab,nb->na", r_e, p_e)
         p_total = p_total + np.einsum("nab,nb->na", r_total, p_e)
         r_total = r_total @ r_e
-    if notes is not None:
-        chain_text = " -> ".join([parent] + [b if not inv else a for a, b, inv in steps])
-        notes.append(f"bag TF {chain_text} ({len(t_ns)} poses {sampled}, {stamp} stamps)")
-    return Trajectory.from_rp(_to_sec(t_ns), r_total, p_total)
+    return r_total, p_total
 
 
 def _to_sec(ns: np.ndarray) -> np.ndarray:

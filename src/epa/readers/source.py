@@ -80,9 +80,17 @@ def timing_file(run_path, opts: dict) -> Path | None:
     return None
 
 
-def read(path, opts: dict, *, notes: list | None = None, kitti_times=None) -> Trajectory:
+def read(
+    path,
+    opts: dict,
+    *,
+    notes: list | None = None,
+    kitti_times=None,
+    c_parser_min_bytes: int = text.C_PARSER_MIN_BYTES,
+) -> Trajectory:
     """Read a source (bag or text file) into seconds and unit quaternions; what was inferred goes to
-    ``notes`` and the log."""
+    ``notes`` and the log. ``c_parser_min_bytes``: text files from this size on are parsed by
+    pandas' C parser (:func:`epa.readers.text.read_table`)."""
     path = Path(path)
     if bags.is_bag(path):
         own: list[str] = []
@@ -124,6 +132,7 @@ def read(path, opts: dict, *, notes: list | None = None, kitti_times=None) -> Tr
         kitti_times=kitti_times,
         kitti_printed=opts.get("kitti_printed", False),
         notes=notes,
+        c_parser_min_bytes=c_parser_min_bytes,
     )
     if traj.cov_rot is not None and opts.get("orientation_covariance") == "global":
         traj = Trajectory(

@@ -10,11 +10,14 @@ from epa.core.errors import EpaError
 from epa.readers import text
 
 
-def read_timing(path) -> tuple[np.ndarray, np.ndarray, str]:
+def read_timing(
+    path, *, c_parser_min_bytes: int = text.C_PARSER_MIN_BYTES
+) -> tuple[np.ndarray, np.ndarray, str]:
     """(stamps in s, frame times in ms, what was read) from ``<timestamp> <milliseconds>`` text or
     OpenVINS's timing CSV (header ``timestamp (sec),...,total``, in seconds: its ``total``)."""
     path = Path(path)
-    tab = text.read_table(path)  # the text readers' parsing and one-line errors
+    # the text readers' parsing and one-line errors
+    tab = text.read_table(path, c_parser_min_bytes=c_parser_min_bytes)
     header = [h.strip().lower() for h in (tab.header or [])]
     rows = tab.rows
     if "total" in header:

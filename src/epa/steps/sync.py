@@ -359,104 +359,165 @@ def estimate_offset(
     OffsetEstimate
     """
 
-    def fail(status, reason, **kw):
-        return OffsetEstimate(
-            offset=fallback,
-            estimated=kw.pop("estimated", None),
-            used=False,
-            reason=reason,
-            status=status,
-            **kw,
-        )
-
     if len(ref) < 4 or len(est) < 4:
-        return fail(Step1Status.TOO_LITTLE_MOTION, "too few poses for a correlation")
+        return _not_used(fallback, Step1Status.TOO_LITTLE_MOTION, "too few poses for a correlation")
     t_a, w_a, t_b, w_b = _speed_signals(ref, est, speed_interval)
     motion = dict(ref_motion_rad_s=float(np.std(w_a)), est_motion_rad_s=float(np.std(w_b)))
+    refused = _signals_refused(t_a, t_b, motion, window, min_motion)
+    if refused is not None:
+        return _not_used(fallback, *refused, **motion)
+    w_a, w_b = _clip_spikes(w_a), _clip_spikes(w_b)
+    dt, a, in_a, b, in_b = _correlation_grid(t_a, w_a, t_b, w_b, window, resample_dt, max_samples)
+    if in_a.sum() < 4 or in_b.sum() < 4:
+        reason = f"too few samples on the {dt:.3g} s correlation grid"
+        return _not_used(fallback, Step1Status.NO_OVERLAP, reason, **motion)
+    peak = _windowed_peak(a, in_a, b, in_b, window, dt)
+    found = peak.found(motion, dt)  # what sync.json records, trusted or not
+    refused = _peak_refused(peak, window, min_corr, min_peak_ratio)
+    if refused is not None:
+        return _not_used(fallback, *refused, **found)
+    # the jackknife looks for replicate peaks within the main lobe, at most 0.25 s either side
+    reach = max(3, min(peak.k - peak.left, peak.right - peak.k, int(round(0.25 / dt))))
+    found["std"] = std = _jackknife_std(a, b, peak.span_b, int(peak.lags[peak.k]), reach, dt)
+    if not std <= max_std:
+        return _not_used(
+            fallback,
+            Step1Status.UNCERTAIN,
+            f"offset {peak.estimated * 1000:.1f} ms too uncertain: std {std * 1000:.3g} ms >"
+            f" {max_std * 1000:.3g} ms",
+            **found,
+        )
+    found.pop("estimated")
+    return OffsetEstimate(
+        offset=peak.estimated, estimated=peak.estimated, used=True, reason="estimated", **found
+    )
+
+
+def _signals_refused(t_a, t_b, motion: dict, window: float, min_motion: float):
+    """Why the angular-speed signals cannot give an offset (a status and the reason), or None."""
     weakest = min(motion.values())
     if weakest < min_motion:
-        return fail(
+        return (
             Step1Status.TOO_LITTLE_MOTION,
             f"too little rotational motion (std of angular speed {weakest:.3g}"
             f" rad/s < {min_motion})",
-            **motion,
         )
     if t_b[0] > t_a[-1] + window or t_b[-1] < t_a[0] - window:
-        return fail(
+        return (
             Step1Status.NO_OVERLAP,
             f"the stamps do not overlap within the ±{window} s search window",
-            **motion,
         )
-    w_a, w_b = _clip_spikes(w_a), _clip_spikes(w_b)
+    return None
+
+
+def _not_used(fallback: float, status: Step1Status, reason: str, **kw) -> OffsetEstimate:
+    """The fallback offset, with why the estimate (``estimated``, when there is one) is not used."""
+    return OffsetEstimate(
+        offset=fallback,
+        estimated=kw.pop("estimated", None),
+        used=False,
+        reason=reason,
+        status=status,
+        **kw,
+    )
+
+
+def _correlation_grid(t_a, w_a, t_b, w_b, window: float, resample_dt: float, max_samples: int):
+    """The uniform grid both signals are correlated on (the span of both, ±window) and its step
+    ``dt``, coarsened to at most ``max_samples``; each signal on it with its support."""
     start = min(t_a[0], t_b[0]) - window
     end = max(t_a[-1], t_b[-1]) + window
     dt = max(resample_dt, (end - start) / max_samples)
     grid = start + dt * np.arange(int(np.ceil((end - start) / dt)) + 1)
     a, in_a = _on_grid(grid, t_a, w_a)
     b, in_b = _on_grid(grid, t_b, w_b)
-    if in_a.sum() < 4 or in_b.sum() < 4:
-        return fail(
-            Step1Status.NO_OVERLAP, f"too few samples on the {dt:.3g} s correlation grid", **motion
+    return dt, a, in_a, b, in_b
+
+
+@dataclass
+class _Peak:
+    """The correlation's peak within the search window, and what the statuses judge it by."""
+
+    lags: np.ndarray  # the lags within the window (grid steps) and the correlation at each
+    corr: np.ndarray
+    kmax: int  # the window's half-width (grid steps)
+    k: int  # the peak's index in lags
+    value: float
+    estimated: float  # the peak's offset (s), refined below one grid step
+    left: int  # the main lobe around the peak (indices in lags)
+    right: int
+    ratio: float  # the peak over the highest local maximum outside its main lobe
+    best_beyond: float  # the best local maximum beyond the window (-1 when none)
+    lag_beyond: float | None  # and its offset (s)
+    span_b: tuple[int, int]  # the estimate signal's support on the grid
+
+    def found(self, motion: dict, dt: float) -> dict:
+        """The fields of :class:`OffsetEstimate` the peak gives, with the motion and the grid step."""
+        return dict(
+            curve_lag=self.lags * dt,
+            curve_corr=self.corr,
+            peak_corr=self.value,
+            peak_ratio=self.ratio,
+            beyond_window_corr=self.best_beyond,
+            **motion,
+            dt=dt,
+            estimated=self.estimated,
         )
+
+
+def _windowed_peak(a, in_a, b, in_b, window: float, dt: float) -> _Peak:
+    """The normalised correlation's peak within ±window, and the best match beyond it."""
     lags_all, corr_all, span_b = _normalised_correlation(a, in_a, b, in_b)
     kmax = int(round(window / dt))
     maxima_all = _local_maxima(corr_all)
     beyond = maxima_all[np.abs(lags_all[maxima_all]) > kmax]
     best_beyond = float(corr_all[beyond].max()) if len(beyond) else -1.0
+    lag_beyond = float(lags_all[beyond[np.argmax(corr_all[beyond])]] * dt) if len(beyond) else None
     in_window = np.abs(lags_all) <= kmax
     lags, corr = lags_all[in_window], corr_all[in_window]
     k, frac = _peak(corr)
-    peak = float(corr[k])
-    estimated = float((lags[k] + frac) * dt)
+    value = float(corr[k])
     left, right, second = _main_lobe(corr, k)
-    ratio = peak / second if second > 0 else float("inf")
-    found = dict(
-        curve_lag=lags * dt,
-        curve_corr=corr,
-        peak_corr=peak,
-        peak_ratio=ratio,
-        beyond_window_corr=best_beyond,
-        **motion,
-        dt=dt,
-        estimated=estimated,
+    return _Peak(
+        lags=lags,
+        corr=corr,
+        kmax=kmax,
+        k=k,
+        value=value,
+        estimated=float((lags[k] + frac) * dt),
+        left=left,
+        right=right,
+        ratio=value / second if second > 0 else float("inf"),
+        best_beyond=best_beyond,
+        lag_beyond=lag_beyond,
+        span_b=span_b,
     )
-    if abs(lags[k]) >= kmax - 1:  # never clamped: the true offset may lie beyond the window
-        return fail(
+
+
+def _peak_refused(
+    peak: _Peak, window: float, min_corr: float, min_peak_ratio: float
+) -> tuple[Step1Status, str] | None:
+    """Why the peak is not trusted as the offset (a status and the reason), or None."""
+    if abs(peak.lags[peak.k]) >= peak.kmax - 1:  # never clamped: the offset may lie beyond
+        return (
             Step1Status.AT_WINDOW_EDGE,
             f"correlation peak at the edge of the ±{window} s search window"
             " (the offset may lie outside it: widen sync.window)",
-            **found,
         )
     # Beyond the window only a clearly better and itself strong match counts: quasi-periodic motion (a
     # figure-8, a pendulum) repeats itself tens of seconds later almost as well, and that is not this
     # offset; nor is a weak bump of a run that diverged.
-    if best_beyond > max(peak * min_peak_ratio, min_corr):
-        lag_beyond = float(lags_all[beyond[np.argmax(corr_all[beyond])]] * dt)
-        return fail(
+    if peak.best_beyond > max(peak.value * min_peak_ratio, min_corr):
+        return (
             Step1Status.OUTSIDE_WINDOW,
-            f"a better match ({best_beyond:.3f} at {lag_beyond:+.3f} s) lies outside the"
-            f" ±{window} s search window than inside it ({peak:.3f}): widen sync.window",
-            **found,
+            f"a better match ({peak.best_beyond:.3f} at {peak.lag_beyond:+.3f} s) lies outside the"
+            f" ±{window} s search window than inside it ({peak.value:.3f}): widen sync.window",
         )
-    if peak < min_corr:
-        return fail(Step1Status.WEAK_PEAK, f"correlation peak {peak:.3f} below {min_corr}", **found)
-    if ratio < min_peak_ratio:
-        return fail(
+    if peak.value < min_corr:
+        return Step1Status.WEAK_PEAK, f"correlation peak {peak.value:.3f} below {min_corr}"
+    if peak.ratio < min_peak_ratio:
+        return (
             Step1Status.AMBIGUOUS,
-            f"ambiguous peak: best/second = {ratio:.3f} < {min_peak_ratio}",
-            **found,
+            f"ambiguous peak: best/second = {peak.ratio:.3f} < {min_peak_ratio}",
         )
-    # the jackknife looks for replicate peaks within the main lobe, at most 0.25 s either side
-    reach = max(3, min(k - left, right - k, int(round(0.25 / dt))))
-    found["std"] = std = _jackknife_std(a, b, span_b, int(lags[k]), reach, dt)
-    if not std <= max_std:
-        return fail(
-            Step1Status.UNCERTAIN,
-            f"offset {estimated * 1000:.1f} ms too uncertain: std {std * 1000:.3g} ms >"
-            f" {max_std * 1000:.3g} ms",
-            **found,
-        )
-    found.pop("estimated")
-    return OffsetEstimate(
-        offset=estimated, estimated=estimated, used=True, reason="estimated", **found
-    )
+    return None

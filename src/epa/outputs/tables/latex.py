@@ -3,6 +3,8 @@ and the registered metrics' (:mod:`epa.metrics.registry`)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from epa.metrics.accuracy import segment_key
 from epa.outputs.tables.cells import (
     _ate,
@@ -67,108 +69,152 @@ def build_tables(
     base tables, each registered metric's (``metrics``: the enabled ones) after the base table it
     names or at the end. With ``spread`` (std / ci) each cell with runs also shows its spread over
     them and their number. ``text``: only the tables error_comparison.txt shows."""
-    algs = sorted({c.algorithm for c in grid})
-    datasets = sorted({c.dataset for c in grid})
-    seg_labels = [f"{segment_key(s)}m" for s in segments]
-    out = []
-
-    def rows_per_dataset(cell_of, pair=True, marked=lambda alg: None):
-        """A row per algorithm: a cell per dataset and their Average; an algorithm ``marked`` (by
-        what it lacks) is named so, its cells empty, never faked."""
-        rows = []
-        for a in algs:
-            missing = marked(a)
-            cells = [
-                _Cell(None, pair) if missing else cell_of(_ok_runs(grid, a, d)) for d in datasets
-            ]
-            rows.append((f"{a} ({missing})" if missing else a, cells + [_average(cells, pair)]))
-        return rows
-
-    def per_dataset(name, title, fn, pair=True, dec=decimals):
-        rows = rows_per_dataset(fn, pair)
-        header = datasets + ["Average"]
-        out.append(
-            (
-                name,
-                title + SPREAD_TITLE[spread],
-                _latex_rows(header, rows, dec, spread),
-                len(header) + 1,
-            )
-        )
-
-    def per_segment(name, title, fn):
-        # these pool an algorithm's datasets: the spread is over every run of every dataset
-        rows = [(a, [fn(_ok_runs(grid, a), s) for s in segments]) for a in algs]
-        out.append(
-            (
-                name,
-                title + SPREAD_TITLE[spread].replace("RUNS]", "RUNS OF ALL DATASETS]"),
-                _latex_rows(seg_labels, rows, decimals, spread),
-                len(segments) + 1,
-            )
-        )
-
-    for prefix, valid, tag in (
-        ("", False, "FULL TRAJECTORY"),
-        ("valid_", True, "DRIFT-VALID ONLY"),
-    ):
-        if valid:
-            per_dataset(
-                "success_rate",
-                "DRIFT-VALID SUCCESS RATE LATEX TABLE (% PATH LENGTH)",
-                _success,
-                pair=False,
-                dec=2,
-            )
-            per_dataset(
-                "success_auc",
-                "SUCCESS RATE AREA LATEX TABLE (% PATH, MEAN OVER DRIFT THRESHOLDS x0.1-x10)",
-                _success_auc,
-                pair=False,
-                dec=2,
-            )
-        per_dataset(
-            prefix + "ate",
-            f"{tag} ATE LATEX TABLE (ROT DEG / TRANS M)",
-            lambda r, valid=valid: _ate(r, valid),
-        )
-        per_segment(
-            prefix + "rpe_distance",
-            f"{tag} DISTANCE RPE LATEX TABLE (ROT DEG / TRANS M)",
-            lambda r, s, valid=valid: _mean_pair(r, "segments", valid, s),
-        )
-        per_segment(
-            prefix + "drift_rate",
-            f"{tag} DISTANCE DRIFT RATE LATEX TABLE (% TRANS / DIST)",
-            lambda r, s, valid=valid: _drift_rate(r, valid, s),
-        )
-        per_dataset(
-            prefix + "rpe_time_1s",
-            f"{tag} 1S TIME RPE LATEX TABLE (ROT DEG / TRANS M)",
-            lambda r, valid=valid: _mean_pair(r, "time", valid),
-        )
-
+    layout = _Layout.of(grid, decimals, spread)
+    out = _base_tables(layout, segments)
     for metric in metrics:
         for spec in metric.TABLES:
             if text and not spec.in_text:
                 continue
-            table = _metric_table(
-                grid, algs, metric, spec, decimals, spread, rows_per_dataset, datasets
-            )
+            table = _metric_table(layout, metric, spec)
             at = next((k + 1 for k, t in enumerate(out) if t[0] == spec.after), len(out))
             out.insert(at, table)
     return out
 
 
-def _metric_table(grid, algs, metric, spec, decimals, spread, rows_per_dataset, datasets):
+def _unmarked(alg: str) -> str | None:
+    return None
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """What every table of one grid shares: its cases, a row per algorithm, a column per dataset
+    (and their Average), the decimals and the spread its cells show."""
+
+    grid: list[CaseResult]
+    algs: list[str]
+    datasets: list[str]
+    decimals: int
+    spread: str
+
+    @classmethod
+    def of(cls, grid: list[CaseResult], decimals: int, spread: str) -> _Layout:
+        algs = sorted({c.algorithm for c in grid})
+        return cls(grid, algs, sorted({c.dataset for c in grid}), decimals, spread)
+
+    def rows_per_dataset(self, cell_of, pair=True, marked=_unmarked):
+        """A row per algorithm: a cell per dataset and their Average; an algorithm ``marked`` (by
+        what it lacks) is named so, its cells empty, never faked."""
+        rows = []
+        for a in self.algs:
+            missing = marked(a)
+            cells = [
+                _Cell(None, pair) if missing else cell_of(_ok_runs(self.grid, a, d))
+                for d in self.datasets
+            ]
+            rows.append((f"{a} ({missing})" if missing else a, cells + [_average(cells, pair)]))
+        return rows
+
+    def per_dataset(self, name: str, title: str, rows, decimals: int | None = None):
+        """A table of ``rows_per_dataset`` rows."""
+        header = self.datasets + ["Average"]
+        dec = self.decimals if decimals is None else decimals
+        return (
+            name,
+            title + SPREAD_TITLE[self.spread],
+            _latex_rows(header, rows, dec, self.spread),
+            len(header) + 1,
+        )
+
+
+def _per_segment(layout: _Layout, segments, name: str, title: str, fn):
+    """A table with a row per algorithm and a column per segment length."""
+    seg_labels = [f"{segment_key(s)}m" for s in segments]
+    # these pool an algorithm's datasets: the spread is over every run of every dataset
+    rows = [(a, [fn(_ok_runs(layout.grid, a), s) for s in segments]) for a in layout.algs]
+    return (
+        name,
+        title + SPREAD_TITLE[layout.spread].replace("RUNS]", "RUNS OF ALL DATASETS]"),
+        _latex_rows(seg_labels, rows, layout.decimals, layout.spread),
+        len(segments) + 1,
+    )
+
+
+def _base_tables(layout: _Layout, segments) -> list[tuple[str, str, list[str], int]]:
+    """The tables every report has: success rates, then ATE and RPE of the full trajectories and
+    of their drift-valid parts."""
+
+    def per_dataset(name, title, fn, pair=True, dec=None):
+        return layout.per_dataset(name, title, layout.rows_per_dataset(fn, pair), dec)
+
+    out = []
+    for prefix, valid, tag in (
+        ("", False, "FULL TRAJECTORY"),
+        ("valid_", True, "DRIFT-VALID ONLY"),
+    ):
+        if valid:
+            out.append(
+                per_dataset(
+                    "success_rate",
+                    "DRIFT-VALID SUCCESS RATE LATEX TABLE (% PATH LENGTH)",
+                    _success,
+                    pair=False,
+                    dec=2,
+                )
+            )
+            out.append(
+                per_dataset(
+                    "success_auc",
+                    "SUCCESS RATE AREA LATEX TABLE (% PATH, MEAN OVER DRIFT THRESHOLDS x0.1-x10)",
+                    _success_auc,
+                    pair=False,
+                    dec=2,
+                )
+            )
+        out.append(
+            per_dataset(
+                prefix + "ate",
+                f"{tag} ATE LATEX TABLE (ROT DEG / TRANS M)",
+                lambda r, valid=valid: _ate(r, valid),
+            )
+        )
+        out.append(
+            _per_segment(
+                layout,
+                segments,
+                prefix + "rpe_distance",
+                f"{tag} DISTANCE RPE LATEX TABLE (ROT DEG / TRANS M)",
+                lambda r, s, valid=valid: _mean_pair(r, "segments", valid, s),
+            )
+        )
+        out.append(
+            _per_segment(
+                layout,
+                segments,
+                prefix + "drift_rate",
+                f"{tag} DISTANCE DRIFT RATE LATEX TABLE (% TRANS / DIST)",
+                lambda r, s, valid=valid: _drift_rate(r, valid, s),
+            )
+        )
+        out.append(
+            per_dataset(
+                prefix + "rpe_time_1s",
+                f"{tag} 1S TIME RPE LATEX TABLE (ROT DEG / TRANS M)",
+                lambda r, valid=valid: _mean_pair(r, "time", valid),
+            )
+        )
+    return out
+
+
+def _metric_table(layout: _Layout, metric, spec):
     """A registered metric's table (:class:`epa.metrics.spec.Table`)."""
+    grid = layout.grid
 
     def has(alg):
         return any(c.algorithm == alg and spec.has(c.record_of(metric)) for c in grid)
 
     if spec.per_algorithm is not None:  # one row per algorithm with the metric, over all its runs
         rows = []
-        for a in algs:
+        for a in layout.algs:
             records = [
                 c.record_of(metric)
                 for c in grid
@@ -179,7 +225,7 @@ def _metric_table(grid, algs, metric, spec, decimals, spread, rows_per_dataset, 
         return (
             spec.name,
             spec.title,
-            _latex_rows(list(spec.header), rows, decimals, spread),
+            _latex_rows(list(spec.header), rows, layout.decimals, layout.spread),
             len(spec.header) + 1,
         )
 
@@ -196,18 +242,13 @@ def _metric_table(grid, algs, metric, spec, decimals, spread, rows_per_dataset, 
             return spec.missing([c.record_of(metric) for c in grid if c.algorithm == alg])
         return spec.missing
 
-    rows = rows_per_dataset(cell_of, spec.pair, marked)
+    rows = layout.rows_per_dataset(cell_of, spec.pair, marked)
     if spec.note is not None:  # rows are in the order of algs
         rows = [
-            (_noted(name, alg, grid, metric, spec), cells) for alg, (name, cells) in zip(algs, rows)
+            (_noted(name, alg, grid, metric, spec), cells)
+            for alg, (name, cells) in zip(layout.algs, rows)
         ]
-    header = datasets + ["Average"]
-    return (
-        spec.name,
-        spec.title + SPREAD_TITLE[spread],
-        _latex_rows(header, rows, decimals, spread),
-        len(header) + 1,
-    )
+    return layout.per_dataset(spec.name, spec.title, rows)
 
 
 def _noted(name: str, alg: str, grid, metric, spec) -> str:
