@@ -62,15 +62,43 @@ def sha256(path, chunk: int = 1 << 20) -> str:
     return h.hexdigest()
 
 
-def file_record(path) -> dict:
-    """An input file as recorded: its path (as the config gives it), size and sha256; or missing."""
+def file_record(path, roots: dict[str, str] | None = None) -> dict:
+    """An input file as recorded: its path (as the config gives it), the config folder it came from
+    and its path relative to that folder (so that it can be found again under a new root), its size
+    and sha256; or missing."""
     p = Path(path)
+    place = {"path": str(path), **where(path, roots or {})}
     try:
         if not stat.S_ISREG(p.stat().st_mode):  # a device or a FIFO is never read here
-            return {"path": str(path), "missing": True, "not_a_file": True}
-        return {"path": str(path), "size": p.stat().st_size, "sha256": sha256(p)}
+            return {**place, "missing": True, "not_a_file": True}
+        return {**place, "size": p.stat().st_size, "sha256": sha256(p)}
     except (OSError, ValueError):
-        return {"path": str(path), "missing": True}
+        return {**place, "missing": True}
+
+
+def where(path, roots: dict[str, str]) -> dict:
+    """``{"folder": key, "relative": path within it}`` for the first of ``roots`` (a config key: its
+    folder) that holds ``path`` as written (no ``..``); ``{}`` for none."""
+    norm = os.path.normpath(str(path))
+    for key, root in roots.items():
+        base = os.path.normpath(str(root))
+        relative = (
+            os.path.relpath(norm, base) if os.path.isabs(norm) == os.path.isabs(base) else ".."
+        )
+        if relative != "." and not relative.startswith(".."):
+            return {"folder": key, "relative": Path(relative).as_posix()}
+    return {}
+
+
+def input_roots(kind: str, cfg: dict, case: dict | None = None) -> dict[str, str]:
+    """The folders a record's inputs are relative to: a grid's ``truth_dir`` and ``algorithms_dir``;
+    a case's reference and estimate folders."""
+    if kind == "case" and case:
+        return {
+            "estimate": os.path.dirname(str(case["estimate"])) or ".",
+            "reference": os.path.dirname(str(case["reference"])) or ".",
+        }
+    return {k: str(cfg[k]) for k in ("truth_dir", "algorithms_dir") if cfg.get(k)}
 
 
 def case_inputs(truth, estimate, timing=None) -> list[str]:
@@ -343,6 +371,7 @@ def document(
     extra: dict | None = None,
 ) -> dict:
     """The provenance record: ``kind`` is ``grid`` (a workflow's results) or ``case`` (``epa eval``)."""
+    roots = input_roots(kind, cfg, (extra or {}).get("case"))
     doc = {
         "format": FORMAT,
         "kind": kind,
@@ -351,7 +380,7 @@ def document(
         **(extra or {}),
         "config": cfg,
         "config_file": CONFIG,
-        "inputs": [file_record(p) for p in sorted(set(map(str, inputs)))],
+        "inputs": [file_record(p, roots) for p in sorted(set(map(str, inputs)))],
         "volatile": {
             "created_utc": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
             "command_line": command_line

@@ -24,49 +24,17 @@ import sys
 import tempfile
 from pathlib import Path
 
-from epa.artifacts.case import FOLDERS
 from epa.core.errors import EpaError
 from epa.outputs import contract, provenance
-
-REPORT_FOLDER = FOLDERS["report"]
-GRID_FILES = (
-    "error_comparison.txt",
-    "summary.csv",
-    "comparison.txt",
-    "comparison.tex",
-    "success_curves.csv",
-    "consistency/summary.csv",
-    "rpg_translation_rmse.txt",  # mode rpg
-    "rpg_rel_err.txt",
-)
+from epa.workflow import package, relocate
+from epa.workflow.compared import REPORT_FOLDER, compared_files, kind_of
+from epa.workflow.relocate import check_inputs
 
 
-def compared_files(results) -> list[str]:
-    """The files ``epa verify`` compares, relative to ``results`` (those that exist there): the
-    printed outputs, then the records."""
-    results = Path(results)
-    names = [n for n in GRID_FILES if (results / n).is_file()]
-    names += sorted(str(p.relative_to(results)) for p in (results / "tables").glob("*.tex"))
-    records = [  # every stage's artifacts (10_report/ holds copies for the reader)
-        *results.glob("cases/*/*/*/[0-9][0-9]_*/**/*"),
-        *results.glob("consistency/*/*.csv"),
-        *results.glob("[0-9][0-9]_*/**/*"),  # a case folder of `epa eval --out`
-    ]
-    names += sorted(
-        str(p.relative_to(results))
-        for p in records
-        if p.is_file() and REPORT_FOLDER not in p.parts and not p.name.startswith(".")
-    )
-    return names
-
-
-def kind_of(name: str) -> str:
-    """``printed`` (a table a reader reads) or ``record`` (full-precision numbers)."""
-    return "printed" if name in GRID_FILES or name.startswith("tables/") else "record"
-
-
-def compare(a, b, *, exact: bool = False) -> list[contract.Comparison]:
-    """Every file of :func:`compared_files` of the results ``a`` against the regenerated ``b``."""
+def compare(a, b, *, exact: bool = False, rewrites=()) -> list[contract.Comparison]:
+    """Every file of :func:`compared_files` of the results ``a`` against the regenerated ``b``
+    (in whose text each ``(new, recorded)`` of ``rewrites`` is put back as recorded: the inputs'
+    paths, when they were found elsewhere)."""
     a, b = Path(a), Path(b)
     names = compared_files(a)
     extra = [n for n in compared_files(b) if kind_of(n) == "printed" and n not in names]
@@ -74,21 +42,22 @@ def compare(a, b, *, exact: bool = False) -> list[contract.Comparison]:
     for name in names + extra:
         kind = kind_of(name)
         if exact:
-            out.append(_compare_bytes(a, b, name, kind))
+            out.append(_compare_bytes(a, b, name, kind, rewrites))
         else:
-            out.append(contract.compare_files(a, b, name, kind))
+            out.append(contract.compare_files(a, b, name, kind, rewrites))
     return out
 
 
-def _compare_bytes(a: Path, b: Path, name: str, kind: str) -> contract.Comparison:
+def _compare_bytes(a: Path, b: Path, name: str, kind: str, rewrites=()) -> contract.Comparison:
     pa, pb = a / name, b / name
     if not pb.is_file():
         return contract.Comparison(name, kind, contract.Verdict.MISSING)
     if not pa.is_file():
         return contract.Comparison(name, kind, contract.Verdict.EXTRA)
-    if pa.read_bytes() == pb.read_bytes():
+    got = contract.rewritten(pb.read_bytes(), rewrites)
+    if pa.read_bytes() == got:
         return contract.Comparison(name, kind, contract.Verdict.IDENTICAL)
-    la, lb = pa.read_bytes().splitlines(), pb.read_bytes().splitlines()
+    la, lb = pa.read_bytes().splitlines(), got.splitlines()
     i = next((k for k, (x, y) in enumerate(zip(la, lb)) if x != y), min(len(la), len(lb)))
     text = [lines[i].decode("utf-8", "replace") if i < len(lines) else "" for lines in (la, lb)]
     return contract.Comparison(
@@ -135,28 +104,6 @@ def _worst_text(r: contract.Comparison, with_name: bool = False) -> str:
     return f"{r.name}: {text}" if with_name else text
 
 
-def check_inputs(doc: dict, workdir) -> list[str]:
-    """Each recorded input that is missing or whose bytes changed, one line each."""
-    problems = []
-    for rec in doc.get("inputs", []):
-        path = Path(workdir) / rec["path"]
-        if rec.get("missing"):
-            if path.exists():
-                problems.append(f"was missing, now present: {rec['path']}")
-            continue
-        if not path.is_file():
-            problems.append(f"missing: {rec['path']}")
-            continue
-        size = path.stat().st_size
-        digest = provenance.sha256(path)
-        if digest != rec["sha256"]:
-            problems.append(
-                f"changed: {rec['path']} (size {rec['size']} -> {size}, "
-                f"sha256 {rec['sha256'][:12]}... -> {digest[:12]}...)"
-            )
-    return problems
-
-
 def default_snakefile() -> Path | None:
     """The workflow of this checkout (src/epa/workflow -> the repository's Snakefile)."""
     root = provenance.source_checkout()
@@ -171,29 +118,26 @@ def _workdir(doc: dict, snakefile: Path | None) -> Path:
 
 
 def regenerate_grid(
-    doc: dict, results: Path, into: Path, snakefile: Path, workdir: Path, cores: int, log
+    results: Path,
+    into: Path,
+    snakefile: Path,
+    workdir: Path,
+    cores: int,
+    log,
+    folders: dict | None = None,
 ) -> None:
+    """The grid again from ``config.resolved.yaml`` (its folders replaced by ``folders``) into
+    ``into/results``: Snakemake's ``tables`` target in a subprocess."""
     import yaml
 
     from epa.workflow import settings
 
     cfg = settings.load_yaml(results / provenance.CONFIG)
-    cfg["results_dir"] = str(into / "results")
+    cfg.update(folders or {}, results_dir=str(into / "results"))
     configfile = into / "config.yaml"
     configfile.write_text(yaml.safe_dump(cfg, sort_keys=False), encoding="utf-8")
-    cmd = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "--snakefile",
-        str(snakefile),
-        "--configfile",
-        str(configfile),
-        "--cores",
-        str(cores),
-        "--nolock",
-        "tables",
-    ]
+    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(snakefile)]
+    cmd += ["--configfile", str(configfile), "--cores", str(cores), "--nolock", "tables"]
     print("epa verify: " + " ".join(cmd[2:]) + f"  (in {workdir})", file=log, flush=True)
     env = dict(os.environ)
     src = str(Path(__file__).resolve().parents[2])  # this epica, not another installed one
@@ -206,14 +150,17 @@ def regenerate_grid(
         raise EpaError(f"the re-run failed (snakemake exit status {run.returncode}):\n{tail}")
 
 
-def regenerate_case(doc: dict, results: Path, into: Path, workdir: Path) -> None:
-    """A case folder of ``epa eval --out``: every stage again, in this process."""
+def regenerate_case(
+    doc: dict, results: Path, into: Path, workdir: Path, paths: dict | None = None
+) -> None:
+    """A case folder of ``epa eval --out``: every stage again, in this process (its reference and
+    estimate at ``paths`` where they were found elsewhere)."""
     from epa import readers
     from epa.workflow import chain, settings
 
     cfg = settings.load_yaml(results / provenance.CONFIG)
     cfg["report"] = {**cfg["report"], "per_case": False}  # the report is not compared
-    case = doc["case"]
+    case = {**doc["case"], **(paths or {})}
     arrays = any(  # `epa eval --artifacts` wrote them: regenerate them to compare them
         p.is_file() and p.suffix != ".json"
         for p in results.glob("[0-9][0-9]_*/*")
@@ -235,20 +182,7 @@ def regenerate_case(doc: dict, results: Path, into: Path, workdir: Path) -> None
         os.chdir(cwd)
 
 
-def verify(
-    results_dir,
-    *,
-    cores: int = 2,
-    snakefile=None,
-    keep=None,
-    force: bool = False,
-    exact: bool = False,
-    log=None,
-) -> int:
-    """Check, regenerate, compare; prints what it finds. 0: reproduced (within the numeric contract,
-    or byte for byte with ``exact``); 1: not (a raised EpaError: cannot verify)."""
-    log = log or sys.stdout
-    results = Path(results_dir)
+def _read_results(results: Path) -> dict:
     try:
         doc = provenance.read(results)
     except OSError as exc:
@@ -259,36 +193,130 @@ def verify(
         ) from None
     if not (results / provenance.CONFIG).is_file():
         raise EpaError(f"no {provenance.CONFIG}", path=str(results))
-    snakefile = Path(snakefile) if snakefile else default_snakefile()
-    workdir = _workdir(doc, snakefile)
+    return doc
+
+
+def _inputs_as_recorded(doc: dict, workdir: Path, force: bool, log) -> list[str] | None:
+    """The recorded inputs hashed again where they were read; None: stop (not re-run)."""
     problems = check_inputs(doc, workdir)
     n = len(doc.get("inputs", []))
-    if problems:
-        print(f"epa verify: {len(problems)} of {n} inputs differ from the record:", file=log)
-        for line in problems:
-            print("  " + line, file=log)
-        if not force:
-            print("epa verify: not re-run (--force re-runs anyway): NOT VERIFIED", file=log)
-            return 1
-    else:
+    if not problems:
         print(f"epa verify: {n} inputs have their recorded sha256", file=log)
-    if doc.get("kind") == "grid" and snakefile is None:
-        raise EpaError("no Snakefile beside this epica (not a checkout): give --snakefile")
+        return []
+    print(f"epa verify: {len(problems)} of {n} inputs differ from the record:", file=log)
+    for line in problems:
+        print("  " + line, file=log)
+    if force:
+        return problems
+    print("epa verify: not re-run (--force re-runs anyway): NOT VERIFIED", file=log)
+    return None
+
+
+def _inputs_found(doc: dict, data: list, log) -> relocate.Located | None:
+    """The recorded inputs looked for by sha256 under ``data``; None: some are not there."""
+    located = relocate.locate(doc, data)
+    n = len([r for r in doc.get("inputs", []) if not r.get("missing")])
+    print(f"epa verify: {len(located.found)} of {n} inputs found by sha256 under --data", file=log)
+    for line in located.said:
+        print("  " + line, file=log)
+    for line in located.problems:
+        print("  " + line, file=log)
+    if located.problems:
+        print("epa verify: not re-run: NOT VERIFIED", file=log)
+        return None
+    return located
+
+
+def verify(
+    results_dir,
+    *,
+    cores: int = 2,
+    snakefile=None,
+    keep=None,
+    force: bool = False,
+    exact: bool = False,
+    data=None,
+    json_path=None,
+    log=None,
+) -> int:
+    """Check, regenerate, compare; prints what it finds and writes ``verify.json``. 0: reproduced
+    (within the numeric contract, or byte for byte with ``exact``); 1: not (a raised EpaError:
+    cannot verify). ``results_dir`` is a results folder or a package of ``epa pack``; ``data``
+    folders where the inputs are now (found by sha256)."""
+    log = log or sys.stdout
     tmp = tempfile.TemporaryDirectory(prefix="epa-verify-")
-    into = Path(keep) if keep else Path(tmp.name)
-    into.mkdir(parents=True, exist_ok=True)
     try:
-        if doc.get("kind") == "case":
-            regenerate_case(doc, results, into, workdir)
-        else:
-            regenerate_grid(doc, results, into, snakefile, workdir, cores, log)
-        compared = compare(results, into / "results", exact=exact)
+        return _verify(
+            Path(results_dir), Path(tmp.name), cores, snakefile, keep, force, exact,
+            list(data or []), json_path, log,
+        )  # fmt: skip
     finally:
         tmp.cleanup()
+
+
+def _verify(source, tmp, cores, snakefile, keep, force, exact, data, json_path, log) -> int:
+    results, damaged = source, []
+    if package.is_package(source):
+        results, inputs, damaged = package.unpack(source, tmp / "package")
+        print(
+            f"epa verify: unpacked {source} ({len(damaged)} files changed since packed)", file=log
+        )
+        data += [inputs] if inputs else []
+        json_path = json_path or Path.cwd() / (source.name.split(".")[0] + ".verify.json")
+    doc = _read_results(results)
+    snakefile = Path(snakefile) if snakefile else default_snakefile()
+    if doc.get("kind") == "grid" and snakefile is None:
+        raise EpaError("no Snakefile beside this epica (not a checkout): give --snakefile")
+    into = Path(keep) if keep else tmp / "again"
+    into.mkdir(parents=True, exist_ok=True)
+    folders, rewrites, workdir = None, [], _workdir(doc, snakefile)
+    if data:
+        located = _inputs_found(doc, data, log)
+        if located is None:
+            return 1
+        from epa.workflow import settings
+
+        cfg = settings.load_yaml(results / provenance.CONFIG)
+        folders, rewrites = relocate.lay_out(doc, cfg, located.found, into / "inputs")
+        problems: list[str] | None = []
+    else:
+        problems = _inputs_as_recorded(doc, workdir, force, log)
+        if problems is None:
+            return 1
+    if doc.get("kind") == "case":
+        regenerate_case(doc, results, into, workdir, folders)
+    else:
+        regenerate_grid(results, into, snakefile, workdir, cores, log, folders)
+    compared = compare(results, into / "results", exact=exact, rewrites=rewrites)
+    compared += [
+        contract.Comparison(n, "packed", contract.Verdict.DIFFERS, contract.Place(n, "packed", "changed"))
+        for n in damaged
+    ]  # fmt: skip
     ok = report(compared, exact=exact, log=log) and not problems
     how = "byte for byte" if exact else "within the numeric contract"
-    print(f"epa verify: {'REPRODUCED ' + how if ok else 'NOT VERIFIED'}", file=log)
+    verdict = "REPRODUCED " + how if ok else "NOT VERIFIED"
+    out = Path(json_path) if json_path else (into if keep else results) / "verify.json"
+    _write_json(out, source, doc, compared, verdict, problems or [], exact)
+    print(f"epa verify: {verdict} (the verdicts: {out})", file=log)
     return 0 if ok else 1
+
+
+def _write_json(out: Path, source, doc, compared, verdict: str, problems, exact: bool) -> None:
+    """verify.json: the verdict, what was compared and how, and both machines' numerics."""
+    from epa import __version__
+    from epa.artifacts import files
+
+    record = {
+        "verified": str(source),
+        "verdict": verdict,
+        "rule": "bytes" if exact else "numeric contract (docs/reproducibility.md)",
+        "epica": __version__,
+        "inputs_not_as_recorded": problems,
+        "table": [dict(zip(("file", "verdict", "worst"), row)) for row in summary_rows(compared)],
+        "files": [c.to_dict() for c in compared],
+        "numerics": {"recorded": doc.get("numerics"), "here": provenance.environment()["numerics"]},
+    }
+    files.write_json(out, record)
 
 
 def report(compared: list[contract.Comparison], *, exact: bool, log) -> bool:
@@ -325,7 +353,9 @@ def add_parser(sub) -> None:
         help="check a results folder's inputs against provenance.json, regenerate it and compare "
         "by the numeric contract (docs/reproducibility.md)",
     )
-    v.add_argument("results", help="a results folder (or an `epa eval --out` folder)")
+    v.add_argument(
+        "results", help="a results folder, an `epa eval --out` folder or a package of `epa pack`"
+    )
     v.add_argument("--cores", type=int, default=2, help="cores of the re-run (default 2)")
     v.add_argument("--snakefile", help="the workflow (default: this checkout's Snakefile)")
     v.add_argument(
@@ -333,6 +363,19 @@ def add_parser(sub) -> None:
     )
     v.add_argument(
         "--force", action="store_true", help="re-run and compare even when inputs changed"
+    )
+    v.add_argument(
+        "--data",
+        action="append",
+        metavar="DIR",
+        help="a folder where the inputs are now (repeatable): each recorded input is found by its "
+        "sha256 under them, whatever its path or name",
+    )
+    v.add_argument(
+        "--json",
+        metavar="FILE",
+        help="write the verdicts here (default: RESULTS/verify.json, or NAME.verify.json in this "
+        "folder for a package, or KEEP/verify.json with --keep)",
     )
     v.add_argument(
         "--exact",
@@ -349,4 +392,6 @@ def run(args) -> int:
         keep=args.keep,
         force=args.force,
         exact=args.exact,
+        data=args.data,
+        json_path=args.json,
     )
