@@ -35,6 +35,8 @@ def motion(n=600, dt=0.05, t0=1403636580.0):
 
 
 T, P, Q = motion()
+THREE = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0.5]])  # three poses, not on one line
+LINE = np.column_stack([2 * (T - T[0]), 0 * T, 0 * T])  # 2 m/s along x, never turning
 GOOD = _rows(T, P, Q)
 GOOD_CSV = (
     "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []\n"
@@ -938,6 +940,27 @@ CATALOGUE: list[Bad] = [
         ref=_rows(T, P),
         ok=True,
     ),
+    Bad(
+        "three-matched",
+        "stage",
+        "exactly 3 matched poses (`sync.min_pairs: 3`): no RPE pair, statistics null with a note",
+        "no two matched poses are 1 s (±10 %) apart in 0.100 s: the 1 s RPE is empty",
+        ref=_rows(T[:3], THREE),
+        est=_rows(T[:3], THREE + [[0.01, 0, 0], [0, 0.02, 0], [0, 0, 0.01]]),
+        config="sync:\n  min_pairs: 3\n",
+        ok=True,
+    ),
+    Bad(
+        "pure-translation-drifting",
+        "stage",
+        "pure translation without rotation (a straight line, `--align posyaw`) whose estimate"
+        " drifts everywhere (3x its length): the drift-valid ATE null with a note",
+        "no drift-valid interval (distance success rate 0 %): every drift-valid metric is empty",
+        ref=_rows(T, LINE),
+        est=_rows(T, 3 * LINE),
+        args=("--no-offset-estimate", "--no-calibrate", "--align", "posyaw"),
+        ok=True,
+    ),
     # ------------------------------------------------------------------ config
     Bad(
         "cfg-list",
@@ -1232,6 +1255,15 @@ CATALOGUE: list[Bad] = [
         config="efficiency: {sensor_rate_hz: 20}\n",
         ok=True,
     ),
+    Bad(
+        "grid-killed-write",
+        "grid",
+        "a temporary file a killed write left in a case folder (`03_sync/.xcorr.csv.<random>`):"
+        " the next run removes it",
+        "removed what a killed run left: .xcorr.csv.k1ll3d_x",
+        setup="grid-killed-write",
+        ok=True,
+    ),
     # ------------------------------------------------------------------ commands
     Bad(
         "ape-save-under-a-file",
@@ -1493,7 +1525,8 @@ def markdown() -> str:
         "is current). An error is one line, `epa: error: <file>[:<line>]: <what is wrong>`, the exit status",
         "is 2 and no partial output is left; in a grid the case is marked failed in `summary.csv` and",
         "the report, and every other case finishes. A row marked *result* is read correctly and what was",
-        "inferred is a warning and a note in `load.json` (or `metrics.json`).",
+        "inferred is a warning and a note in `load.json` (or `metrics.json`, `drift.json`, the case's",
+        "log). A quantity without samples is `null` in the record, with a note saying why (never NaN).",
         "",
     ]
     n = 0

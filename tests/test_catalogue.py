@@ -160,6 +160,10 @@ def _bag(tmp: Path, est: Path, setup: str) -> Path:
     return est
 
 
+def _refuse(token: str):
+    raise ValueError(f"{token} is not JSON")
+
+
 EVAL_ROWS = [b for b in catalogue.CATALOGUE if b.where in ("eval", "stage", "config")]
 
 
@@ -177,6 +181,8 @@ def test_epa_eval(tmp_path, capsys, caplog, monkeypatch, b):
         assert rc == 0, err
         notes = [caplog.text, err, captured.out] + [p.read_text() for p in out.rglob("*.json")]
         assert any(b.expect in n for n in notes), f"{b.expect!r} not noted"
+        for p in out.rglob("*.json"):  # JSON any parser takes: no NaN or Infinity token
+            json.loads(p.read_text(), parse_constant=_refuse)
         return
     lines = [line for line in err.splitlines() if line.startswith("epa: error: ")]
     assert rc == 2 and len(lines) == 1, err
@@ -279,9 +285,20 @@ def _grid_folders(tmp: Path, setup: str) -> tuple[Path, Path, str | None]:
             "".join(f"{t:.9f} {100000 if k == 100 else 20}\n" for k, t in enumerate(catalogue.T)),
         )
         bad = None
+    elif setup == "grid-killed-write":  # a kill mid-write, as a previous run would have left it
+        sync = tmp / "results" / "cases" / "good" / "seq" / "run1" / "03_sync"
+        _write(sync / ".xcorr.csv.k1ll3d_x", "lag_s,corr\n-0.5,0.12")
+        for name in KEPT_BESIDE_A_TEMPORARY:  # not epica's temporaries: left alone
+            _write(sync / name, "the user's")
+        bad = None
     elif setup is None:
         bad = None
     return truth, algs, bad
+
+
+# files beside a killed write's temporary that are not epica's temporaries: an unknown artifact name,
+# a suffix mkstemp never makes, a name without the leading dot
+KEPT_BESIDE_A_TEMPORARY = (".notes.txt.k1ll3d_x", ".xcorr.csv.bak", "xcorr.csv.k1ll3d_x")
 
 
 def run_grid(truth: Path, algs: Path, results: Path, config: dict | None = None) -> dict[str, str]:
@@ -344,7 +361,9 @@ def test_grid(tmp_path, caplog, b):
         assert " inf " not in tex.read_text(), tex
     if b.ok:
         notes = caplog.text + "".join(
-            p.read_text() for p in (tmp_path / "results" / "cases").rglob("*.json")
+            p.read_text()
+            for p in (tmp_path / "results" / "cases").rglob("*")
+            if p.suffix in (".json", ".log")  # a record's notes, a stage's case log
         )
         assert b.expect in notes or (b.expect == "ok" and all(s == "ok" for s in status.values()))
         assert all(s == "ok" for s in status.values()), status
@@ -357,6 +376,14 @@ def test_grid(tmp_path, caplog, b):
                 (tmp_path / "results/cases/good/seq/run1/09_efficiency/efficiency.json").read_text()
             )
             assert eff["available"] and eff["frame_time_mean_ms"] == 12
+        if b.setup == "grid-killed-write":
+            sync = tmp_path / "results/cases/good/seq/run1/03_sync"
+            assert sorted(p.name for p in sync.iterdir() if not p.name[0].isalpha()) == sorted(
+                KEPT_BESIDE_A_TEMPORARY[:2]
+            )
+            assert (sync / KEPT_BESIDE_A_TEMPORARY[2]).read_text() == "the user's"
+            xcorr = (sync / "xcorr.csv").read_text().splitlines()  # the real one, whole
+            assert xcorr[0] == "lag_s,corr" and len(xcorr) > 100
         if b.setup == "grid-names":
             assert len(status) == 10
             assert all(

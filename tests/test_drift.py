@@ -57,11 +57,14 @@ def test_divergence_success_rate_equals_valid_fraction():
     assert s["success_rate_time_pct"] == pytest.approx(70.0, abs=1.0)
 
 
-def test_global_gate_makes_drift_valid_nan():
+def test_global_gate_empties_drift_valid():
     s, _ = run(T, np.full(len(T), 45.0))
     assert s["global_failed"] and "globally failed" in s["status"]
     assert s["success_rate_distance_pct"] == 100  # still reported
-    assert np.isnan(s["drift_valid"]["ate"]["trans_m"]["rmse"])
+    # None, never NaN; the status is the reason (no note repeats it)
+    empty = {"n": 0, **dict.fromkeys(("rmse", "mean", "median", "std", "min", "max"))}
+    assert s["drift_valid"]["ate"]["trans_m"] == empty
+    assert "notes" not in s
 
 
 def test_knee_threshold_cases():

@@ -1,17 +1,31 @@
 """Settings refuse every non-finite number and every negative length, rate and delta, whatever the
 key; command-line overrides are coerced as YAML would read them; the TF search is the same under
-every hash seed."""
+every hash seed. A quantity without samples is None with a note in its record, never NaN, and the
+JSON writer refuses a NaN. A killed write leaves a temporary that the next job removes, and nothing
+else."""
 
+import json
 import math
 import os
+import signal
 import subprocess
 import sys
+import tempfile
+import time
 from pathlib import Path
 
+import catalogue
+import numpy as np
 import pytest
 
+from epa.artifacts import files
+from epa.artifacts.case import FOLDERS, CaseFolder
 from epa.core.errors import EpaError
-from epa.workflow import settings
+from epa.metrics import accuracy
+from epa.workflow import chain, settings
+from epa.workflow import jobs as grid
+from epa.workflow.stages import calibrate as calibrate_stage
+from epa.workflow.stages import sync
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = {"truth_dir": "t", "algorithms_dir": "a"}
@@ -132,3 +146,238 @@ def test_a_tf_loop_is_the_same_error_under_every_hash_seed(tmp_path):
     (loop, tree, _) = outs.pop()
     assert loop[0] == 2 and "the TF frames form a loop (odom -> world and world -> odom" in loop[1]
     assert tree[0] == 0
+
+
+# ----------------------------------------------------------------------------- None, never NaN
+EMPTY = {"n": 0, **dict.fromkeys(("rmse", "mean", "median", "std", "min", "max"))}
+
+
+def _nan_keys(obj, where: str = "") -> list[str]:
+    """Every NaN in a record as it is in memory (dicts, lists, arrays, floats)."""
+    if isinstance(obj, dict):
+        return [p for k, v in obj.items() for p in _nan_keys(v, f"{where}.{k}")]
+    if isinstance(obj, (list, tuple)):
+        return [p for k, v in enumerate(obj) for p in _nan_keys(v, f"{where}[{k}]")]
+    if isinstance(obj, np.ndarray):
+        return [where] if obj.dtype.kind == "f" and np.isnan(obj).any() else []
+    return [where] if isinstance(obj, float) and math.isnan(obj) else []
+
+
+def _strict_json(path: Path) -> dict:
+    def refuse(token):
+        raise ValueError(f"{path}: {token} is not JSON")
+
+    return json.loads(path.read_text(encoding="utf-8"), parse_constant=refuse)
+
+
+def _case(tmp_path, row_id: str, cfg: dict):
+    """A catalogue row's reference and estimate run through every stage as ``epa eval`` runs them."""
+    row = next(b for b in catalogue.CATALOGUE if b.id == row_id)
+    (tmp_path / "ref.txt").write_text(row.ref)
+    (tmp_path / "est.txt").write_text(row.est)
+    cfg = settings.resolve({**BASE, **cfg})
+    return chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "out", cfg)
+
+
+def test_an_empty_sample_has_none_statistics_not_nan():
+    assert accuracy.stats(np.zeros(0)) == EMPTY
+    assert accuracy.drift_rate(np.zeros(0), 8.0) is None
+    assert accuracy.stats([3.0, 4.0])["rmse"] == pytest.approx(math.sqrt(12.5), rel=1e-15)
+
+
+def test_three_matched_poses_give_null_rpe_with_a_note_never_nan(tmp_path):
+    records = _case(tmp_path, "three-matched", {"sync": {"min_pairs": 3}})
+    assert _nan_keys(records) == []
+    m, d = records["metrics"], records["drift"]
+    assert m["n_matched"] == 3 and m["ate"]["trans_m"]["n"] == 3
+    for key in ("8", "16", "24", "32", "40", "48"):
+        assert m["rpe_distance"][key] == {"trans_m": EMPTY, "rot_deg": EMPTY}
+        assert m["drift_rate_pct"][key] is None
+        assert d["drift_valid"]["rpe_distance"][key] == {"trans_m": EMPTY, "rot_deg": EMPTY}
+        assert f"no {key} m segment fits in the 2.118 m matched path" in " ".join(m["notes"])
+        assert f"no {key} m segment fits in the matched path: its drift-valid" in " ".join(
+            d["notes"]
+        )
+    assert (
+        m["rpe_time_1s"]["trans_m"] == EMPTY and d["drift_valid"]["rpe_time_1s"]["rot_deg"] == EMPTY
+    )
+    assert (
+        "no two matched poses are 1 s (±10 %) apart in 0.100 s: the 1 s RPE is empty" in m["notes"]
+    )
+    assert "no time-RPE pair in the matched poses: the drift-valid time RPE is empty" in d["notes"]
+    # Step 1 could not run on 3 poses: what it did not measure is None, its reason says why
+    step1 = m["sync"]["step1"]
+    assert step1["peak_corr"] is None and step1["dt"] is None
+    assert step1["reason"] == "too few poses for a correlation"
+    # the files hold null where the record holds None, and parse with any JSON reader
+    written = _strict_json(tmp_path / "out/06_metrics/metrics.json")
+    assert written["rpe_time_1s"]["trans_m"] == EMPTY and written["notes"] == m["notes"]
+    assert _strict_json(tmp_path / "out/07_drift/drift.json")["notes"] == d["notes"]
+
+
+def test_pure_translation_without_rotation_has_a_null_drift_valid_ate_with_a_note(tmp_path):
+    off = {"sync": {"estimate_offset": False}, "calibrate": {"enabled": False}}
+    records = _case(tmp_path, "pure-translation-drifting", {**off, "align": {"method": "posyaw"}})
+    assert _nan_keys(records) == []
+    d = records["drift"]
+    assert d["success_rate_distance_pct"] == 0 and not d["global_failed"] and "status" not in d
+    assert d["drift_valid"]["ate"] == {"trans_m": EMPTY, "rot_deg": EMPTY}
+    assert d["drift_valid"]["drift_rate_pct"] == dict.fromkeys(("8", "16", "24", "32", "40", "48"))
+    assert d["notes"] == [
+        "no drift-valid interval (distance success rate 0 %): every drift-valid metric is empty"
+    ]
+    assert records["metrics"]["ate"]["trans_m"]["n"] == 600  # the ATE itself stands
+    assert (
+        _strict_json(tmp_path / "out/07_drift/drift.json")["drift_valid"]["ate"]["rot_deg"] == EMPTY
+    )
+
+
+def test_step2_on_one_time_block_has_null_uncertainty_with_a_note_never_nan(tmp_path):
+    """2.2 s of motion: every motion pair in one 2 s block, so the covariance is scaled by infinity
+    and its zero entries were 0 x inf = NaN (a NaN the JSON writer now refuses)."""
+    t, p, q = catalogue.motion(45)
+    (tmp_path / "ref.txt").write_text(catalogue._rows(t, p, q))
+    (tmp_path / "est.txt").write_text(catalogue._rows(t, p, q))
+    cfg = settings.resolve(BASE)
+    records = chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "out", cfg)
+    assert _nan_keys(records) == []
+    ext = records["metrics"]["calibrate"]["extrinsic"]
+    assert ext["status"] == "uncertain" and ext["rotation_std_deg"] == [math.inf] * 3
+    assert ext["translation_std_m"] == [None, math.inf, math.inf]
+    assert ext["notes"] == [calibrate_stage.UNDEFINED_UNCERTAINTY]
+    written = _strict_json(tmp_path / "out/04_calibrate/calibrate.json")["extrinsic"]
+    assert written["translation_std_m"] == [None, "inf", "inf"]
+
+
+def test_write_json_refuses_nan_naming_its_key_and_writes_nothing(tmp_path):
+    record = {"rpe_distance": {"8": {"trans_m": {"n": 0, "rmse": np.float64("nan")}}}}
+    with pytest.raises(ValueError, match=r"metrics\.json: NaN at rpe_distance\.8\.trans_m\.rmse"):
+        files.write_json(tmp_path / "metrics.json", record)
+    assert list(tmp_path.iterdir()) == []  # neither the file nor a temporary
+    with pytest.raises(ValueError, match=r"NaN at curve\[1\]"):
+        files.write_json(tmp_path / "d.json", {"curve": np.array([1.0, np.nan])})
+
+
+def test_write_json_keeps_its_bytes_for_every_other_value(tmp_path):
+    record = {
+        "a": np.float64(0.1),
+        "ratio": float("inf"),  # Step 1's peak_ratio with no second peak: the string "inf"
+        "neg": -np.inf,
+        "xs": np.array([np.float32(0.25), 2.0]),
+        "n": np.int64(3),
+        "ok": np.bool_(True),
+        "none": None,
+        1: "key",
+    }
+    files.write_json(tmp_path / "r.json", record)
+    assert (tmp_path / "r.json").read_text() == (
+        '{\n  "a": 0.1,\n  "ratio": "inf",\n  "neg": "-inf",\n  "xs": [\n    0.25,\n    2.0\n  ],\n'
+        '  "n": 3,\n  "ok": true,\n  "none": null,\n  "1": "key"\n}'
+    )
+
+
+# ----------------------------------------------------------------------------- killed writes
+def test_a_sigkilled_write_leaves_only_a_temporary_which_the_cleanup_removes(tmp_path):
+    """A real SIGKILL in the middle of an atomic write: no xcorr.csv, a `.xcorr.csv.<random>`."""
+    folder = tmp_path / "03_sync"
+    code = (
+        "import sys, time\n"
+        "from epa.artifacts import files\n"
+        "def write(fh):\n"
+        "    fh.write('lag_s,corr\\n-0.5,0.1')\n"
+        "    fh.flush()\n"
+        "    time.sleep(60)\n"
+        f"files.write_text({str(folder / 'xcorr.csv')!r}, '')\n"
+        f"files._atomic_write({str(folder / 'xcorr.csv')!r}, write)\n"
+    )
+    (folder / "sync.json").parent.mkdir()
+    (folder / "sync.json").write_text("{}")
+    proc = subprocess.Popen([sys.executable, "-c", code])
+    deadline = time.time() + 60
+    while time.time() < deadline and not any(p.stat().st_size for p in folder.glob(".xcorr.csv.*")):
+        time.sleep(0.02)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    left = [p.name for p in folder.glob(".xcorr.csv.*")]
+    assert len(left) == 1 and (folder / "xcorr.csv").read_text() == ""  # the old one stands
+    removed = CaseFolder(tmp_path).remove_temporaries("sync", sync.RECORDS + sync.ARRAYS)
+    assert removed == left
+    assert sorted(p.name for p in folder.iterdir()) == ["sync.json", "xcorr.csv"]
+
+
+def test_the_cleanup_matches_every_name_mkstemp_makes_and_nothing_else(tmp_path):
+    made = [Path(tempfile.mkstemp(prefix=".xcorr.csv.", dir=tmp_path)[1]).name for _ in range(200)]
+    kept = [
+        ".xcorr.csv",
+        ".xcorr.csv.bak",
+        ".xcorr.csv.ABCDEFGH",
+        ".notes.csv.abcdefgh",
+        "xcorr.csv.abcdefgh",
+        ".xcorr.csv.abcdefghi",
+        "xcorr.csv",
+        ".pairs.csv.lnk",
+    ]
+    for name in kept:
+        (tmp_path / name).write_text("the user's")
+    (tmp_path / ".pairs.csv.link").write_text("")  # case.link's temporary
+    (tmp_path / ".sync.json.abcd1234").mkdir()  # a folder is no temporary of a file
+    removed = files.remove_temporaries(tmp_path, ["xcorr.csv", "pairs.csv"])
+    assert sorted(removed) == sorted(made + [".pairs.csv.link"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(kept + [".sync.json.abcd1234"])
+    assert files.remove_temporaries(tmp_path / "missing", ["xcorr.csv"]) == []
+
+
+def test_the_next_job_removes_a_killed_runs_temporaries_and_keeps_the_artifacts(tmp_path):
+    """Every stage's folder of a case, and the batch manifest's folder, after a killed run."""
+    (tmp_path / "truth").mkdir()
+    (tmp_path / "truth/seq.txt").write_text(catalogue.GOOD)
+    (tmp_path / "algs/a/seq").mkdir(parents=True)
+    (tmp_path / "algs/a/seq/run1.txt").write_text(catalogue.GOOD)
+    results = tmp_path / "results"
+    cfg = settings.resolve(
+        {
+            "truth_dir": str(tmp_path / "truth"),
+            "algorithms_dir": str(tmp_path / "algs"),
+            "results_dir": str(results),
+            "report": {"per_case": False},
+        }
+    )
+    batch = [
+        {
+            "key": "a/seq/run1",
+            "truth": str(tmp_path / "truth/seq.txt"),
+            "estimate": str(tmp_path / "algs/a/seq/run1.txt"),
+        }
+    ]
+
+    def run_all():
+        upstream = None
+        for st in chain.STAGES:
+            manifest = results / "batches" / "all" / f"{st.NAME}.json"
+            assert grid.run_job(st.NAME, batch, results, cfg, manifest, upstream) == {
+                "a/seq/run1": {"status": "ok"}
+            }
+            upstream = manifest
+
+    run_all()
+    case = results / "cases/a/seq/run1"
+    before = {p: p.read_bytes() for p in case.rglob("*") if p.is_file() and "logs" not in p.parts}
+    stale = []
+    for st in chain.STAGES:
+        for name in chain.artifacts(st):
+            stale.append(case / FOLDERS[st.NAME] / f".{name}.x7_q2k9z")
+    stale.append(results / "batches/all/.sync.json.abc_1234")
+    for p in stale:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text('{"half": ')
+    user = case / "03_sync" / "my notes.txt"
+    user.write_text("mine")
+    run_all()
+    assert [p for p in stale if p.exists()] == []
+    assert user.read_text() == "mine"
+    after = {p: p.read_bytes() for p in case.rglob("*") if p.is_file() and "logs" not in p.parts}
+    assert after == {**before, user: b"mine"}  # every artifact whole and the same
+    assert (case / "logs/sync.log").read_text() == (
+        "INFO removed what a killed run left: .pairs.csv.x7_q2k9z, .sync.json.x7_q2k9z,"
+        " .xcorr.csv.x7_q2k9z\n"
+    )

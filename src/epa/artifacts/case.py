@@ -110,6 +110,8 @@ def link(src, dst) -> bool:
             os.unlink(tmp)
         os.link(src, tmp)
         os.replace(tmp, dst)
+        if os.path.lexists(tmp):  # dst was src already (a re-run): rename() then does nothing
+            os.unlink(tmp)
         return True
     except OSError:
         return False
@@ -221,6 +223,11 @@ class CaseFolder:
             for f in path.iterdir():
                 os.unlink(f)
             path.rmdir()
+
+    def remove_temporaries(self, stage: str, names) -> list[str]:
+        """Remove the temporaries of the artifacts ``names`` a killed write left in the stage's
+        folder (:func:`epa.artifacts.files.remove_temporaries`); returns their names."""
+        return files.remove_temporaries(self.root / FOLDERS[stage], names)
 
     def write_failure(self, stage: str, names, reason: str) -> None:
         for name in names:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 import tempfile
 import warnings
@@ -48,6 +49,36 @@ def _atomic_write(path, write, binary: bool = False) -> None:
         raise
 
 
+# A temporary of _atomic_write is "." + the artifact's name + "." + mkstemp's 8 random characters
+# (CPython's tempfile alphabet); one of case.link is "." + the name + ".link".
+_TEMPORARY = re.compile(r"\.(?P<name>.+)\.(?:[a-z0-9_]{8}|link)")
+
+
+def remove_temporaries(folder, names) -> list[str]:
+    """Remove the temporaries a killed write left in ``folder`` for the artifacts ``names`` (a
+    temporary is never taken as done, but would stay); only those names, never another file. One
+    listing of the folder (none when it does not exist). Returns the names removed."""
+    names = set(names)
+    try:
+        with os.scandir(folder) as entries:
+            stale = sorted(
+                e.name
+                for e in entries
+                if e.name.startswith(".")
+                and (m := _TEMPORARY.fullmatch(e.name)) is not None
+                and m["name"] in names
+                and e.is_file(follow_symlinks=False)
+            )
+    except (FileNotFoundError, NotADirectoryError):
+        return []
+    for name in stale:
+        try:
+            os.unlink(os.path.join(folder, name))
+        except FileNotFoundError:  # gone meanwhile
+            pass
+    return stale
+
+
 def _why(exc: OSError, path: Path) -> str:
     """The reason, with the path part that is in the way (a file where a folder is needed)."""
     where = next((p for p in path.parents if p.exists() and not p.is_dir()), None)
@@ -65,6 +96,10 @@ def write_bytes(path, data: bytes) -> None:
 
 
 def _jsonable(obj):
+    """Plain JSON values. ±inf is the string "inf" / "-inf" (a ratio with a zero denominator, e.g.
+    Step 1's peak_ratio); NaN is refused: a quantity without samples is None with a reason in its
+    record, so a NaN here is a bug to fix where it was made (json.dump's allow_nan=False then names
+    no key, :func:`_nan_keys` does)."""
     if isinstance(obj, dict):
         return {str(k): _jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -72,7 +107,7 @@ def _jsonable(obj):
     if isinstance(obj, np.ndarray):
         return _jsonable(obj.tolist())
     if isinstance(obj, (np.floating, float)):
-        return float(obj) if np.isfinite(obj) else None if np.isnan(obj) else str(float(obj))
+        return float(obj) if np.isfinite(obj) else obj if np.isnan(obj) else str(float(obj))
     if isinstance(obj, np.integer):
         return int(obj)
     if isinstance(obj, np.bool_):
@@ -80,9 +115,30 @@ def _jsonable(obj):
     return obj
 
 
+def _nan_keys(obj, where: str = "") -> list[str]:
+    """The dotted keys of every NaN in a JSON-able value (for the error message only)."""
+    if isinstance(obj, dict):
+        return [
+            p for k, v in obj.items() for p in _nan_keys(v, f"{where}.{k}" if where else str(k))
+        ]
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [p for k, v in enumerate(obj) for p in _nan_keys(v, f"{where}[{k}]")]
+    return [where] if isinstance(obj, (np.floating, float)) and np.isnan(obj) else []
+
+
 def write_json(path, data: dict) -> None:
-    """JSON with nan written as null, so every file parses with any JSON reader."""
-    _atomic_write(path, lambda fh: json.dump(_jsonable(data), fh, indent=2, sort_keys=False))
+    """JSON every reader parses: ±inf as strings, and a NaN refused (ValueError naming its keys)
+    instead of written as the NaN token no JSON parser takes, or as a null without a reason."""
+    doc = _jsonable(data)
+    try:
+        text = json.dumps(doc, indent=2, sort_keys=False, allow_nan=False)
+    except ValueError:
+        keys = _nan_keys(doc)
+        raise ValueError(
+            f"{Path(path).name}: NaN at {', '.join(keys[:5])}{' ...' if len(keys) > 5 else ''}"
+            " (a quantity without samples is None with a reason, never NaN)"
+        ) from None
+    _atomic_write(path, lambda fh: fh.write(text))
 
 
 def read_json(path) -> dict:

@@ -16,18 +16,26 @@ from epa.core.trajectory import Trajectory
 RPE_UNITS = ("frames", "m", "s", "deg", "rad")
 
 
+STATISTICS = ("rmse", "mean", "median", "std", "min", "max")
+
+
 def stats(x: np.ndarray) -> dict:
+    """The statistics of a sample of errors.
+
+    Parameters
+    ----------
+    x : ndarray
+        The errors (any shape; flattened).
+
+    Returns
+    -------
+    dict
+        ``n`` and each of STATISTICS. An empty sample has ``n`` 0 and None for each statistic,
+        never NaN: the record that holds it says why it is empty (a note).
+    """
     x = np.asarray(x, float)
     if x.size == 0:
-        return {
-            "n": 0,
-            "rmse": np.nan,
-            "mean": np.nan,
-            "median": np.nan,
-            "std": np.nan,
-            "min": np.nan,
-            "max": np.nan,
-        }
+        return {"n": 0, **dict.fromkeys(STATISTICS)}
     return {
         "n": int(x.size),
         "rmse": float(np.sqrt(np.mean(x * x))),
@@ -37,6 +45,12 @@ def stats(x: np.ndarray) -> dict:
         "min": float(np.min(x)),
         "max": float(np.max(x)),
     }
+
+
+def drift_rate(trans_m: np.ndarray, length: float) -> float | None:
+    """The mean translation error of segments of ``length`` metres as a percentage of the length;
+    None without a segment."""
+    return float(np.mean(trans_m / length) * 100) if len(trans_m) else None
 
 
 # ----------------------------------------------------------------------------- pair selection
@@ -172,7 +186,7 @@ def evaluate(
         er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
         key = segment_key(length)
         summary["rpe_distance"][key] = {"trans_m": stats(et), "rot_deg": stats(er)}
-        summary["drift_rate_pct"][key] = float(np.mean(et / length) * 100) if len(et) else np.nan
+        summary["drift_rate_pct"][key] = drift_rate(et, length)
         for name, v in zip(seg_rows, (np.full(len(i), float(length)), i, j, er, et)):
             seg_rows[name].append(v)
     tables["rpe_segments"] = {

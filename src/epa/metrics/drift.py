@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa.metrics.accuracy import segment_key, stats
+from epa.metrics.accuracy import drift_rate, segment_key, stats
 
 
 def thresholds(settings: dict, ref_t: np.ndarray, ref_dist: np.ndarray, time_pairs) -> dict:
@@ -64,13 +64,14 @@ def growth_stretches(
 
 
 def knee_threshold(ape: np.ndarray, lo: float = 5.0, hi: float = 30.0) -> dict:
-    """Knee of the sorted APE curve (largest gap below the chord, tail above p95 trimmed), else p95; clamped."""
+    """Knee of the sorted APE curve (largest gap below the chord, tail above p95 trimmed), else p95;
+    clamped. Without a finite APE: mode none, raw_m None and the upper bound."""
     finite = np.sort(ape[np.isfinite(ape)])
     if finite.size == 0:
         return {
             "threshold_m": hi,
             "mode": "none",
-            "raw_m": np.nan,
+            "raw_m": None,
             "clamped": True,
             "bounds_m": [lo, hi],
         }
@@ -120,32 +121,32 @@ def _invalid(t, ape_trans, time_i, time_j, time_trans, th: dict):
     return invalid | ~np.isfinite(ape_trans), stretches
 
 
-def _success_distance(dist, invalid) -> float:
-    """% of the path length whose intervals are valid (both ends valid)."""
+def _success_distance(dist, invalid) -> float | None:
+    """% of the path length whose intervals are valid (both ends valid); None on a path without
+    length (the metrics stage refuses such a reference first)."""
     valid_iv = ~invalid[:-1] & ~invalid[1:]
     total = float(dist[-1] - dist[0])
-    return 100.0 * np.diff(dist)[valid_iv].sum() / total if total > 0 else np.nan
+    return 100.0 * np.diff(dist)[valid_iv].sum() / total if total > 0 else None
 
 
 def success_curve(t, dist, ape_trans, time_i, time_j, time_trans, th: dict) -> dict:
     """The distance success rate with every drift threshold multiplied by each of CURVE_FACTORS, and
     its area: the mean over the log-spaced factors (%), so a ranking need not hinge on one threshold."""
-    rates = np.array(
-        [
-            _success_distance(
-                dist,
-                _invalid(
-                    t, ape_trans, time_i, time_j, time_trans, {k: f * th[k] for k in THRESHOLD_KEYS}
-                )[0],
-            )
-            for f in CURVE_FACTORS
-        ]
-    )
+    rates = [
+        _success_distance(
+            dist,
+            _invalid(
+                t, ape_trans, time_i, time_j, time_trans, {k: f * th[k] for k in THRESHOLD_KEYS}
+            )[0],
+        )
+        for f in CURVE_FACTORS
+    ]
+    auc = None if None in rates else float(np.mean(rates))  # None: a path without length
     return {
         "factor": CURVE_FACTORS,
         "rpe_trans_max_m": CURVE_FACTORS * th["rpe_trans_max_m"],
-        "success_rate_distance_pct": rates,
-        "auc_pct": float(np.mean(rates)),
+        "success_rate_distance_pct": rates if auc is None else np.array(rates),
+        "auc_pct": auc,
     }
 
 
@@ -157,7 +158,7 @@ def detect(t, dist, ape_trans, ape_rot, time_i, time_j, time_trans, settings: di
     seg_dur = np.diff(t)
     total_dur = float(t[-1] - t[0])
     sr_dist = _success_distance(dist, invalid)
-    sr_time = 100.0 * seg_dur[valid_iv].sum() / total_dur if total_dur > 0 else np.nan
+    sr_time = 100.0 * seg_dur[valid_iv].sum() / total_dur if total_dur > 0 else None
 
     # maximal runs of invalid poses
     edges = np.diff(np.concatenate([[0], invalid.astype(int), [0]]))
@@ -175,8 +176,8 @@ def detect(t, dist, ape_trans, ape_rot, time_i, time_j, time_trans, settings: di
         "ape_mean_m": np.array([ape_trans[a : b + 1].mean() for a, b in zip(starts, ends)]),
     }
     finite = ape_trans[np.isfinite(ape_trans)]
-    p5 = float(np.percentile(finite, 5)) if finite.size else np.nan
-    global_failed = not np.isfinite(p5) or p5 > settings["global_fail_p5_m"]
+    p5 = float(np.percentile(finite, 5)) if finite.size else None
+    global_failed = p5 is None or p5 > settings["global_fail_p5_m"]
     knee = knee_threshold(ape_trans, settings["knee_min_m"], settings["knee_max_m"])
     return {
         "thresholds": th,
@@ -198,14 +199,20 @@ def pair_valid(valid_interval: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.n
     return (bad[j] - bad[i]) == 0
 
 
+NO_VALID_INTERVAL = (
+    "no drift-valid interval (distance success rate 0 %): every drift-valid metric is empty"
+)
+
+
 def valid_metrics(
     det: dict, ape_trans, ape_rot, seg: dict, tpairs: dict, segments
-) -> tuple[dict, np.ndarray, np.ndarray]:
+) -> tuple[dict, np.ndarray, np.ndarray, list[str]]:
     """Drift-valid ATE (poses touching a valid interval) and RPE / drift rate / 1 s RPE over valid pairs.
 
-    Returns the metrics and the validity of each segment pair and each time pair (all False when
-    the case is globally failed or has no valid path)."""
-    nan_all = det["global_failed"] or not (det["success_rate_distance_pct"] > 0)
+    Returns the metrics, the validity of each segment pair and each time pair (all False when
+    the case is globally failed or has no valid path) and a note for each drift-valid quantity left
+    without samples, whose statistics are None (no note for a globally failed case: its status
+    says why every one is empty)."""
     viv = det["valid_interval"]
     touch = np.zeros(len(ape_trans), bool)
     touch[:-1] |= viv
@@ -220,16 +227,24 @@ def valid_metrics(
         if len(seg["i"])
         else np.zeros(0, bool)
     )
+    notes = []
     for length in segments:
         key = segment_key(length)
-        sel = sv & (seg["length_m"] == float(length))
+        of_length = seg["length_m"] == float(length)
+        sel = sv & of_length
         out["rpe_distance"][key] = {
             "trans_m": stats(seg["trans_m"][sel]),
             "rot_deg": stats(seg["rot_deg"][sel]),
         }
-        out["drift_rate_pct"][key] = (
-            float(np.mean(seg["trans_m"][sel] / length) * 100) if sel.any() else np.nan
-        )
+        out["drift_rate_pct"][key] = drift_rate(seg["trans_m"][sel], length)
+        if not sel.any():
+            notes.append(
+                f"none of the {int(of_length.sum())} {key} m segments lies in drift-valid intervals:"
+                f" its drift-valid RPE and drift rate are empty"
+                if of_length.any()
+                else f"no {key} m segment fits in the matched path: its drift-valid RPE and drift"
+                " rate are empty"
+            )
     tv = (
         pair_valid(viv, tpairs["i"].astype(int), tpairs["j"].astype(int))
         if len(tpairs["i"])
@@ -239,16 +254,24 @@ def valid_metrics(
         "trans_m": stats(tpairs["trans_m"][tv]),
         "rot_deg": stats(tpairs["rot_deg"][tv]),
     }
-    if nan_all:
-        out = _nan_like(out)
-    return (
-        out,
-        (sv if not nan_all else np.zeros_like(sv)),
-        (tv if not nan_all else np.zeros_like(tv)),
-    )
+    if not tv.any():
+        notes.append(
+            f"none of the {len(tv)} time-RPE pairs lies in drift-valid intervals: the drift-valid"
+            " time RPE is empty"
+            if len(tv)
+            else "no time-RPE pair in the matched poses: the drift-valid time RPE is empty"
+        )
+    if det["global_failed"]:  # the record's status says why every drift-valid metric is empty
+        notes = []
+    elif not det["success_rate_distance_pct"]:  # 0, or None on a path without length
+        notes = [NO_VALID_INTERVAL]
+    else:
+        return out, sv, tv, notes
+    return _empty_like(out), np.zeros_like(sv), np.zeros_like(tv), notes
 
 
-def _nan_like(d):
+def _empty_like(d):
+    """``d`` with every statistic None and every count 0 (a metric without drift-valid samples)."""
     if isinstance(d, dict):
-        return {k: (0 if k == "n" else _nan_like(v)) for k, v in d.items()}
-    return np.nan
+        return {k: (0 if k == "n" else _empty_like(v)) for k, v in d.items()}
+    return None

@@ -135,6 +135,9 @@ def run_cases(
             continue
         reason = upstream.get(key)
         with case_log(case.log(stage)):
+            stale = case.remove_temporaries(stage, chain.artifacts(chain.BY_NAME[stage]))
+            if stale:
+                log.info("removed what a killed run left: %s", ", ".join(stale))
             if reason is not None:
                 log.error("case failed upstream: %s", reason)
             else:
@@ -265,6 +268,9 @@ def run_job(
     from concurrent.futures.process import BrokenProcessPool
 
     wall0, cpu = time.perf_counter(), float("nan")
+    for path in (manifest, log_path, timing_path):  # a killed job's temporaries of these
+        if path is not None:
+            io.remove_temporaries(Path(path).parent, [Path(path).name])
     upstream = upstream_failures(upstream_manifest)
     try:
         status, cpu = call(workers, _run_cases_timed, stage, cases, results_dir, cfg, upstream)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import logging
+import math
 
 from epa.artifacts.case import CaseData
 from epa.core.trajectory import Trajectory
@@ -42,6 +43,33 @@ def extrinsic_step(
     )
 
 
+# Motion pairs in one time block (under 2 pair_step s of rotating motion) leave the uncertainty
+# undefined: the covariance is scaled by infinity, and each zero entry becomes 0 x inf = NaN.
+UNDEFINED_UNCERTAINTY = (
+    "a null uncertainty entry is undefined (motion pairs in one time block scale the covariance by"
+    " infinity, and 0 x inf is no number)"
+)
+
+
+def extrinsic_record(ext: calibration.Extrinsic) -> dict:
+    """The extrinsic's record (calibrate.json's ``extrinsic``): an undefined uncertainty entry is
+    None, with a note, never NaN."""
+    undefined: list = []
+
+    def defined(value):
+        if isinstance(value, dict):
+            return {k: defined(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [defined(v) for v in value]
+        if isinstance(value, float) and math.isnan(value):
+            undefined.append(value)
+            return None
+        return value
+
+    record = defined(ext.to_dict())
+    return {**record, "notes": [UNDEFINED_UNCERTAINTY]} if undefined else record
+
+
 def compute(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict, cropped=None):
     """Step 2 and the evaluation plan on the matched (ref, est). ``cropped()`` gives the unmatched
     trajectories, needed only when the plan drops an estimated offset (Step 2 not trusted) and the
@@ -67,7 +95,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict, croppe
         ext = extrinsic_step(
             ref_at, est, cfg, (step1_record.get("std") or 0.0) if step1_record.get("used") else 0.0
         )
-        info["extrinsic"] = ext.to_dict()
+        info["extrinsic"] = extrinsic_record(ext)
         info["step2_status"] = ext.status
         plan = evaluation_plan(cfg, step1_record, ext)
         if not ext.trusted:

@@ -24,7 +24,7 @@ def compute(tables: dict, cfg: dict):
         tp["trans_m"],
         cfg["drift"],
     )
-    valid, seg_valid, time_valid = drift.valid_metrics(
+    valid, seg_valid, time_valid, notes = drift.valid_metrics(
         det, ape["trans_m"], ape["rot_deg"], seg, tp, cfg["metrics"]["segments"]
     )
     fs = det["fail_segments"]
@@ -60,7 +60,11 @@ def compute(tables: dict, cfg: dict):
         summary["status"] = (
             f"globally failed: 5th percentile APE {det['ape_p5_m']:.3g} m >"
             f" {cfg['drift']['global_fail_p5_m']} m"
+            if det["ape_p5_m"] is not None
+            else "globally failed: no finite APE"
         )
+    if notes:  # why a drift-valid quantity is empty (None); absent when none is
+        summary["notes"] = notes
     artifacts = {
         "fail_segments": fs,
         "pose_valid": {"t": ape["t"], "valid": ~det["invalid"]},

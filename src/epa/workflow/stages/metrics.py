@@ -63,6 +63,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
         for key, rpe in summary["rpe_distance"].items()
         if rpe["trans_m"]["n"] == 0
     ]
+    summary["notes"] += empty_relative_notes(summary, c)
     for metric in registry.computed_in(NAME):
         if metric.enabled(cfg):
             extra = {k: inputs[k]() for k in getattr(metric, "INPUTS", ())}
@@ -74,6 +75,25 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
     for note in summary["notes"]:
         log.warning("%s", note)
     return summary, tables
+
+
+def empty_relative_notes(summary: dict, c: dict) -> list[str]:
+    """Why the 1 s RPE and each evo-style RPE without a pair of poses are empty (their statistics
+    are None): one note each, as for a segment length that does not fit."""
+    notes = []
+    if summary["rpe_time_1s"]["trans_m"]["n"] == 0:
+        delta = c["time_delta"]
+        notes.append(
+            f"no two matched poses are {delta:g} s (±{100 * c['time_tol']:g} %) apart in"
+            f" {summary['duration_s']:.3f} s: the {delta:g} s RPE is empty"
+        )
+    for spec in summary["rpe"]:
+        if spec["trans_m"]["n"] == 0:
+            notes.append(
+                f"rpe {spec['delta']:g} {spec['unit']}: no pair of matched poses is"
+                f" {spec['delta']:g} {spec['unit']} apart: its RPE is empty"
+            )
+    return notes
 
 
 def case_record(

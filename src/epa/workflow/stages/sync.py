@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 
 from epa.artifacts.case import CaseData
 from epa.core.errors import EpaError
@@ -31,7 +32,11 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict):
                 est_off.reason,
                 c["offset"],
             )
-        info["step1"] = est_off.to_dict()
+        # what Step 1 could not measure (too few poses, no motion) is None; status and reason say why
+        info["step1"] = {
+            k: None if isinstance(v, float) and math.isnan(v) else v
+            for k, v in est_off.to_dict().items()
+        }
         offset = est_off.offset
         curve = {"lag_s": est_off.curve_lag, "corr": est_off.curve_corr}
     else:
