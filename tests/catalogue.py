@@ -1508,6 +1508,42 @@ CATALOGUE: list[Bad] = [
 ]
 
 
+# Replication packages and moved inputs (`epa verify`, `epa pack`): run by tests/test_package.py
+# on a 4-case grid it makes, packs and moves (an archive needs a real results folder).
+PACKAGE_ROWS = (
+    (
+        "not-an-archive",
+        "`epa verify` of a file that is not an archive",
+        "cannot unpack: not a tar.gz archive",
+    ),
+    (
+        "cut-archive",
+        "`epa verify` of a package cut off halfway (an incomplete download)",
+        "cannot unpack: the archive is cut off",
+    ),
+    (
+        "newer-package",
+        "`epa verify` of a package made by a newer epica",
+        "made by epica 99.0.0, newer than this epica",
+    ),
+    (
+        "wrong-hash-input",
+        "`epa verify --data DIR` where DIR holds an input with the right name and other bytes",
+        "found with the right name but the wrong hash: ",
+    ),
+    (
+        "input-not-found",
+        "`epa verify --data DIR` where an input is nowhere under DIR",
+        "not found under --data: ",
+    ),
+    (
+        "tampered-package",
+        "`epa verify` of a package one of whose tables was edited after packing",
+        "1 files changed since packed",
+    ),
+)
+
+
 def markdown() -> str:
     titles = {
         "eval": "Reading a file (`epa eval`, and the load stage of a grid)",
@@ -1540,6 +1576,20 @@ def markdown() -> str:
             cell = what.replace("|", "\\|")
             out.append(f"| {n} | {b.situation} | {cell} |")
         out.append("")
+    out += [
+        "## Replication packages and moved inputs (`epa verify`, `epa pack`)",
+        "",
+        "Run by `tests/test_package.py` on a grid it makes, packs and moves. A package that cannot be",
+        "read is exit status 2; inputs that are not what was recorded make `epa verify` say",
+        "`NOT VERIFIED` (exit status 1) without re-running anything.",
+        "",
+        "| # | Input | Outcome |",
+        "|---|---|---|",
+    ]
+    for _, situation, expect in PACKAGE_ROWS:
+        n += 1
+        out.append(f"| {n} | {situation} | `…{expect.strip()}…` |")
+    out.append("")
     return "\n".join(out)
 
 

@@ -15,6 +15,7 @@ import sys
 import tarfile
 from pathlib import Path
 
+import catalogue
 import pytest
 import yaml
 
@@ -22,6 +23,15 @@ from epa.cli import main as cli
 from epa.workflow import package
 
 ROOT = Path(__file__).resolve().parents[1]
+EXPECT = {key: expect for key, _, expect in catalogue.PACKAGE_ROWS}  # docs/bad-inputs.md's rows
+RUN_HERE = {  # each row of the catalogue's package section is run by a test below
+    "not-an-archive",
+    "cut-archive",
+    "newer-package",
+    "wrong-hash-input",
+    "input-not-found",
+    "tampered-package",
+}
 CASES = [
     ("vio_body", "drone_figure8", "run1.txt"),
     ("vio_body", "drone_figure8", "run1_timing.txt"),
@@ -141,7 +151,7 @@ def test_a_tampered_package_is_not_verified(moved, tmp_path, capsys, monkeypatch
     bad = _rewrite_archive(good, tmp_path / "tampered.tar.gz", one_digit)
     assert cli.main(["verify", str(bad), "--data", str(moved / "data")]) == 1
     out = capsys.readouterr().out
-    assert "unpacked" in out and "(1 files changed since packed)" in out
+    assert "unpacked" in out and f"({EXPECT['tampered-package']})" in out
     assert "differs: tables/ate.tex: first line " in out and "NOT VERIFIED" in out
 
 
@@ -160,11 +170,12 @@ def test_bad_packages_and_inputs_are_one_line(moved, tmp_path, capsys, monkeypat
 
     future = _rewrite_archive(good, tmp_path / "future.tar.gz", newer)
     capsys.readouterr()
-    for archive, said in (
-        (not_one, "cannot unpack: not a tar.gz archive"),
-        (cut, "cannot unpack: the archive is cut off"),
-        (future, "made by epica 99.0.0, newer than this epica"),
+    for archive, key in (
+        (not_one, "not-an-archive"),
+        (cut, "cut-archive"),
+        (future, "newer-package"),
     ):
+        said = EXPECT[key]
         assert cli.main(["verify", str(archive), "--data", str(moved / "data")]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and str(archive) in err and said in err, err
@@ -177,5 +188,16 @@ def test_bad_packages_and_inputs_are_one_line(moved, tmp_path, capsys, monkeypat
     assert cli.main(args) == 1
     out = capsys.readouterr().out
     lines = [line for line in out.splitlines() if "wrong hash" in line]
-    assert len(lines) == 1 and f"found with the right name but the wrong hash: {run2}" in lines[0]
+    assert len(lines) == 1 and f"{EXPECT['wrong-hash-input']}{run2}" in lines[0]
     assert "NOT VERIFIED" in out
+    # an input that is nowhere under --data
+    run2.unlink()
+    assert cli.main(args) == 1
+    out = capsys.readouterr().out
+    recorded = "/before/data/algorithms/vo_drifty/drone_figure8/run2.txt ("
+    lines = [line for line in out.splitlines() if EXPECT["input-not-found"] in line]
+    assert len(lines) == 1 and recorded in lines[0] and "NOT VERIFIED" in out
+
+
+def test_every_package_row_of_the_catalogue_is_run_here():
+    assert set(EXPECT) == RUN_HERE

@@ -87,7 +87,9 @@ def locate(doc: dict, folders) -> Located:
             out.found[rec["path"]] = places[0]
             out.said.append(f"found {rec['path']} at {places[0]}")
             continue
-        same_name = _as_recorded_first(by_name.get(Path(rec["path"]).name, []), tail)
+        same_name = [  # the same path within its folder (another run's run2.txt is not it)
+            p for p in by_name.get(Path(rec["path"]).name, []) if p.as_posix().endswith("/" + tail)
+        ]
         if same_name:
             other = provenance.sha256(same_name[0])
             out.problems.append(
