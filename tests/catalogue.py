@@ -1527,6 +1527,11 @@ PACKAGE_ROWS = (
         "made by epica 99.0.0, newer than this epica",
     ),
     (
+        "escaping-member",
+        "`epa verify` of an archive holding a member named `../x` (it would write outside)",
+        "refused: the archive holds '../x'",
+    ),
+    (
         "wrong-hash-input",
         "`epa verify --data DIR` where DIR holds an input with the right name and other bytes",
         "found with the right name but the wrong hash: ",

@@ -28,6 +28,7 @@ RUN_HERE = {  # each row of the catalogue's package section is run by a test bel
     "not-an-archive",
     "cut-archive",
     "newer-package",
+    "escaping-member",
     "wrong-hash-input",
     "input-not-found",
     "tampered-package",
@@ -179,6 +180,7 @@ def test_bad_packages_and_inputs_are_one_line(moved, tmp_path, capsys, monkeypat
         assert cli.main(["verify", str(archive), "--data", str(moved / "data")]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and str(archive) in err and said in err, err
+    assert not (tmp_path.parent / "x").exists()
     # an input with the right name and other bytes
     wrong = tmp_path / "wrong_data"
     shutil.copytree(moved / "data", wrong)
