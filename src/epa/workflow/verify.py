@@ -91,10 +91,11 @@ def _group(name: str) -> str:
     return name
 
 
-def _badness(r: contract.Comparison) -> tuple[int, float]:
-    order = 0 if r.ok else 1
-    ratio = r.worst.diff / r.worst.tol if r.worst and r.worst.tol and r.worst.tol > 0 else 0.0
-    return order * 2 + (r.verdict != contract.Verdict.IDENTICAL), ratio if ratio == ratio else 0.0
+def _badness(r: contract.Comparison) -> tuple[bool, bool, float]:
+    """Failing first, then not identical, then the larger difference over its tolerance."""
+    place = r.worst
+    ratio = place.diff / place.tol if place and place.tol > 0 else 0.0  # nan > 0 is False
+    return not r.ok, r.verdict != contract.Verdict.IDENTICAL, ratio
 
 
 def _worst_text(r: contract.Comparison, with_name: bool = False) -> str:
