@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from epa import simulate
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.core.trajectory import Trajectory
 from epa.steps import calibrate as calibration
 from epa.steps import sync
@@ -36,8 +36,8 @@ def big_pair(tmp: Path, n=100_000):
     ref = Trajectory.from_rp(1e9 + t, r, p)
     rng = np.random.default_rng(0)
     est = Trajectory.from_rp(1e9 + t, r, p + rng.normal(0, 0.02, p.shape))
-    io.write_tum(tmp / "ref.txt", ref)
-    io.write_tum(tmp / "est.txt", est)
+    files.write_tum(tmp / "ref.txt", ref)
+    files.write_tum(tmp / "est.txt", est)
     return ref, est
 
 

@@ -117,7 +117,7 @@ def in_pairs(cmds, workers=2) -> float:
 
 
 def bench_euroc(tmp: Path, skip_evo: bool) -> dict:
-    from epa.artifacts import files as io
+    from epa.artifacts import files
     from epa.readers import text
 
     cwd = tmp / "euroc"
@@ -134,11 +134,10 @@ def bench_euroc(tmp: Path, skip_evo: bool) -> dict:
     if not skip_evo:
         evo_cmds = []
         for k, (r, e) in enumerate(pairs):
-            tum = (
-                tmp / "evo" / f"{k}.tum"
-            )  # evo reads TUM; the OpenVINS CSV is converted once, outside the timing
+            # evo reads TUM; the OpenVINS CSV is converted once, outside the timing
+            tum = tmp / "evo" / f"{k}.tum"
             tum.parent.mkdir(exist_ok=True)
-            io.write_tum(tum, text.read_trajectory(e))
+            files.write_tum(tum, text.read_trajectory(e))
             evo_cmds += [
                 ["evo_ape", "tum", str(r), str(tum), "-a"],
                 [
@@ -229,7 +228,7 @@ def timeline(results: Path, started: float) -> dict:
 def short_grid(cwd: Path, n_cases: int, seed: int = 0) -> None:
     """n_cases short cases: 20 s references at 50 Hz, estimates at 20 Hz with noise and drift."""
     from epa import simulate
-    from epa.artifacts import files as io
+    from epa.artifacts import files
     from epa.core.trajectory import Trajectory
 
     rng = np.random.default_rng(seed)
@@ -240,14 +239,14 @@ def short_grid(cwd: Path, n_cases: int, seed: int = 0) -> None:
     t_est = np.arange(0.01, 20, 0.05)
     for d in range(n_ds):
         r, p = simulate.truth_pose("drone_figure8", t_ref + d)
-        io.write_tum(cwd / "truth" / f"seq{d:03d}.txt", Trajectory.from_rp(1e9 + t_ref, r, p))
+        files.write_tum(cwd / "truth" / f"seq{d:03d}.txt", Trajectory.from_rp(1e9 + t_ref, r, p))
         re, pe = simulate.truth_pose("drone_figure8", t_est + d)
         for a in range(n_alg):
             folder = cwd / "algorithms" / f"alg{a:02d}" / f"seq{d:03d}"
             folder.mkdir(parents=True)
             for k in range(n_run):
                 noisy = pe + rng.normal(0, 0.02, pe.shape) + np.outer(t_est, rng.normal(0, 0.01, 3))
-                io.write_tum(folder / f"run{k}.txt", Trajectory.from_rp(1e9 + t_est, re, noisy))
+                files.write_tum(folder / f"run{k}.txt", Trajectory.from_rp(1e9 + t_est, re, noisy))
 
 
 def bench_large(tmp: Path, n_cases: int, check: bool = True) -> dict:

@@ -50,15 +50,8 @@ rule tables:
         cases=lambda wc: sorted(CASE_BY_KEY),  # a function: braces in a name are not wildcards
         idle_truths=lambda wc: idle_truths(),
         results=lambda wc, output: os.path.dirname(output.summary),
-        settings={
-            "tables": EPA["tables"],
-            "metrics": EPA["metrics"],
-            "align": EPA["align"],  # which registered metrics apply (sim3_check)
-            "efficiency": EPA["efficiency"],
-            "mode": EPA["mode"],
-            "load": EPA["load"],
-            "sources": EPA.get("sources"),
-        },
+        # the tables' sections and those the registered metrics declare (their settings)
+        settings=epa_chain.tables_settings(EPA),
         version=EPA_VERSION,
         # provenance.json: the resolved config, every input file (hashed when the rule runs), the checkout
         resolved=EPA,

@@ -17,9 +17,8 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-SCHEMA = (
-    ROOT / "src" / "epa" / "workflow" / "config.schema.yaml"
-)  # epa.workflow.settings.SCHEMA_PATH
+# epa.workflow.settings.SCHEMA_PATH
+SCHEMA = ROOT / "src" / "epa" / "workflow" / "config.schema.yaml"
 OUTPUT = ROOT / "config" / "README.md"
 COMMAND = "python scripts/config_reference.py"
 

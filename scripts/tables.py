@@ -38,7 +38,7 @@ def write_provenance(results_dir, cfg, inputs, workflow_dir) -> None:
 
 def main(argv=None) -> int:
     """Without Snakemake: resolve the config and discover the cases as the Snakefile does."""
-    from epa.workflow import discovery, settings
+    from epa.workflow import chain, discovery, settings
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--configfile", default="config/config.yaml")
@@ -58,7 +58,7 @@ def main(argv=None) -> int:
         failed = write(
             sorted(c.key for c in cases),
             results,
-            cfg,
+            chain.tables_settings(cfg),  # what the tables rule passes
             idle,
             f"{results}/logs/tables.log",
             workers=os.cpu_count() or 1,

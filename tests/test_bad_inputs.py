@@ -7,7 +7,7 @@ import stat
 import numpy as np
 import pytest
 
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.artifacts.case import failure_of
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
@@ -68,8 +68,8 @@ def test_absurd_positions_are_an_error_not_an_infinite_ate(tmp_path):
 def test_a_static_reference_fails_the_case_instead_of_nan_success(tmp_path):
     t = np.arange(0, 20, 0.05)
     still = Trajectory(t, np.zeros((len(t), 3)), np.tile([0, 0, 0, 1.0], (len(t), 1)))
-    io.write_tum(tmp_path / "ref.txt", still)
-    io.write_tum(tmp_path / "est.txt", still)
+    files.write_tum(tmp_path / "ref.txt", still)
+    files.write_tum(tmp_path / "est.txt", still)
     cfg = settings.resolve(
         {"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}}
     )
@@ -126,8 +126,8 @@ def test_folders_given_on_the_command_line_count():
 
 
 def test_results_follow_the_umask_not_mkstemps_0600(tmp_path):
-    io.write_text(tmp_path / "x.txt", "x")
-    assert stat.S_IMODE((tmp_path / "x.txt").stat().st_mode) == 0o666 & ~io._UMASK
+    files.write_text(tmp_path / "x.txt", "x")
+    assert stat.S_IMODE((tmp_path / "x.txt").stat().st_mode) == 0o666 & ~files._UMASK
 
 
 @pytest.mark.parametrize(

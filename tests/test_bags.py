@@ -67,9 +67,8 @@ def test_record_time_on_request(tmp_path):
     traj = known(cov=False)
     bag_fixture.write_bag(tmp_path / "b.bag", {"/p": ("geometry_msgs/msg/PoseStamped", traj)})
     record = bags.read_bag(tmp_path / "b.bag", "/p", stamp="record")
-    np.testing.assert_allclose(
-        record.t, traj.t, rtol=0, atol=1e-6
-    )  # written at the header stamp (ns)
+    # written at the header stamp (ns)
+    np.testing.assert_allclose(record.t, traj.t, rtol=0, atol=1e-6)
 
 
 def test_tf_chains_compose_through_tf_static(tmp_path):
@@ -175,9 +174,8 @@ def test_mcap_topics_equal_evos_reading(data, topic):
         ours.q, evo.orientations_quat_wxyz[:, [1, 2, 3, 0]], rtol=0, atol=1e-9
     )
     assert len(ours) == {"/amcl_pose": 135, "/odom": 2639}[topic]
-    if (
-        topic == "/amcl_pose"
-    ):  # PoseWithCovarianceStamped keeps its 6x6 (SOURCES.md: sigma about 0.15-0.2 m)
+    # PoseWithCovarianceStamped keeps its 6x6 (SOURCES.md: sigma about 0.15-0.2 m)
+    if topic == "/amcl_pose":
         sigma = np.sqrt(ours.cov_pos[:, 0, 0])
         assert ours.cov_ros.shape == (135, 6, 6) and abs(sigma[0] - 0.16803) < 1e-5
 

@@ -8,7 +8,7 @@ import pytest
 from conftest import run_stages
 from test_steps_sim import case as sim_case
 
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.artifacts.case import failure_of
 from epa.core.errors import EpaError
 from epa.outputs import tables
@@ -20,8 +20,8 @@ from epa.workflow import jobs as grid
 def offset_case(tmp_path):
     """A camera-frame estimate 0.25 s late: Step 1 finds the offset, Step 2 the extrinsic."""
     ref, est, _, _ = sim_case("drone_figure8", offset=0.25, noise=0.002)
-    io.write_tum(tmp_path / "ref.txt", ref.shifted(1e9))
-    io.write_tum(tmp_path / "est.txt", est.shifted(1e9))
+    files.write_tum(tmp_path / "ref.txt", ref.shifted(1e9))
+    files.write_tum(tmp_path / "est.txt", est.shifted(1e9))
     return tmp_path / "ref.txt", tmp_path / "est.txt"
 
 
@@ -50,7 +50,7 @@ def test_untrusted_step2_drops_the_step1_offset_and_reassociates(offset_case, tm
         and m["alignment"]["method"] == "se3"
         and m["alignment"]["fallback_se3"]
     )
-    pairs = io.read_csv(tmp_path / "out/04_calibrate/pairs.csv")
+    pairs = files.read_csv(tmp_path / "out/04_calibrate/pairs.csv")
     assert np.abs(pairs["t_ref"] - pairs["t_est"]).max() <= 0.02  # matched on raw stamps
     assert not (tmp_path / "out/04_calibrate/est.tum").exists()
 

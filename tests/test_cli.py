@@ -160,9 +160,8 @@ def test_config_lists_defaults_and_marks_what_a_config_sets(tmp_path, capsys, ca
     captured = capsys.readouterr()
     lines = captured.out.splitlines()
     assert "metrics.kitti: true  # set (default false)" in lines
-    assert (
-        "sync.max_diff: 0.02  # set (default null)" in lines
-    )  # ov_eval's value: the mode overrides the file
+    # ov_eval's value: the mode overrides the file
+    assert "sync.max_diff: 0.02  # set (default null)" in lines
     assert "mode ov_eval overrides sync.max_diff: 0.05 -> 0.02" in caplog.text
     assert cli.main(["config", str(tmp_path / "missing.yaml")]) == 2
 

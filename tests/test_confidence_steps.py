@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from epa import simulate
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.core import geometry
 from epa.core.trajectory import Trajectory
 from epa.steps import calibrate as calibration
@@ -86,8 +86,8 @@ def _rig(t, r, p, rx, tx, offset=0.0):
 
 
 def _run(tmp_path, ref, est):
-    io.write_tum(tmp_path / "ref.txt", ref.shifted(1e9))
-    io.write_tum(tmp_path / "est.txt", est.shifted(1e9))
+    files.write_tum(tmp_path / "ref.txt", ref.shifted(1e9))
+    files.write_tum(tmp_path / "est.txt", est.shifted(1e9))
     cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": "."})
     return chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "out", cfg)[
         "metrics"
@@ -140,9 +140,8 @@ def test_an_offset_outside_the_search_window_is_flagged_not_clamped():
         ref, est = _signal_case(yaw, t, offset=true)
         out = sync.estimate_offset(ref, est, window=2.0, fallback=0.0)
         assert not out.used and out.offset == 0.0 and out.status == status, (true, out.reason)
-        if (
-            status == "at window edge"
-        ):  # what was found is on record, at the edge, never used as the offset
+        # what was found is on record, at the edge, never used as the offset
+        if status == "at window edge":
             assert abs(out.estimated) >= 1.99
         else:  # and where the better match is
             assert f"at +{true:.3f} s" in out.reason

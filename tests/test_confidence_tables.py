@@ -161,9 +161,8 @@ def test_cells_show_their_spread_over_runs_and_how_many(example):
             f"{trans.std(ddof=1):.3f} (n=2)"
         )
         assert cell(out / "tables/ate.tex", alg, col) == expected
-    assert (
-        cell(out / "tables/ate.tex", "vio_body", 3).count("$\\pm$") == 0
-    )  # the Average column: no runs of its own
+    # the Average column: no runs of its own
+    assert cell(out / "tables/ate.tex", "vio_body", 3).count("$\\pm$") == 0
     assert "± SAMPLE STD OVER RUNS, n = RUNS" in (out / "tables/ate.tex").read_text()
     # and in the text report, with a plain ±
     assert re.search(
@@ -201,9 +200,8 @@ def test_success_rate_curve_and_area(example):
     assert np.allclose(curve["factor"], drift.CURVE_FACTORS)
     rates = np.array(curve["success_rate_distance_pct"])
     assert np.all(np.diff(rates) >= -1e-9)  # looser thresholds never lose path
-    assert rates[10] == pytest.approx(
-        d["success_rate_distance_pct"]
-    )  # factor 1 is the configured threshold
+    # factor 1 is the configured threshold
+    assert rates[10] == pytest.approx(d["success_rate_distance_pct"])
     assert d["success_auc_pct"] == pytest.approx(rates.mean())
     assert 0 < d["success_auc_pct"] < 100
     assert cell(out / "tables/success_auc.tex", "vio_body", 0).startswith("100.00")
@@ -316,7 +314,7 @@ def test_selftest_command(capsys, data):
 
 
 def test_selftest_on_planar_motion_says_what_is_unobservable(tmp_path, capsys):
-    from epa.artifacts import files as io
+    from epa.artifacts import files
     from epa.core import geometry
     from epa.core.trajectory import Trajectory
 
@@ -327,7 +325,7 @@ def test_selftest_on_planar_motion_says_what_is_unobservable(tmp_path, capsys):
         geometry.so3_exp(yaw[:, None] * [0.0, 0.0, 1.0]),
         np.c_[20 * np.cos(t / 10), 15 * np.sin(t / 7), 0 * t],
     )
-    io.write_tum(tmp_path / "planar.txt", ref)
+    files.write_tum(tmp_path / "planar.txt", ref)
     assert cli.main(["selftest", str(tmp_path / "planar.txt"), "--trials", "1"]) == 0
     out = capsys.readouterr().out
     assert (

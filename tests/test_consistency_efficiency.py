@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from epa import simulate
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.core import geometry
 from epa.core.trajectory import Trajectory
 from epa.metrics import consistency, efficiency
@@ -45,8 +45,8 @@ def estimator(rng, seq="handheld_office", confidence=1.0):
 
 
 def run(tmp_path, ref, est, name):
-    io.write_tum(tmp_path / f"{name}_ref.txt", ref)
-    io.write_trajectory(tmp_path / f"{name}_est.txt", est, "openvins")
+    files.write_tum(tmp_path / f"{name}_ref.txt", ref)
+    files.write_trajectory(tmp_path / f"{name}_est.txt", est, "openvins")
     # the clocks agree (Step 1 is tested elsewhere; its ms-level error would blur NEES on fast motion)
     cfg = settings.resolve(
         {"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}}
@@ -58,9 +58,9 @@ def run(tmp_path, ref, est, name):
         cfg,
         write_arrays=True,
     )
-    calib = io.read_json(tmp_path / name / "04_calibrate/calibrate.json")
+    calib = files.read_json(tmp_path / name / "04_calibrate/calibrate.json")
     assert calib["plan"]["apply_extrinsic"], "Step 2 must have found and applied the extrinsic"
-    return io.read_json(tmp_path / name / "08_consistency/consistency.json")
+    return files.read_json(tmp_path / name / "08_consistency/consistency.json")
 
 
 @pytest.mark.parametrize("confidence,expected", [(1.0, 3.0), (0.1, 30.0)])
@@ -85,11 +85,10 @@ def test_covariance_travels_through_the_stage_artifacts_transformed(tmp_path):
     the estimate's own frame: position and orientation covariance were rotated, not copied."""
     ref, est = estimator(np.random.default_rng(5))
     run(tmp_path, ref, est, "c")
-    aligned = io.read_tum_file(tmp_path / "c/05_align/aligned.tum")
+    aligned = files.read_tum_file(tmp_path / "c/05_align/aligned.tum")
     assert aligned.cov_pos is not None and aligned.cov_rot is not None
-    i_ref, i_est = io.read_pair_indices(
-        tmp_path / "c/04_calibrate/pairs.csv"
-    )  # crop keeps every pose here
+    # crop keeps every pose here
+    i_ref, i_est = files.read_pair_indices(tmp_path / "c/04_calibrate/pairs.csv")
     ref_m = ref.select(i_ref)
     nees = np.loadtxt(tmp_path / "c/08_consistency/nees.csv", delimiter=",", skiprows=1)[:, 1]
     e = ref_m.p - aligned.p
@@ -97,22 +96,21 @@ def test_covariance_travels_through_the_stage_artifacts_transformed(tmp_path):
     # equal up to the lever-arm cross-covariance the blocks cannot carry
     assert abs(np.mean(carried) / np.mean(nees) - 1) < 0.1
     unrotated = np.einsum("na,nab,nb->n", e, np.linalg.inv(est.select(i_est).cov_pos), e)
-    assert (
-        abs(np.mean(unrotated) / np.mean(nees) - 1) > 0.3
-    )  # copying the covariance would be wrong
+    # copying the covariance would be wrong
+    assert abs(np.mean(unrotated) / np.mean(nees) - 1) > 0.3
 
 
 def test_without_covariance_nothing_is_faked(tmp_path):
     ref, est = estimator(np.random.default_rng(2))
-    io.write_tum(tmp_path / "ref.txt", ref)
-    io.write_tum(tmp_path / "est.txt", Trajectory(est.t, est.p, est.q))
+    files.write_tum(tmp_path / "ref.txt", ref)
+    files.write_tum(tmp_path / "est.txt", Trajectory(est.t, est.p, est.q))
     cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": "."})
     chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "o", cfg)
-    assert io.read_json(tmp_path / "o/08_consistency/consistency.json") == {
+    assert files.read_json(tmp_path / "o/08_consistency/consistency.json") == {
         "available": False,
         "reason": "the estimate has no covariance",
     }
-    assert io.read_json(tmp_path / "o/09_efficiency/efficiency.json")["available"] is False
+    assert files.read_json(tmp_path / "o/09_efficiency/efficiency.json")["available"] is False
 
 
 # ----------------------------------------------------------------------------- EA-Drift
@@ -169,7 +167,7 @@ def test_openvins_mh01_nees_is_overconfident_as_sources_md_says(data, tmp_path):
     ref = data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt"
     cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": ".", "mode": "ov_eval"})
     chain.run_case(ref, est, tmp_path / "o", cfg)
-    c = io.read_json(tmp_path / "o/08_consistency/consistency.json")
+    c = files.read_json(tmp_path / "o/08_consistency/consistency.json")
     assert c["available"] and c["n"] > 3000
     # SOURCES.md: naive position NEES after SE3 alignment has median about 51 (over-confident)
     assert 30 < c["nees_pos_median"] < 80, c
@@ -198,8 +196,8 @@ def test_openvins_mh04_diverging_run_with_timing(data, tmp_path):
         }
     )
     chain.run_case(ref, run_dir / "run1.txt", tmp_path / "o", cfg)
-    e = io.read_json(tmp_path / "o/09_efficiency/efficiency.json")
-    c = io.read_json(tmp_path / "o/08_consistency/consistency.json")
+    e = files.read_json(tmp_path / "o/09_efficiency/efficiency.json")
+    c = files.read_json(tmp_path / "o/08_consistency/consistency.json")
     # SOURCES.md: mean total 8.2 ms, max 49 ms
     assert (
         e["available"]

@@ -73,9 +73,8 @@ def test_knee_threshold_cases():
     assert drift.knee_threshold(rng.uniform(100, 200, 500))["threshold_m"] == 30.0
     tail = np.concatenate([rng.uniform(0, 1, 900), np.linspace(8, 20, 90), [1e4] * 10])
     k = drift.knee_threshold(tail)
-    assert (
-        k["mode"] == "knee" and 5 <= k["threshold_m"] < 30 and k["raw_m"] < 1e4
-    )  # outlier trimmed
+    # outlier trimmed
+    assert k["mode"] == "knee" and 5 <= k["threshold_m"] < 30 and k["raw_m"] < 1e4
 
 
 def _case(gt, est, tmp_path, **kw):

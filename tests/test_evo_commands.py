@@ -71,11 +71,8 @@ UNIT = {"f": em.Unit.frames, "m": em.Unit.meters, "d": em.Unit.degrees, "r": em.
 FILES = {
     "fr1_rgbdslam": ("tum", "freiburg1_xyz-groundtruth.txt", "freiburg1_xyz-rgbdslam.txt"),
     "fr1_orb_mono": ("tum", "freiburg1_xyz-groundtruth.txt", "freiburg1_xyz-ORB_kf_mono.txt"),
-    "v102": (
-        "euroc",
-        "V102_groundtruth.csv",
-        "V102.txt",
-    ),  # 4 repeated stamps, kept as evo keeps them
+    # 4 repeated stamps, kept as evo keeps them
+    "v102": ("euroc", "V102_groundtruth.csv", "V102.txt"),
     "kitti_orb": ("kitti", "KITTI_00_gt.txt", "KITTI_00_ORB.txt"),
     "kitti_sptam": ("kitti", "KITTI_00_gt.txt", "KITTI_00_SPTAM.txt"),
     "nav2_mcap": ("mcap", "nav2_turtlebot.mcap", "/amcl_pose", "/odom"),
@@ -127,9 +124,8 @@ RPE_OPTIONS = [
     {"align": True, "sync_method": "interpolation", "delta": 2, "delta_unit": "m"},
     {"correct_scale": True, "t_offset": -0.003, "t_start": 2.0},
 ]
-SCALE_ONLY_MEANINGFUL = {
-    "fr1_orb_mono"
-}  # monocular: without -s its numbers are in another scale (still compared)
+# monocular: without -s its numbers are in another scale (still compared)
+SCALE_ONLY_MEANINGFUL = {"fr1_orb_mono"}
 
 
 def _paths(data, name):

@@ -98,9 +98,8 @@ def test_v102_sim3_with_duplicates_dropped_on_both_sides(data):
     d = data / "MichaelGrupp_evo/test/data"
     est = text.read_trajectory(d / "V102.txt", on_unsorted="sort")
     eest = file_interface.read_tum_trajectory_file(d / "V102.txt")
-    keep = np.concatenate(
-        [[True], np.diff(eest.timestamps) > 0]
-    )  # the same rows our sort mode keeps
+    # the same rows our sort mode keeps
+    keep = np.concatenate([[True], np.diff(eest.timestamps) > 0])
     eest.reduce_to_ids(np.flatnonzero(keep))
     assert len(est) == eest.num_poses == 803
     check(

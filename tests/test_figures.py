@@ -40,14 +40,8 @@ def case(tmp_path_factory):
 
 
 def test_every_case_figure_and_document_is_written(case):
-    names = {
-        "trajectory",
-        "ape_time",
-        "rpe_box",
-        "xcorr",
-        "steps",
-        "sigma3",
-    }  # sigma3: vio_body has covariance
+    # sigma3: vio_body has covariance
+    names = {"trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3"}
     assert {p.stem for p in (case / "figures").glob("*.png")} == names
     assert {p.stem for p in (case / "bundles").glob("*.json")} == names
     for p in (case / "figures").glob("*.png"):
@@ -287,7 +281,7 @@ def test_a_rerun_recording_holds_the_case(case, tmp_path):
     import numpy as np
     from rerun.chunk import RrdReader
 
-    from epa.artifacts import files as io
+    from epa.artifacts import files
 
     sim = case.parents[1] / "sim"
     out = tmp_path / "out"
@@ -315,7 +309,7 @@ def test_a_rerun_recording_holds_the_case(case, tmp_path):
         "/errors/ape_m",
         "/consistency/nees_pos",
     } <= set(chunks)
-    ape = io.read_csv(out / "06_metrics/ape.csv")["trans_m"]
+    ape = files.read_csv(out / "06_metrics/ape.csv")["trans_m"]
     batch = chunks["/errors/ape_m"].to_record_batch()
     column = next(name for name in batch.schema.names if name.endswith("scalars"))
     got = np.array([v[0] for v in batch.column(column).to_pylist()])

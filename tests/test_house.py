@@ -5,7 +5,6 @@ import json
 import shutil
 import subprocess
 import sys
-import types
 from pathlib import Path
 
 import pytest
@@ -15,7 +14,7 @@ from epa import simulate
 from epa.artifacts import case as case_module
 from epa.cli import main as cli
 from epa.metrics import registry
-from epa.metrics.spec import Table
+from epa.metrics.spec import Metric, Table
 from epa.outputs import provenance, tables
 from epa.workflow import chain, settings
 
@@ -58,34 +57,37 @@ def test_the_stage_list_is_the_case_folder_layout_and_each_module_says_what_it_w
         assert callable(stage.run)
     # the metrics stage writes the arrays of the registered metrics it computes
     for metric in registry.computed_in("metrics"):
-        assert set(metric.ARRAYS) <= set(chain.BY_NAME["metrics"].ARRAYS)
+        assert set(metric.arrays) <= set(chain.BY_NAME["metrics"].ARRAYS)
 
 
 def test_every_registered_metric_declares_the_interface():
+    assert all(isinstance(m, Metric) for m in registry.REGISTRY)
+    assert registry.validate(registry.REGISTRY) == registry.REGISTRY
     for metric in registry.REGISTRY:
-        for name in ("KEY", "STAGE", "ARRAYS", "SUMMARY_COLUMNS", "TABLES", "enabled", "summary"):
-            assert hasattr(metric, name), f"{metric.__name__} lacks {name}"
-        assert metric.STAGE in chain.NAMES
-        if metric.STAGE == "metrics":
-            assert callable(metric.compute) and hasattr(metric, "AFTER")
-        assert all(isinstance(t, Table) for t in metric.TABLES)
+        assert metric.stage in chain.NAMES
+        # each setting it declares is a key of the resolved config, in its stage's subset
+        for setting in metric.settings:
+            section, *rest = setting.split(".")
+            assert section in chain.sections_for(metric.stage)
+            node = settings.defaults()
+            for part in [section, *rest]:
+                assert part in node, f"{metric.key}: {setting} is no setting"
+                node = node[part]
 
 
 def test_a_new_metric_is_one_module(small_grid, monkeypatch, tmp_path):
     """A metric module registered in the registry reaches metrics.json, summary.csv, its .tex table
     and error_comparison.txt, with no other change."""
     cwd, cfg, keys = small_grid
-    path_ratio = types.ModuleType("path_ratio")
-    path_ratio.__dict__.update(
-        KEY="path_ratio",
-        STAGE="metrics",
-        AFTER="ate",
-        ARRAYS=(),
-        SUMMARY_COLUMNS=("path_ratio",),
+    path_ratio = Metric(
+        key="path_ratio",
+        stage="metrics",
+        after="ate",
+        summary_columns=("path_ratio",),
         enabled=lambda cfg: True,
         compute=lambda ref, est, cfg: ({"ratio": est.length() / ref.length()}, {}, []),
         summary=lambda record: {"path_ratio": record.get("ratio")},
-        TABLES=(
+        tables=(
             Table("path_ratio", "PATH LENGTH RATIO", pair=False, per_run=lambda r: (r["ratio"],)),
         ),
     )

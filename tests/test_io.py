@@ -76,9 +76,8 @@ def test_orbslam3_float_ns_and_kimera(data):
         data
         / "MIT-SPARK_Kimera-VIO-Evaluation/evaluation/tests/test_results/V1_01_easy/Euroc/traj_vio.csv"
     )
-    assert (
-        len(k) == 52
-    )  # ns stamps, qw first: (w, x, y, z) = (-0.0605, 0.828, 0.0575, 0.554) on row 1
+    # ns stamps, qw first: (w, x, y, z) = (-0.0605, 0.828, 0.0575, 0.554) on row 1
+    assert len(k) == 52
     assert np.allclose(k.q[0], [0.82800183, 0.05748841, 0.55447594, -0.06053841], atol=2e-5)
     assert abs(k.t[0] - 1403715274.012143) < 1e-5
 

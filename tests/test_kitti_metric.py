@@ -128,7 +128,7 @@ def test_kitti_metric_equals_the_devkit_on_kitti_00(kitti00, tmp_path, name):
 def test_the_printed_rotation_blocks_travel_through_the_stage_artifacts(kitti00, tmp_path):
     """Every stage's trajectory artifact of a KITTI input carries the printed blocks (the aligned ones
     turned by the alignment's rotation); a TUM input's artifacts have none."""
-    from epa.artifacts import files as io
+    from epa.artifacts import files
     from epa.readers import text
 
     gt, estimates = kitti00
@@ -140,15 +140,15 @@ def test_the_printed_rotation_blocks_travel_through_the_stage_artifacts(kitti00,
     for name in ("01_load/est.tum", "02_crop/est.tum", "05_align/aligned.tum"):
         header = (out / name).read_text().splitlines()[0]
         assert header.endswith(" qw r11 r12 r13 r21 r22 r23 r31 r32 r33")
-    assert np.array_equal(io.read_tum_file(out / "02_crop/est.tum").r_printed, printed)
+    assert np.array_equal(files.read_tum_file(out / "02_crop/est.tum").r_printed, printed)
     transform = json.loads((out / "05_align/transform.json").read_text())
-    aligned = io.read_tum_file(out / "05_align/aligned.tum")
+    aligned = files.read_tum_file(out / "05_align/aligned.tum")
     # the same product on one machine: a rotation's entries to rounding (rtol 0: atol alone counts)
     want = np.asarray(transform["rotation"]) @ printed
     assert np.allclose(aligned.r_printed, want, rtol=0, atol=1e-15)
     assert np.allclose(aligned.r, aligned.r_printed, atol=1e-6)  # q: their nearest rotations
     tum = tmp_path / "est.tum"
-    io.write_trajectory(tum, text.read_trajectory(estimates["ORB"]), "tum")
+    files.write_trajectory(tum, text.read_trajectory(estimates["ORB"]), "tum")
     assert cli.main(["eval", str(gt), str(tum), "--out", str(tmp_path / "tum"), "--artifacts"]) == 0
     assert (tmp_path / "tum/02_crop/est.tum").read_text().splitlines()[0] == "# t x y z qx qy qz qw"
 
@@ -206,7 +206,7 @@ def test_kitti_metric_reaches_summary_and_its_table(kitti00, tmp_path, method):
 def test_kitti_metric_equals_the_devkit_exactly_on_orthonormal_poses(tmp_path, rng):
     """A 1.5 km drive with a drifting estimate, written as KITTI files at 17 digits (rotations orthonormal
     to 1e-16): the devkit transcription and epa agree to TOL."""
-    from epa.artifacts import files as io
+    from epa.artifacts import files
     from epa.core.geometry import so3_exp
     from epa.core.trajectory import Trajectory
     from epa.metrics import kitti
@@ -220,8 +220,8 @@ def test_kitti_metric_equals_the_devkit_exactly_on_orthonormal_poses(tmp_path, r
     r_est = np.array([so3_exp(rng.normal(0, 0.002, 3)) for _ in range(n)]) @ r
     p_est = p + np.cumsum(rng.normal(0, 0.01, (n, 3)), axis=0)
     t = np.arange(n) * 0.1
-    io.write_trajectory(tmp_path / "gt.txt", Trajectory.from_rp(t, r, p), "kitti")
-    io.write_trajectory(tmp_path / "est.txt", Trajectory.from_rp(t, r_est, p_est), "kitti")
+    files.write_trajectory(tmp_path / "gt.txt", Trajectory.from_rp(t, r, p), "kitti")
+    files.write_trajectory(tmp_path / "est.txt", Trajectory.from_rp(t, r_est, p_est), "kitti")
     count, trans_pct, rot = devkit(tmp_path / "gt.txt", tmp_path / "est.txt")
     summary, _ = kitti.odometry(
         text.read_trajectory(tmp_path / "gt.txt"), text.read_trajectory(tmp_path / "est.txt")

@@ -115,9 +115,8 @@ def test_mode_ov_eval_writes_ov_evals_layout(tmp_path):
         c["truth_source"] = readers.options(cfg, "reference", dataset="drone_figure8")
         c["estimate_source"] = readers.options(cfg, "estimate", algorithm=c["key"].split("/")[0])
     run_stages(cases, out, cfg)
-    idle = (
-        tmp_path / "sim/truth/handheld_office.txt"
-    )  # a reference no case uses: ov_eval lists it too
+    # a reference no case uses: ov_eval lists it too
+    idle = tmp_path / "sim/truth/handheld_office.txt"
     tables.make([c["key"] for c in cases], out, cfg, {"handheld_office": str(idle)})
     text = (out / "error_comparison.txt").read_text()
     lines = text.splitlines()
@@ -137,9 +136,8 @@ def test_mode_ov_eval_writes_ov_evals_layout(tmp_path):
     assert re.fullmatch(
         r"\[COMP\]: \d+ poses in drone_figure8\.txt => length of \d+\.\d\d meters", lines[1]
     )
-    assert (
-        lines[2] == "\033[0m" + "=" * 44 and lines[3] == "ATE LATEX TABLE"
-    )  # the error's RESET follows its newline
+    # the error's RESET follows its newline
+    assert lines[2] == "\033[0m" + "=" * 44 and lines[3] == "ATE LATEX TABLE"
     assert "processing" not in text and "median" not in text and "\t" not in text
     k = lines.index("ATE 2D LATEX TABLE")
     assert lines[k - 1] == lines[k + 1] == "=" * 44
@@ -195,15 +193,14 @@ def test_mode_ov_eval_prints_ov_evals_warnings_and_errors(tmp_path):
     coarse = copy.deepcopy(ok)
     coarse.case, coarse.sync = (
         Case("vio_body", "MH_01", "run2"),
-        {"n_matched": 100, "matched_length_m": {"ref": 60.0, "est": 84.0}},
-    )  # 0.6 m/pose
+        {"n_matched": 100, "matched_length_m": {"ref": 60.0, "est": 84.0}},  # 0.6 m/pose
+    )
     coarse.load["est_path"] = "algorithms/vio_body/MH_01/run2.txt"
     other = copy.deepcopy(ok)
     other.case, other.load = Case("vo", "V1_01", "run1"), {**ok.load, "ref_file": "V1_01.txt"}
     other.sync = {"n_matched": 100, "matched_length_m": {"ref": 50.0, "est": 50.0}}
-    idle = {
-        "V2_01": {"ref_file": "V2_01.txt", "n_ref": 7, "ref_length_m": 3.0}
-    }  # a reference without runs
+    # a reference without runs
+    idle = {"V2_01": {"ref_file": "V2_01.txt", "n_ref": 7, "ref_length_m": 3.0}}
     text = tables.ov_eval_text([ok, coarse, other], [8.0], idle)
     y, r, x = "\033[33m", "\033[31m", "\033[0m"
     assert text.startswith(

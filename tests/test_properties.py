@@ -5,7 +5,7 @@ from hypothesis import HealthCheck, given
 from hypothesis import settings as hsettings
 from hypothesis import strategies as st
 
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
@@ -88,7 +88,7 @@ def test_tum_write_read_round_trip_is_exact(tmp_path, n, seed):
     traj = Trajectory(
         t, rng.uniform(-1e4, 1e4, (n, 3)), q / np.linalg.norm(q, axis=1, keepdims=True)
     )
-    io.write_tum(tmp_path / "a.tum", traj)
+    files.write_tum(tmp_path / "a.tum", traj)
     back = text.read_trajectory(tmp_path / "a.tum")
     np.testing.assert_array_equal(back.t, traj.t if t.max() < text.NS_THRESHOLD else back.t)
     np.testing.assert_array_equal(back.p, traj.p)
@@ -160,11 +160,10 @@ def test_every_format_round_trips(tmp_path, n, seed, fmt, with_cov):
         ns_exact=fmt == "euroc",
     )
     path = tmp_path / ("a.csv" if fmt in ("euroc", "csv") else "a.txt")
-    io.write_trajectory(path, traj, fmt)
+    files.write_trajectory(path, traj, fmt)
     back = text.read_trajectory(path)
-    np.testing.assert_allclose(
-        back.t, traj.t, rtol=0, atol=3e-7 if fmt == "euroc" else 0
-    )  # ns in float64
+    # ns in float64
+    np.testing.assert_allclose(back.t, traj.t, rtol=0, atol=3e-7 if fmt == "euroc" else 0)
     np.testing.assert_array_equal(back.p, traj.p)
     # same rotation (q and -q are one rotation; KITTI stores the matrix)
     np.testing.assert_allclose(np.abs(np.sum(back.q * traj.q, axis=1)), 1.0, rtol=0, atol=1e-12)
@@ -254,9 +253,8 @@ def test_step1_recovers_a_random_offset_on_random_smooth_motion(seed, offset):
     r, p = smooth_motion(rng, t)
     ref = Trajectory.from_rp(t, r, p)
     te = np.arange(2, 58, 1 / 20)
-    re, pe = smooth_motion(
-        np.random.default_rng(seed), te + offset
-    )  # same motion, read offset later
+    # same motion, read offset later
+    re, pe = smooth_motion(np.random.default_rng(seed), te + offset)
     est = Trajectory.from_rp(te, re, pe)
     out = sync.estimate_offset(ref, est, window=2.0)
     if not out.used:  # a few sinusoids can repeat within the window (seed 576: two peaks 3 % apart)

@@ -214,7 +214,7 @@ def test_covariance_columns_are_read_or_refused_in_one_line(tmp_path, covs):
 )
 @given(seed=st.integers(0, 2**32 - 1), covariance=st.booleans())
 def test_traj_export_writes_covariance_only_when_asked(tmp_path, seed, covariance):
-    from epa.artifacts import files as io
+    from epa.artifacts import files
     from epa.cli import main as cli
 
     rng = np.random.default_rng(seed)
@@ -228,7 +228,7 @@ def test_traj_export_writes_covariance_only_when_asked(tmp_path, seed, covarianc
         cov_rot=a @ a.transpose(0, 2, 1) * 1e-4,
         cov_pos=b @ b.transpose(0, 2, 1) * 1e-2,
     )
-    io.write_trajectory(tmp_path / "in.txt", traj, "openvins")
+    files.write_trajectory(tmp_path / "in.txt", traj, "openvins")
     out = tmp_path / "out.tum"
     assert (
         cli.main(

@@ -358,9 +358,8 @@ def test_rpg_relative_pairs_quirk():
 def test_rpg_pair_search_and_association_match_rpg_on_random_input():
     rng = np.random.default_rng(3)
     for _ in range(30):
-        steps = rng.choice(
-            [0.0, 0.01, 0.05, 0.1, 0.25], size=200
-        )  # repeated values: stationary phases
+        # repeated values: stationary phases
+        steps = rng.choice([0.0, 0.01, 0.05, 0.1, 0.25], size=200)
         acc = np.concatenate(([0], np.cumsum(steps)))
         for d in (0.0, 0.3, 1.0, 2.5):
             assert protocol.comparison_indices(
@@ -373,9 +372,8 @@ def test_rpg_pair_search_and_association_match_rpg_on_random_input():
 
 def test_rpg_truncated_distances_and_file_names():
     assert protocol.boxplot_distances(91.79999) == [9.17, 18.35, 27.53, 36.71, 45.89]
-    assert (
-        protocol.truncate(0.29 * 100, 2) == 28.99
-    )  # truncation, not rounding (0.29 * 100 = 28.999...)
+    # truncation, not rounding (0.29 * 100 = 28.999...)
+    assert protocol.truncate(0.29 * 100, 2) == 28.99
     assert command.dist_str(9.17) == "9_2" and command.dist_str(45.89) == "45_9"
 
 
@@ -385,9 +383,8 @@ def test_rpg_single_trial_names_and_update_quirk(tmp_path):
     save = case / "saved_results/traj_est"
     save.mkdir(parents=True)
     (save / "absolute_err_statistics_se3_-1.yaml").write_text("kept: 1\ntrans: 2\n")
-    command.run_case(
-        case, mul_trials=1
-    )  # --mul_trials 1 is a single run: no index 0, no _#0, no mt_ files
+    # --mul_trials 1 is a single run: no index 0, no _#0, no mt_ files
+    command.run_case(case, mul_trials=1)
     written = sorted(p.name for p in save.iterdir())
     assert "stamped_est_gt_matches.txt" in written and not any(
         "mt_" in w or "_#" in w for w in written

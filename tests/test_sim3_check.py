@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import smooth_path
 
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.cli import main as cli
 from epa.core import geometry
 from epa.core.trajectory import Trajectory
@@ -142,9 +142,9 @@ def grid(tmp_path_factory):
 
     root = tmp_path_factory.mktemp("sim3")
     ref = smooth_path()
-    io.write_trajectory(root / "truth/office.txt", ref, "tum")
+    files.write_trajectory(root / "truth/office.txt", ref, "tum")
     for alg, scale in (("stereo", 0.5), ("mono", 1.02)):
-        io.write_trajectory(
+        files.write_trajectory(
             root / f"algs/{alg}/office/run1.txt", _estimate(ref, scale, 0.01), "tum"
         )
     (root / "cfg.yaml").write_text(
@@ -196,8 +196,8 @@ def test_the_warning_reaches_metrics_json_the_log_summary_the_table_and_the_repo
 
 def test_nothing_is_added_under_other_alignments(tmp_path):
     ref = smooth_path()
-    io.write_trajectory(tmp_path / "ref.txt", ref, "tum")
-    io.write_trajectory(tmp_path / "est.txt", _estimate(ref, 0.5, 0.01), "tum")
+    files.write_trajectory(tmp_path / "ref.txt", ref, "tum")
+    files.write_trajectory(tmp_path / "est.txt", _estimate(ref, 0.5, 0.01), "tum")
     base = {"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}}
     for extra in ({}, {"metrics": {"sim3_check": {"enabled": False}}, "align": {"method": "sim3"}}):
         cfg = settings.resolve({**base, "calibrate": {"enabled": False}, **extra})
@@ -221,7 +221,7 @@ def test_nothing_is_added_under_other_alignments(tmp_path):
 )
 def test_a_bad_setting_is_one_line_naming_the_key(tmp_path, capsys, config, says):
     ref = smooth_path()
-    io.write_trajectory(tmp_path / "ref.txt", ref, "tum")
+    files.write_trajectory(tmp_path / "ref.txt", ref, "tum")
     (tmp_path / "cfg.yaml").write_text(config + "\n")
     argv = [
         "eval",

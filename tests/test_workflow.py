@@ -400,7 +400,7 @@ def test_bag_grid_with_per_source_settings(tmp_path):
     """References in bags (a ROS 2 folder; a ROS 1 bag whose second topic is an estimate), text
     estimates of another algorithm, settings per source; changing one algorithm's settings re-runs
     only its cases."""
-    from epa.artifacts import files as io
+    from epa.artifacts import files
     from epa.readers import text as text_reader
 
     simulate.simulate(tmp_path / "sim")
@@ -423,7 +423,7 @@ def test_bag_grid_with_per_source_settings(tmp_path):
     (tmp_path / "truth/office_ros1.bag").symlink_to(both)
     for ds in ("office_ros1", "office_ros2"):
         (tmp_path / f"algs/text/{ds}").mkdir(parents=True)
-        io.write_trajectory(tmp_path / f"algs/text/{ds}/run1.csv", est, "euroc")
+        files.write_trajectory(tmp_path / f"algs/text/{ds}/run1.csv", est, "euroc")
     base = (
         "truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\n" + NO_REPORTS + "sources:\n"
         "  datasets:\n    office_ros2: {topic: /vicon}\n    office_ros1: {topic: /gt}\n"

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.core import geometry
 from epa.core.trajectory import Trajectory
 
@@ -25,9 +25,8 @@ SEQUENCES = {
     "urban_drive": (150.0, 3.0),
     "handheld_office": (120.0, 20.0),
 }
-T_BC_ROT = geometry.so3_exp(
-    np.array([1.2092, -1.2092, 1.2092])
-)  # camera z forward, x right (120 deg about (1,-1,1))
+# camera z forward, x right (120 deg about (1,-1,1))
+T_BC_ROT = geometry.so3_exp(np.array([1.2092, -1.2092, 1.2092]))
 T_BC_TRANS = np.array([0.10, -0.05, 0.02])
 ALGORITHMS = {
     # name: (frame, offsets per run (s), drift scale, file format); openvins = TUM + covariance
@@ -35,12 +34,8 @@ ALGORITHMS = {
     "vio_camera": ("camera", (0.05, -0.03), 1.0, "euroc"),
     "vo_drifty": ("body", (0.0, 0.0), 4.0, "tum"),
 }
-DIVERGING = (
-    "vo_drifty",
-    "urban_drive",
-    "run2",
-    60.0,
-)  # algorithm, dataset, run, divergence time (s)
+# algorithm, dataset, run, divergence time (s)
+DIVERGING = ("vo_drifty", "urban_drive", "run2", 60.0)
 # per-frame processing time (ms): median and log-normal spread; vio_camera is often over its 50 ms period
 TIMING = {"vio_body": (22.0, 0.25), "vio_camera": (42.0, 0.3)}
 NOISE_ROT_DEG, NOISE_POS_M = 0.1, 0.005
@@ -147,15 +142,14 @@ def _estimate(
     origin = rng.normal(0, 5, 3)
     r_est = world @ r_est
     p_est = p_est @ world.T + origin
-    cov = (
-        {} if frame == "camera" else {"cov_rot": cov_rot, "cov_pos": cov_pos}
-    )  # x/y equal: yaw-invariant
+    # x/y equal: yaw-invariant
+    cov = {} if frame == "camera" else {"cov_rot": cov_rot, "cov_pos": cov_pos}
     return Trajectory.from_rp(t0 + t_est, r_est, p_est, **cov), offset
 
 
 def _write(path: Path, traj: Trajectory, fmt: str) -> None:
     if fmt == "openvins":
-        io.write_trajectory(path, traj, "openvins")
+        files.write_trajectory(path, traj, "openvins")
         return
     if fmt == "euroc":
         ns = np.round(traj.t * 1e9).astype(np.int64)
@@ -164,7 +158,7 @@ def _write(path: Path, traj: Trajectory, fmt: str) -> None:
             f"{a},{x:.6f},{y:.6f},{z:.6f},{qw:.8f},{qx:.8f},{qy:.8f},{qz:.8f}"
             for a, (x, y, z), (qx, qy, qz, qw) in zip(ns, traj.p, q)
         )
-        io.write_text(
+        files.write_text(
             path,
             "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],"
             "q_RS_z []\n" + body + "\n",
@@ -178,7 +172,7 @@ def _write(path: Path, traj: Trajectory, fmt: str) -> None:
         )
         + "\n"
     )
-    io.write_text(path, text)
+    files.write_text(path, text)
 
 
 def simulate(out_dir, seed: int = 7) -> dict:
@@ -208,7 +202,7 @@ def simulate(out_dir, seed: int = 7) -> dict:
                 if alg in TIMING:  # <run>_timing.txt: <timestamp> <milliseconds>, the naming rule
                     median, spread = TIMING[alg]
                     ms = median * np.exp(rng.normal(0, spread, len(est)))
-                    io.write_text(
+                    files.write_text(
                         out / "algorithms" / alg / seq / f"{run}_timing.txt",
                         "".join(f"{t:.6f} {m:.3f}\n" for t, m in zip(est.t, ms)),
                     )
@@ -218,7 +212,7 @@ def simulate(out_dir, seed: int = 7) -> dict:
                     "diverges_at_s": diverge,
                     "format": fmt,
                 }
-    io.write_json(out / "manifest.json", manifest)
+    files.write_json(out / "manifest.json", manifest)
     return manifest
 
 

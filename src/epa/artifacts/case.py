@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from epa.artifacts import files
+from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 
@@ -77,9 +78,11 @@ def plain_name(name: str) -> bool:
 # Every case of a dataset holds the same reference. A worker writes it once and hard-links it into
 # the other cases, and parses a file once per inode (an atomic rewrite makes a new inode, so a
 # cached parse is never stale). Measured: this halves the workflow's cost on 200 Hz references.
-_PARSED: OrderedDict = OrderedDict()  # (device, inode, mtime, size) -> Trajectory
+# (device, inode, mtime, size) -> Trajectory
+_PARSED: OrderedDict = runtime.register("artifacts.case.parsed", OrderedDict())
 CACHE_MAX = 64  # a few hundred MB at most for 200 Hz references, far less for most grids
-_WRITTEN: dict = {}  # reference source -> the file this process wrote it to
+# reference source -> the file this process wrote it to
+_WRITTEN: dict = runtime.register("artifacts.case.written", {})
 
 
 def remember(cache: OrderedDict, key, value):

@@ -230,17 +230,14 @@ def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
     covariance columns when it has them)."""
     path = Path(path)
     cov = _cov_columns(traj)
-    if (
-        fmt == "openvins" and cov is None
-    ):  # never invent an uncertainty the estimator did not report
+    # never invent an uncertainty the estimator did not report
+    if fmt == "openvins" and cov is None:
         raise EpaError(
             "the OpenVINS format holds covariance and this trajectory has none; write tum or csv",
             path=str(path),
         )
-    if fmt in (
-        "tum",
-        "openvins",
-    ):  # write_tum adds the covariance columns (OpenVINS's layout) when there are some
+    # write_tum adds the covariance columns (OpenVINS's layout) when there are some
+    if fmt in ("tum", "openvins"):
         return write_tum(path, traj)
     if fmt == "kitti":
         m = np.concatenate([traj.r_as_printed, traj.p[:, :, None]], axis=2).reshape(len(traj), 12)

@@ -249,9 +249,8 @@ def _eval_config(args) -> dict:
         ("calibrate", "scale"): True if args.scale else None,
         ("load", "stamp"): args.stamp,
         ("efficiency", "sensor_rate_hz"): args.rate,
-        ("report", "per_case"): bool(
-            args.report or args.rerun
-        ),  # epa eval stays free of matplotlib unless asked
+        # epa eval stays free of matplotlib unless asked
+        ("report", "per_case"): bool(args.report or args.rerun),
         ("report", "rerun"): True if args.rerun else None,
         ("report", "figures"): "all" if args.report else None,  # one case, asked for: every figure
         ("sources", "reference", "topic"): args.ref_topic,
@@ -373,10 +372,10 @@ def _eval(args) -> None:
         est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM),
     )
     on_stage(None)
-    from epa.artifacts import files as io
+    from epa.artifacts import files
     from epa.outputs import report
 
-    io.write_json(document, report.case_document(out))
+    files.write_json(document, report.case_document(out))
     record = result["metrics"]
     ate = record["ate"]["trans_m"]["rmse"]
     print(
@@ -457,7 +456,7 @@ def _eval_provenance(args, cfg) -> None:
 
 def _traj(args) -> None:
     from epa import readers
-    from epa.artifacts import files as io
+    from epa.artifacts import files
     from epa.core.trajectory import Trajectory
     from epa.readers import bags
     from epa.workflow import settings
@@ -503,7 +502,7 @@ def _traj(args) -> None:
             fmt_written = "openvins" if fmt == "tum" else fmt
         else:
             traj, fmt_written = Trajectory(traj.t, traj.p, traj.q), fmt
-        io.write_trajectory(out, traj, fmt_written)
+        files.write_trajectory(out, traj, fmt_written)
         what = "OpenVINS layout: TUM + covariance" if fmt_written == "openvins" else fmt
         left = (
             "; its covariance is left out (--covariance writes it)"

@@ -250,7 +250,7 @@ def _source(args, which: str) -> str:
 def save(result, path, *, ref: str, est: str) -> None:
     """The result as JSON (``epica-result/1``: kind, title, stats, options, info, reference and
     estimate names, the error array), or a .zip holding ``result.json`` and ``errors.csv``."""
-    from epa.artifacts import files as io
+    from epa.artifacts import files
     from epa.outputs import figures
 
     doc = {
@@ -265,13 +265,13 @@ def save(result, path, *, ref: str, est: str) -> None:
     }
     path = Path(path)
     if path.suffix.lower() != ".zip":
-        io.write_text(path, figures._json({**doc, "errors": result.errors}) + "\n")
+        files.write_text(path, figures._json({**doc, "errors": result.errors}) + "\n")
         return
     buf = io_bytes.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("result.json", json.dumps(doc, indent=1) + "\n")
         z.writestr("errors.csv", "error\n" + "".join(f"{e!r}\n" for e in result.errors.tolist()))
-    io.write_bytes(path, buf.getvalue())
+    files.write_bytes(path, buf.getvalue())
 
 
 STAT_COLUMNS = ("rmse", "mean", "median", "std", "min", "max", "sse")
@@ -357,9 +357,9 @@ def res(args) -> None:
     for line in [header, *table]:
         print("  ".join(str(x).ljust(w) for x, w in zip(line, widths)).rstrip())
     if args.save_table:
-        from epa.artifacts import files as io
+        from epa.artifacts import files
 
-        io.write_text(
+        files.write_text(
             args.save_table,
             "\n".join(",".join(_csv(x) for x in line) for line in [header, *table]) + "\n",
         )

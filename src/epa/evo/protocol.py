@@ -22,12 +22,8 @@ from epa.metrics import accuracy, relations
 from epa.steps import align as alignment
 from epa.steps import sync
 
-DELTA_UNITS = {
-    "f": "frames",
-    "d": "deg",
-    "r": "rad",
-    "m": "m",
-}  # evo's -u letters -> evo_pairs units
+# evo's -u letters -> evo_pairs units
+DELTA_UNITS = {"f": "frames", "d": "deg", "r": "rad", "m": "m"}
 PLANES = ("xy", "xz", "yz")
 SYNC_METHODS = ("nearest_time", "interpolation")
 
@@ -100,9 +96,8 @@ def synchronise(ref: Trajectory, est: Trajectory, o: EvoOptions) -> tuple[Trajec
         )
     if o.sync_method == "nearest_time":
         return ref.select(i_ref), est.select(i_est)
-    if len(est) > len(
-        ref
-    ):  # the estimate is denser: resample it at the reference's stamps in its own clock
+    # the estimate is denser: resample it at the reference's stamps in its own clock
+    if len(est) > len(ref):
         r = ref.select(i_ref)
         return r, est.at(r.t - o.t_offset)
     e = est.select(i_est)

@@ -14,6 +14,30 @@ from epa.core.stamps import closest_pairs
 from epa.core.trajectory import Trajectory
 
 RPE_UNITS = ("frames", "m", "s", "deg", "rad")
+# the keys of evaluate's record: what a registered metric's record can follow in metrics.json
+RECORD_KEYS = (
+    "n_matched",
+    "ref_length_m",
+    "duration_s",
+    "ate",
+    "rpe_distance",
+    "drift_rate_pct",
+    "rpe_time_1s",
+    "rpe",
+)
+# the paper tables of these metrics (epa.outputs.tables), in order: what a metric's table can follow
+BASE_TABLES = (
+    "ate",
+    "rpe_distance",
+    "drift_rate",
+    "rpe_time_1s",
+    "success_rate",
+    "success_auc",
+    "valid_ate",
+    "valid_rpe_distance",
+    "valid_drift_rate",
+    "valid_rpe_time_1s",
+)
 
 
 STATISTICS = ("rmse", "mean", "median", "std", "min", "max")

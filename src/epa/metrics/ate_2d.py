@@ -8,13 +8,7 @@ import numpy as np
 from epa.core import geometry
 from epa.core.trajectory import Trajectory
 from epa.metrics.accuracy import stats
-from epa.metrics.spec import Table
-
-KEY = "ate_2d"
-STAGE = "metrics"
-AFTER = "ate"  # its record follows the ATE's in metrics.json
-ARRAYS = ()  # its per-pose columns (yaw_deg, trans_xy_m) extend ape.csv
-SUMMARY_COLUMNS = ()
+from epa.metrics.spec import Metric, Table
 
 
 def enabled(cfg: dict) -> bool:
@@ -42,9 +36,9 @@ def errors(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
 def compute(ref: Trajectory, est: Trajectory, cfg: dict) -> tuple[dict, dict, list[str]]:
     yaw, trans_xy = errors(ref, est)
     record = {
-        "yaw_deg": stats(yaw),
+        "yaw_deg": stats(yaw),  # signed: its rmse is ov_eval's
         "trans_xy_m": stats(trans_xy),
-    }  # yaw signed: its rmse is ov_eval's
+    }
     return record, {"ape": {"yaw_deg": yaw, "trans_xy_m": trans_xy}}, []
 
 
@@ -62,11 +56,23 @@ def summary(record: dict) -> dict:
     return {}
 
 
-TABLES = (
+_TABLES = (
     Table(
         "ate_2d",
         "FULL TRAJECTORY ATE 2D LATEX TABLE (YAW DEG / XY M)",
         per_run=per_run,
         after="ate",
     ),
+)
+
+
+METRIC = Metric(
+    key="ate_2d",
+    stage="metrics",
+    enabled=enabled,
+    summary=summary,
+    compute=compute,
+    after="ate",  # its record follows the ATE's in metrics.json
+    arrays=(),  # its per-pose columns (yaw_deg, trans_xy_m) extend ape.csv
+    tables=_TABLES,
 )

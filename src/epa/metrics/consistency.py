@@ -16,12 +16,9 @@ import numpy as np
 
 from epa.core import geometry
 from epa.core.trajectory import Trajectory
-from epa.metrics.spec import Table
+from epa.metrics.spec import Metric, Table
 from epa.steps.align import Similarity
 
-KEY = "consistency"
-STAGE = "consistency"  # its own stage: records available false without covariance
-ARRAYS = ("nees.csv",)
 SUMMARY_COLUMNS = ("nees_rot_mean", "nees_pos_mean", "outside_3sigma_pct")
 
 
@@ -167,7 +164,7 @@ def across_runs(runs: dict[str, dict]) -> tuple[dict, dict]:
     return summary, table
 
 
-TABLES = (
+_TABLES = (
     Table(
         "nees",
         "NEES LATEX TABLE (ORI / POS, 3 = CONSISTENT)",
@@ -175,4 +172,15 @@ TABLES = (
         has=lambda r: bool(r.get("available")),
         missing="no covariance",
     ),
+)
+
+
+METRIC = Metric(
+    key="consistency",
+    stage="consistency",  # its own stage: records available false without covariance
+    enabled=enabled,
+    summary=summary,
+    arrays=("nees.csv",),
+    summary_columns=SUMMARY_COLUMNS,
+    tables=_TABLES,
 )

@@ -23,11 +23,8 @@ import logging
 import numpy as np
 
 from epa.core.stamps import nearest_from
-from epa.metrics.spec import Table
+from epa.metrics.spec import Metric, Table
 
-KEY = "efficiency"
-STAGE = "efficiency"  # its own stage: records available false without timing
-ARRAYS = ("frames.csv",)
 SUMMARY_COLUMNS = ("ea_drift", "frame_time_mean_ms")
 
 
@@ -180,9 +177,8 @@ def evaluate(
         return summary, {}
     summary["available"] = True
     k = _overflowing_frame(ms, rate_hz)
-    if (
-        k is not None
-    ):  # never inf as a result: the frame times stand, EA-Drift is empty and says why
+    # never inf as a result: the frame times stand, EA-Drift is empty and says why
+    if k is not None:
         summary.update(ea_drift_seed=None, ea_drift=None, ea_drift_m2ud=None)
         summary["ea_drift_reason"] = (
             f"timing entry {k + 1} (stamp {t_tim[k]:.6f} s) takes {ms[k]:g} ms, "
@@ -193,9 +189,10 @@ def evaluate(
     else:
         summary.update(ea_drift(err_m[have], ms[idx[have]], rate_hz, est_path_length_m))
         m2 = match_m2ud(t_ref, t_tim)
+        # the patch stops when a pose has no timing
         summary["ea_drift_m2ud"] = (
             ea_drift_m2ud(err_m, ms[m2], rate_hz, est_path_length_m) if (m2 >= 0).all() else None
-        )  # the patch stops when a pose has no timing
+        )
     table = {
         "t": t_est,
         "frame_ms": np.where(have, ms[np.maximum(idx, 0)], np.nan),
@@ -205,7 +202,7 @@ def evaluate(
     return summary, table
 
 
-TABLES = (
+_TABLES = (
     Table(
         "ea_drift",
         "EA-DRIFT LATEX TABLE (% PER-FRAME NORMALISED, SEE DOCS)",
@@ -224,4 +221,16 @@ TABLES = (
         per_algorithm=pooled_runtime,
         header=("mean", "p95", "max", "over period %"),
     ),
+)
+
+
+METRIC = Metric(
+    key="efficiency",
+    stage="efficiency",  # its own stage: records available false without timing
+    enabled=enabled,
+    summary=summary,
+    settings=("efficiency",),
+    arrays=("frames.csv",),
+    summary_columns=SUMMARY_COLUMNS,
+    tables=_TABLES,
 )

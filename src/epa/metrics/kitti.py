@@ -24,13 +24,7 @@ import numpy as np
 
 from epa.core import geometry
 from epa.core.trajectory import Trajectory
-from epa.metrics.spec import Table
-
-KEY = "kitti"  # metrics.kitti: off by default
-STAGE = "metrics"
-AFTER = None
-ARRAYS = ("kitti_segments.csv",)
-SUMMARY_COLUMNS = ("kitti_trans_pct", "kitti_rot_deg_per_100m")
+from epa.metrics.spec import Metric, Table
 
 LENGTHS_M = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
 STEP = 10
@@ -43,9 +37,8 @@ def segments(
     first = np.arange(0, len(dist), step)
     firsts, lasts, lens = [], [], []
     for length in lengths:
-        last = np.searchsorted(
-            dist, dist[first] + length, side="right"
-        )  # first pose strictly beyond
+        # first pose strictly beyond
+        last = np.searchsorted(dist, dist[first] + length, side="right")
         ok = last < len(dist)
         firsts.append(first[ok])
         lasts.append(last[ok])
@@ -147,7 +140,7 @@ def summary(record: dict) -> dict:
     }
 
 
-TABLES = (
+_TABLES = (
     Table(
         "kitti",
         "KITTI ODOMETRY LATEX TABLE (ROT DEG/100M / TRANS %, 100-800 M SEGMENTS)",
@@ -155,4 +148,17 @@ TABLES = (
         has=lambda r: bool(r.get("n_segments")),
         in_text=False,
     ),
+)
+
+
+METRIC = Metric(
+    key="kitti",  # metrics.kitti: off by default
+    stage="metrics",
+    enabled=enabled,
+    summary=summary,
+    settings=("metrics.kitti",),
+    compute=compute,
+    arrays=("kitti_segments.csv",),
+    summary_columns=("kitti_trans_pct", "kitti_rot_deg_per_100m"),
+    tables=_TABLES,
 )

@@ -17,13 +17,8 @@ import numpy as np
 from epa.core import geometry
 from epa.core.trajectory import Trajectory
 from epa.metrics.accuracy import segment_key, segment_pairs, stats
-from epa.metrics.spec import Table
+from epa.metrics.spec import Metric, Table
 
-KEY = "per_axis"
-STAGE = "metrics"
-AFTER = "ate_2d"  # its record follows ATE 2D's in metrics.json
-ARRAYS = ()  # its per-pose columns (err_x_m ... err_yaw_deg) extend ape.csv
-SUMMARY_COLUMNS = ()
 AXES = ("x", "y", "z", "roll", "pitch", "yaw")
 UNITS = ("m", "m", "m", "deg", "deg", "deg")
 
@@ -100,7 +95,7 @@ def summary(record: dict) -> dict:
     return {}
 
 
-TABLES = (
+_TABLES = (
     Table(
         "ate_per_axis",
         "PER-AXIS ATE LATEX TABLE (RMSE: X Y Z M, ROLL PITCH YAW DEG, MEAN OVER RUNS)",
@@ -109,4 +104,17 @@ TABLES = (
         per_algorithm=per_algorithm,
         header=("x (m)", "y (m)", "z (m)", "roll", "pitch", "yaw"),
     ),
+)
+
+
+METRIC = Metric(
+    key="per_axis",  # metrics.per_axis: off by default
+    stage="metrics",
+    enabled=enabled,
+    summary=summary,
+    settings=("metrics.per_axis", "metrics.segments", "metrics.segment_tol"),
+    compute=compute,
+    after="ate_2d",  # its record follows ATE 2D's in metrics.json
+    arrays=(),  # its per-pose columns (err_x_m ... err_yaw_deg) extend ape.csv
+    tables=_TABLES,
 )

@@ -100,9 +100,8 @@ def _of_error_poses(relation: str, r_e: np.ndarray, t_e: np.ndarray) -> np.ndarr
     if relation in ("angle_deg", "angle_rad"):
         return _angle(relation, geometry.rotation_angle(geometry.nearest_rotation(r_e)))
     rot = np.linalg.norm(r_e - np.eye(3), axis=(-2, -1))
-    return (
-        rot if relation == "rot_part" else np.sqrt(rot**2 + np.sum(t_e**2, axis=-1))
-    )  # full: last row is 0
+    # full: last row is 0
+    return rot if relation == "rot_part" else np.sqrt(rot**2 + np.sum(t_e**2, axis=-1))
 
 
 def ape(ref: Trajectory, est: Trajectory, relation: str = "trans_part") -> np.ndarray:

@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from epa.core.trajectory import Trajectory
+from epa.metrics.spec import Metric
 from epa.steps.rpg import EPS, quaternion_matrix
 
 BOXPLOT_PERCENTAGES = (0.1, 0.2, 0.3, 0.4, 0.5)
@@ -349,14 +350,6 @@ def rel_labels(e: dict) -> dict:
 
 
 # ----------------------------------------------------------------------------- mode: rpg
-KEY = "rpg"  # on in mode rpg only (no metrics.rpg key): rpg's statistics are a protocol's, not epica's
-STAGE = "metrics"
-AFTER = None
-ARRAYS = ("rpg_relative_errors.csv",)
-SUMMARY_COLUMNS = ()  # summary.csv keeps epica's columns; rpg's numbers are in results/rpg_*.txt
-TABLES = ()  # rpg's summary table has its own layout (epa.outputs.tables.rpg)
-# what compute() needs beyond the aligned matched poses (the metrics stage passes these)
-INPUTS = ("unaligned", "transform", "reference")
 REL_COLUMNS = dict(
     zip(
         REL_METRICS, ("trans_m", "trans_perc", "yaw_deg", "rot_deg", "gravity_deg", "rot_deg_per_m")
@@ -465,3 +458,18 @@ def documents(record: dict) -> dict[str, str]:
         stats = {k: v for k, v in rel.items() if k != "distance_m" and v is not None}
         docs[f"relative_error_statistics_{dist_str(rel['distance_m'])}.yaml"] = yaml_text(stats)
     return docs
+
+
+METRIC = Metric(
+    key="rpg",  # on in mode rpg only (no metrics.rpg key): rpg's statistics are a protocol's, not epica's
+    stage="metrics",
+    enabled=enabled,
+    summary=summary,  # summary.csv keeps epica's columns; rpg's numbers are in results/rpg_*.txt
+    settings=("mode",),
+    compute=compute,
+    # what compute() needs beyond the aligned matched poses (the metrics stage passes these)
+    inputs=("unaligned", "transform", "reference"),
+    arrays=("rpg_relative_errors.csv",),
+    tables=(),  # rpg's summary table has its own layout (epa.outputs.tables.rpg)
+    documents=documents,
+)

@@ -26,15 +26,8 @@ import numpy as np
 from epa.core import geometry
 from epa.core.trajectory import Trajectory
 from epa.metrics.accuracy import ape, stats
-from epa.metrics.spec import Table
+from epa.metrics.spec import Metric, Table
 from epa.steps import align as alignment
-
-KEY = "sim3_check"  # metrics.sim3_check; only with align.method: sim3
-STAGE = "metrics"
-AFTER = "ate"  # beside the (Sim3) ATE in metrics.json
-INPUTS = ("transform", "estimate_source")  # Step 3's scale; the metric_scale declaration
-ARRAYS = ()
-SUMMARY_COLUMNS = ()  # summary.csv: its warning in the notes column
 
 
 def enabled(cfg: dict) -> bool:
@@ -144,7 +137,7 @@ def summary(record: dict) -> dict:
     return {}
 
 
-TABLES = (
+_TABLES = (
     Table(
         "sim3_check",
         "SIM3 SCALE LATEX TABLE (SCALE / SE3 ATE RMSE M BESIDE THE SIM3 ATE, MEAN OVER RUNS)",
@@ -153,4 +146,17 @@ TABLES = (
         note=note,
         after="ate",
     ),
+)
+
+
+METRIC = Metric(
+    key="sim3_check",  # metrics.sim3_check; only with align.method: sim3
+    stage="metrics",
+    enabled=enabled,
+    summary=summary,  # summary.csv: its warning in the notes column
+    settings=("metrics.sim3_check", "align.method"),
+    compute=compute,
+    after="ate",  # beside the (Sim3) ATE in metrics.json
+    inputs=("transform", "estimate_source"),  # Step 3's scale; the metric_scale declaration
+    tables=_TABLES,
 )

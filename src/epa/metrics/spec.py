@@ -1,25 +1,6 @@
-"""How a metric shows in the paper tables: a :class:`Table` per table, declared by its metric module.
-
-A metric module of the registry (:mod:`epa.metrics.registry`) declares:
-
-- ``KEY``: its setting (``metrics.<KEY>``, where it has one) and its record's key;
-- ``STAGE``: ``"metrics"`` (computed by the metrics stage from the aligned matched poses, its record
-  under ``KEY`` in ``metrics.json``) or the name of its own stage (its record is that stage's);
-- ``enabled(cfg)``; for ``STAGE == "metrics"``: ``AFTER`` (the record it follows in metrics.json,
-  None: last), ``compute(ref, est, cfg) -> (record, arrays, notes)`` where ``arrays`` maps a per-case
-  table (``ape`` or its own, one of ``ARRAYS`` without ``.csv``) to its columns, and ``notes`` are
-  logged as warnings and listed in metrics.json ``notes``;
-- ``ARRAYS``: its own per-case files; ``SUMMARY_COLUMNS`` and ``summary(record) -> dict``: its
-  ``summary.csv`` columns; ``TABLES``: its paper tables.
-
-Optionally (mode rpg's metric, :mod:`epa.metrics.rpg`, and :mod:`epa.metrics.sim3_check` use them):
-
-- ``INPUTS``: what ``compute`` needs beyond the aligned matched poses, passed as keywords:
-  ``unaligned`` (the matched estimate before Step 3), ``transform`` (``05_align/transform.json``),
-  ``reference`` (the whole cropped reference), ``estimate_source`` (the estimate's source settings,
-  as ``load.json`` records them); each is read only when such a metric is on;
-- ``documents(record) -> {file name: text}``: small files of its own, written to
-  ``06_metrics/<KEY>/`` (that folder is removed where the metric is off).
+"""The metric contract, in code: a :class:`Metric` per metric module (its ``METRIC``), a
+:class:`Table` per paper table it declares. The registry (:mod:`epa.metrics.registry`) checks the
+declarations when it loads: a wrong field, an unknown anchor or table fails at import.
 
 A record's ``warning`` (a sentence, or None) is a finding a reader must not miss: besides the log and
 metrics.json it goes to the case's flags (its report, ``10_report/report.json``) and summary.csv's
@@ -30,6 +11,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+
+# what the metrics stage can pass a metric's compute beyond the aligned matched poses (Metric.inputs)
+INPUTS = ("unaligned", "transform", "reference", "estimate_source")
 
 
 @dataclass(frozen=True)
@@ -54,3 +38,87 @@ class Table:
     note: Callable[[list[dict]], str | None] | None = None
     after: str | None = None  # the base table it follows; None: after the base tables
     in_text: bool = True  # also in error_comparison.txt
+
+
+def _strings(value, field: str, key: str) -> None:
+    if not isinstance(value, tuple) or not all(isinstance(v, str) and v for v in value):
+        raise TypeError(f"metric {key!r}: {field} must be a tuple of names, not {value!r}")
+
+
+@dataclass(frozen=True)
+class Metric:
+    """What a metric module declares (its ``METRIC``); checked when it is built and when the
+    registry loads.
+
+    - ``key``: its record's key (and its setting ``metrics.<key>``, where it has one);
+    - ``stage``: ``"metrics"`` (computed by the metrics stage from the aligned matched poses, its
+      record under ``key`` in ``metrics.json``) or the name of its own stage (its record is that
+      stage's);
+    - ``enabled(cfg)``; ``summary(record) -> dict``: its ``summary.csv`` columns, named by
+      ``summary_columns``;
+    - ``settings``: the config keys it reads, dotted (``"metrics.per_axis"``, ``"align"``); the
+      stage's and the tables rule's config subsets include their sections, so reading one is never
+      a ``KeyError``;
+    - for ``stage == "metrics"``: ``compute(ref, est, cfg, **inputs) -> (record, arrays, notes)``
+      where ``arrays`` maps a per-case table (``ape`` or its own, one of ``arrays`` without
+      ``.csv``) to its columns and ``notes`` are logged as warnings and listed in metrics.json
+      ``notes``; ``after``: the record it follows in metrics.json (a key of the base record or of
+      another metric of the stage; None: last);
+    - ``inputs``: what ``compute`` needs beyond the aligned matched poses, passed as keywords (one
+      of :data:`INPUTS`: the matched estimate before Step 3, ``05_align/transform.json``, the whole
+      cropped reference, the estimate's source settings as ``load.json`` records them); each is read
+      only when such a metric is on;
+    - ``arrays``: its own per-case files; ``tables``: its paper tables;
+    - ``documents(record) -> {file name: text}``: small files of its own, written to
+      ``06_metrics/<key>/`` (that folder is removed where the metric is off).
+    """
+
+    key: str
+    stage: str
+    enabled: Callable[[dict], bool]
+    summary: Callable[[dict], dict]
+    settings: tuple[str, ...] = ()
+    compute: Callable[..., tuple[dict, dict, list[str]]] | None = None
+    after: str | None = None
+    inputs: tuple[str, ...] = ()
+    arrays: tuple[str, ...] = ()
+    summary_columns: tuple[str, ...] = ()
+    tables: tuple[Table, ...] = ()
+    documents: Callable[[dict], dict[str, str]] | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.key, str) or not self.key:
+            raise TypeError(f"a metric's key must be a non-empty string, not {self.key!r}")
+        key = self.key
+        if not isinstance(self.stage, str) or not self.stage:
+            raise TypeError(f"metric {key!r}: stage must be a stage name, not {self.stage!r}")
+        for field in ("enabled", "summary"):
+            if not callable(getattr(self, field)):
+                raise TypeError(f"metric {key!r}: {field} must be callable")
+        for field in ("settings", "inputs", "arrays", "summary_columns"):
+            _strings(getattr(self, field), field, key)
+        if any("" in s.split(".") for s in self.settings):
+            raise ValueError(
+                f"metric {key!r}: settings {self.settings!r}: a dotted config key each"
+            )
+        if unknown := [i for i in self.inputs if i not in INPUTS]:
+            raise ValueError(f"metric {key!r}: inputs {unknown} are not among {INPUTS}")
+        if not isinstance(self.tables, tuple) or not all(isinstance(t, Table) for t in self.tables):
+            raise TypeError(f"metric {key!r}: tables must be a tuple of Table")
+        if self.documents is not None and not callable(self.documents):
+            raise TypeError(f"metric {key!r}: documents must be callable or None")
+        if self.stage == "metrics":
+            if not callable(self.compute):
+                raise TypeError(f"metric {key!r}: a metric of the metrics stage needs compute")
+            if self.after is not None and (not isinstance(self.after, str) or not self.after):
+                raise TypeError(f"metric {key!r}: after must be a record key or None")
+        elif self.compute is not None or self.after is not None or self.inputs or self.documents:
+            raise ValueError(
+                f"metric {key!r}: compute, after, inputs and documents belong to metrics of the"
+                f" metrics stage, not of stage {self.stage!r}"
+            )
+
+    @property
+    def sections(self) -> tuple[str, ...]:
+        """The config sections its settings are in, in order."""
+        return tuple(dict.fromkeys(s.split(".")[0] for s in self.settings))

@@ -231,9 +231,9 @@ def metric_warnings(doc: dict) -> list[str]:
     out = []
     for metric in registry.REGISTRY:
         metrics = doc.get("metrics", {})
-        record = metrics.get(metric.KEY) if metric.STAGE == "metrics" else doc.get(metric.STAGE)
+        record = metrics.get(metric.key) if metric.stage == "metrics" else doc.get(metric.stage)
         if isinstance(record, dict) and record.get("warning"):
-            out.append(f"{metric.KEY}: {record['warning']}")
+            out.append(f"{metric.key}: {record['warning']}")
     return out
 
 

@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from epa.artifacts import files as io
+from epa.artifacts import files
+from epa.core import runtime
 from epa.core.errors import EpaError
 
 OKABE_ITO = ["#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000"]
@@ -94,7 +95,7 @@ def bundle(kind: str, title: str, data: dict, **meta) -> dict:
 
 
 def write_bundle(path, b: dict) -> None:
-    io.write_text(path, _json(b) + "\n")
+    files.write_text(path, _json(b) + "\n")
 
 
 def read_bundle(path) -> dict:
@@ -152,10 +153,8 @@ def _setup(style: str):
             "svg.fonttype": "none",
             "axes.prop_cycle": matplotlib.cycler(color=OKABE_ITO),
             # 1e4 and beyond as a power of ten above the axis: tick labels stay short enough for fixed margins
-            "axes.formatter.limits": (
-                -3,
-                4,
-            ),  # no mathtext: parsing it would cost more than drawing
+            # no mathtext: parsing it would cost more than drawing
+            "axes.formatter.limits": (-3, 4),
         }
     )
     return plt, w, h
@@ -165,7 +164,7 @@ def _setup(style: str):
 # half of a figure's cost, so after saving, a case figure is kept (one per kind and size, in this
 # process) and the next figure of that layout reuses it, emptied of data: the same bytes as a new
 # one (a test compares them), at about half the cost.
-_KEPT: dict[tuple, object] = {}
+_KEPT: dict[tuple, object] = runtime.register("outputs.figures.kept", {})
 
 
 def _layout(plt, kind: str, size: tuple, make):
@@ -174,10 +173,8 @@ def _layout(plt, kind: str, size: tuple, make):
     fig = _KEPT.pop(key, None)
     if fig is None:
         fig = make()
-        fig._epa_layout, fig._epa_axes = (
-            key,
-            len(fig.axes),
-        )  # axes added later (a colour bar) go on reuse
+        # axes added later (a colour bar) go on reuse
+        fig._epa_layout, fig._epa_axes = (key, len(fig.axes))
     else:
         _empty(fig)
     return fig
@@ -244,13 +241,11 @@ def render(
         raise EpaError(f"the {b['kind']} bundle's data cannot be drawn: {what}") from None
     from matplotlib.ticker import MaxNLocator
 
-    for ax in (
-        fig.axes
-    ):  # five ticks read well at column width, and tick labels are most of a figure's cost
+    # five ticks read well at column width, and tick labels are most of a figure's cost
+    for ax in fig.axes:
         for axis in (ax.xaxis, ax.yaxis):
-            if isinstance(
-                axis.get_major_locator(), MaxNLocator
-            ):  # AutoLocator too; not log or fixed ticks
+            # AutoLocator too; not log or fixed ticks
+            if isinstance(axis.get_major_locator(), MaxNLocator):
                 axis.get_major_locator().set_params(nbins=5)
     _no_ligatures(fig)
     out = []
@@ -414,9 +409,8 @@ def _xcorr(plt, b, w, h):
 
         def make():
             fig, _ = _single(plt, w, h)
-            inset = fig.axes[0].inset_axes(
-                [0.34, 0.1, 0.34, 0.34]
-            )  # below the peak, where the zoomed curve is not
+            # below the peak, where the zoomed curve is not
+            inset = fig.axes[0].inset_axes([0.34, 0.1, 0.34, 0.34])
             inset.tick_params(labelsize=5.5, length=2, pad=1)
             return fig
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.outputs.tables.latex import latex_escape
 
 FOLDER = "paper"
@@ -80,7 +80,7 @@ def write_paper(results_dir, captions: dict | None = None) -> list[Path]:
         written.append(out / "figures" / src.name)
     tables = [p for p in written if p.parent.name == "tables"]
     figures = [p for p in written if p.parent.name == "figures"]
-    io.write_text(out / "paper.tex", paper_tex(tables, figures, captions))
+    files.write_text(out / "paper.tex", paper_tex(tables, figures, captions))
     return [out / "paper.tex", *written]
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.artifacts.case import CaseData, CaseFolder
 from epa.metrics.accuracy import segment_key
 from epa.outputs import case_report, figures, parallel, tables
@@ -33,8 +33,8 @@ def case_bundles(data: CaseData) -> dict[str, dict]:
     """Every per-case figure's bundle, from a case's artifacts."""
     p = data.folder.path
     ref, aligned, ape, fail = data.matched[0], data.aligned, data.ape, data.fail_segments
-    drift = io.read_json(p("drift", "drift.json"))
-    sync = io.read_json(p("sync", "sync.json"))
+    drift = files.read_json(p("drift", "drift.json"))
+    sync = files.read_json(p("sync", "sync.json"))
     t0 = float(ref.t[0])
     k = figures.thin(len(ref))
     out = {
@@ -55,14 +55,14 @@ def case_bundles(data: CaseData) -> dict[str, dict]:
             "threshold": (drift.get("knee") or {}).get("threshold_m"),
         },
     )
-    seg = io.read_csv(p("metrics", "rpe_segments.csv"))
+    seg = files.read_csv(p("metrics", "rpe_segments.csv"))
     lengths = sorted({float(x) for x in seg["length_m"]}) if len(seg.get("length_m", [])) else []
     out["rpe_box"] = figures.bundle(
         "rpe_box",
         "RPE per segment length",
         {"lengths": lengths, "trans": [seg["trans_m"][seg["length_m"] == L] for L in lengths]},
     )
-    xc = io.read_csv(p("sync", "xcorr.csv"))
+    xc = files.read_csv(p("sync", "xcorr.csv"))
     step1 = sync.get("step1", {})
     out["xcorr"] = figures.bundle(
         "xcorr",
@@ -109,7 +109,7 @@ def case_document(case: CaseFolder) -> dict:
     ):
         path = case.path(stage, name)
         if path.exists():
-            doc[stage] = io.read_json(path)
+            doc[stage] = files.read_json(path)
     return doc
 
 
@@ -212,8 +212,8 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
     case = data.folder
     folder = case.path("report", "report.json").parent
     doc = case_document(case)
-    io.write_json(folder / "metrics.json", doc)
-    io.write_text(folder / "metrics_summary.csv", summary_csv(doc))
+    files.write_json(folder / "metrics.json", doc)
+    files.write_text(folder / "metrics_summary.csv", summary_csv(doc))
     # Figures cost most of a report (0.7 s a case): by default only the cases a reader opens first,
     # those drift detection failed, are drawn; every case keeps its bundles.
     bundles = case_bundles(data)
@@ -240,7 +240,7 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
             inputs=inputs,
             grid_provenance=_grid_provenance(case.root),
         )
-        io.write_text(folder / f"report_{lang}.md", md)
+        files.write_text(folder / f"report_{lang}.md", md)
     if c["rerun"]:
         from epa.outputs import recording
 
@@ -346,7 +346,7 @@ def _rmse_time_bundle(consistency_dir: Path, algs: list[str], datasets: list[str
         for k, a in enumerate(algs):
             path = consistency_dir / a / f"{d}.csv"
             if path.exists():
-                t = io.read_csv(path)
+                t = files.read_csv(path)
                 if len(t.get("t", [])):
                     kk = figures.thin(len(t["t"]), 1500)
                     x, y = t["t"][kk] - t["t"][0], t["rmse_pos_m"][kk]

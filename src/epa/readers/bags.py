@@ -252,9 +252,8 @@ def _read_poses(reader, conns, msgtype: str, stamp: str) -> Trajectory:
         raws.append(raw)
         records.append(record_ns)
     fast = _decode_all(reader, raws, conns[0].msgtype, msgtype, ros1=not reader.is2)
-    if (
-        fast is not None
-    ):  # every message decoded at once from fixed offsets (checked against rosbags)
+    # every message decoded at once from fixed offsets (checked against rosbags)
+    if fast is not None:
         t, p, q, cov = fast
         if stamp == "record":
             t = np.asarray(records, float) / 1e9

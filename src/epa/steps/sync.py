@@ -114,9 +114,8 @@ class OffsetEstimate:
     std: float | None = None  # standard deviation of the estimate (s), delete-one-block jackknife
     peak_corr: float = float("nan")
     peak_ratio: float = float("nan")
-    beyond_window_corr: float = float(
-        "nan"
-    )  # the best local maximum of the correlation beyond ±window
+    # the best local maximum of the correlation beyond ±window
+    beyond_window_corr: float = float("nan")
     ref_motion_rad_s: float = float("nan")
     est_motion_rad_s: float = float("nan")
     dt: float = float("nan")

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from epa.artifacts.case import Case, CaseData, CaseFolder
 from epa.core.errors import EpaError
+from epa.metrics import registry
 from epa.workflow.stages import (
     align,
     calibrate,
@@ -39,9 +40,26 @@ def artifacts(stage) -> tuple[str, ...]:
     return stage.RECORDS + stage.ARRAYS
 
 
+def sections_for(stage: str) -> tuple[str, ...]:
+    """The config sections one stage reads: its ``SETTINGS``, then those its registered metrics
+    declare (:attr:`epa.metrics.spec.Metric.settings`)."""
+    return tuple(dict.fromkeys(BY_NAME[stage].SETTINGS + registry.sections(stage)))
+
+
 def settings_for(stage: str, cfg: dict) -> dict:
     """The part of a resolved config one stage reads (what the workflow puts in the rule's params)."""
-    return {k: cfg[k] for k in BY_NAME[stage].SETTINGS if k in cfg}  # folders: only on a grid
+    return {k: cfg[k] for k in sections_for(stage) if k in cfg}  # folders: only on a grid
+
+
+# what the tables read besides the registered metrics' settings (error_comparison.txt, summary.csv,
+# provenance of the sources)
+TABLES_SETTINGS = ("tables", "metrics", "mode", "load", "sources")
+
+
+def tables_settings(cfg: dict) -> dict:
+    """The part of a resolved config the tables rule reads (``scripts/tables.py``): the tables', then
+    every registered metric's sections (a section absent from ``cfg``: None)."""
+    return {k: cfg.get(k) for k in dict.fromkeys(TABLES_SETTINGS + registry.sections())}
 
 
 def previous(stage: str) -> str | None:

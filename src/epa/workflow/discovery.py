@@ -17,6 +17,7 @@ from epa.artifacts.case import Case, plain_name
 from epa.core.errors import EpaError
 
 log = logging.getLogger("epa")
+# not runs
 SIDE_FILES = (
     "_times.txt",
     "times.txt",
@@ -26,7 +27,7 @@ SIDE_FILES = (
     ".yml",
     ".md",
     ".json",
-)  # not runs
+)
 
 
 def _timing_side_files(files: list[Path], pattern: str | None) -> set[Path]:
@@ -53,9 +54,8 @@ def _trajectory_files(folder: Path, skipped: list[Path], timing: str | None = No
         if p.name.startswith("."):
             continue  # hidden (.DS_Store, editor swap files): never data
         if p.is_dir():
-            (files if (p / "metadata.yaml").is_file() else skipped).append(
-                p
-            )  # a ROS 2 bag is a folder
+            # a ROS 2 bag is a folder
+            (files if (p / "metadata.yaml").is_file() else skipped).append(p)
         elif p.name.endswith(SIDE_FILES):
             continue  # a side file by the documented rule: expected, so not worth a warning
         elif p.is_file() or p.is_symlink():

@@ -26,8 +26,9 @@ from contextlib import contextmanager
 from multiprocessing import context, spawn
 from pathlib import Path
 
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.artifacts.case import Case, CaseData, CaseFolder
+from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.workflow import chain
 
@@ -73,6 +74,15 @@ _HANDLER = _ThreadFileHandler()
 
 _INSIDE = {"n": 0, "saved": None}
 _INSIDE_LOCK = threading.Lock()
+
+
+def _reset_logging() -> None:
+    """Leave every case log still open: the logging setup from before the first is restored."""
+    while _INSIDE["n"] > 0:
+        _leave_logging()
+
+
+runtime.register("workflow.jobs.inside", reset=_reset_logging)
 
 
 def _enter_logging() -> None:
@@ -161,7 +171,7 @@ def run_cases(
 
 
 def read_manifest(path) -> dict[str, dict]:
-    return io.read_json(path)["cases"]
+    return files.read_json(path)["cases"]
 
 
 def upstream_failures(manifest_path) -> dict[str, str]:
@@ -207,7 +217,14 @@ def _without_main_module(get_preparation_data):
         return data
 
     prepared.epa_without_main = True
+    prepared.epa_original = get_preparation_data
     return prepared
+
+
+def _unpatch_spawn() -> None:
+    """Undo :func:`_context`'s patch of ``multiprocessing.spawn`` (the next pool applies it again)."""
+    if getattr(spawn.get_preparation_data, "epa_without_main", False):
+        spawn.get_preparation_data = spawn.get_preparation_data.epa_original
 
 
 def warm_up() -> None:
@@ -226,6 +243,10 @@ def close_pool() -> None:
         if _POOL is not None:
             _POOL.shutdown(wait=True)
             _POOL = None
+
+
+runtime.register("workflow.jobs.pool", reset=close_pool)
+runtime.register("workflow.jobs.spawn_patch", reset=_unpatch_spawn)
 
 
 def _pool(workers: int):
@@ -270,7 +291,7 @@ def run_job(
     wall0, cpu = time.perf_counter(), float("nan")
     for path in (manifest, log_path, timing_path):  # a killed job's temporaries of these
         if path is not None:
-            io.remove_temporaries(Path(path).parent, [Path(path).name])
+            files.remove_temporaries(Path(path).parent, [Path(path).name])
     upstream = upstream_failures(upstream_manifest)
     try:
         status, cpu = call(workers, _run_cases_timed, stage, cases, results_dir, cfg, upstream)
@@ -288,9 +309,9 @@ def run_job(
     if log_path is not None:
         lines = [f"{stage}: {len(status) - len(failed)} ok, {len(failed)} failed"]
         lines += [f"failed {k}: {r}" for k, r in failed.items()]
-        io.write_text(log_path, "\n".join(lines) + "\n")
+        files.write_text(log_path, "\n".join(lines) + "\n")
     if timing_path is not None:
         wall = time.perf_counter() - wall0
-        io.write_text(timing_path, f"s\tcpu_time\n{wall:.4f}\t{cpu:.4f}\n")
-    io.write_json(manifest, {"stage": stage, "cases": status})
+        files.write_text(timing_path, f"s\tcpu_time\n{wall:.4f}\t{cpu:.4f}\n")
+    files.write_json(manifest, {"stage": stage, "cases": status})
     return status

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.artifacts.case import CaseFolder
 from epa.metrics import consistency
-from epa.outputs.tables.cells import _ok_runs
+from epa.outputs.tables.cells import ok_runs
 from epa.outputs.tables.results import CaseResult
 from epa.outputs.tables.summary import records_csv
 
@@ -20,12 +20,12 @@ def write_across_runs(grid: list[CaseResult], results_dir) -> None:
     for alg in sorted({c.algorithm for c in grid}):
         for ds in sorted({c.dataset for c in grid if c.algorithm == alg}):
             runs = {}
-            for c in _ok_runs(grid, alg, ds):
+            for c in ok_runs(grid, alg, ds):
                 case = CaseFolder.of(results_dir, c.case)
                 ape = case.table("metrics", "ape.csv")
                 nees = case.path("consistency", "nees.csv")
                 table = (
-                    io.read_csv(nees)
+                    files.read_csv(nees)
                     if c.records.get("consistency", {}).get("available") and nees.exists()
                     else {}
                 )
@@ -39,7 +39,7 @@ def write_across_runs(grid: list[CaseResult], results_dir) -> None:
             if not runs:
                 continue
             summary, table = consistency.across_runs(runs)
-            io.write_csv(results_dir / "consistency" / alg / f"{ds}.csv", table)
+            files.write_csv(results_dir / "consistency" / alg / f"{ds}.csv", table)
             rows.append({"algorithm": alg, "dataset": ds, **summary})
     cols = [
         "algorithm",
@@ -51,4 +51,4 @@ def write_across_runs(grid: list[CaseResult], results_dir) -> None:
         "nees_pos_mean",
         "nees_rot_mean",
     ]
-    io.write_text(results_dir / "consistency" / "summary.csv", records_csv(cols, rows))
+    files.write_text(results_dir / "consistency" / "summary.csv", records_csv(cols, rows))

@@ -10,20 +10,21 @@ from __future__ import annotations
 
 import numpy as np
 
+from epa.core import runtime
 from epa.metrics import statistics
 
 
-def _num(x) -> float:
+def num(x) -> float:
     return np.nan if x is None else float(x)
 
 
-def _nanmean(values) -> float:
-    v = np.array([_num(x) for x in values], float)
+def nanmean(values) -> float:
+    v = np.array([num(x) for x in values], float)
     v = v[~np.isnan(v)]
     return float(v.mean()) if v.size else np.nan
 
 
-class _Cell:
+class Cell:
     """A table cell: missing (None: no successful run), or numbers that may be nan.
     ``pair`` cells hold rot / trans; the others a single number. ``runs`` (runs x numbers) holds
     each run's own value of those numbers, for the spread over runs."""
@@ -46,15 +47,15 @@ class _Cell:
         return " / ".join(parts) + n
 
 
-def _average(cells: list[_Cell], pair=True) -> _Cell:
+def average_cell(cells: list[Cell], pair=True) -> Cell:
     have = [c.values for c in cells if c.values is not None]
     if not have:
-        return _Cell(None, pair)
+        return Cell(None, pair)
     arr = np.array(have, float)
-    return _Cell(tuple(_nanmean(arr[:, k]) for k in range(arr.shape[1])), pair)
+    return Cell(tuple(nanmean(arr[:, k]) for k in range(arr.shape[1])), pair)
 
 
-def _ok_runs(grid, alg, ds=None):
+def ok_runs(grid, alg, ds=None):
     """The runs with a result of ``alg`` (on ``ds``), in grid order. From an index built once per
     grid: scanning the grid for every cell made the tables quadratic (31 s on 1,000 cases)."""
     kept = _INDEX.get(id(grid))
@@ -69,25 +70,25 @@ def _ok_runs(grid, alg, ds=None):
     return list(kept[2].get((alg, ds), ()))
 
 
-_INDEX: dict[int, tuple] = {}
+_INDEX: dict[int, tuple] = runtime.register("outputs.tables.cells.index", {})
 
 
-def _run_ate(c, valid: bool = False) -> tuple[float, float]:
+def run_ate(c, valid: bool = False) -> tuple[float, float]:
     """One run's ATE RMSE: rotation (deg), translation (m)."""
     src = c.drift["drift_valid"]["ate"] if valid else c.metrics["ate"]
     return src["rot_deg"]["rmse"], src["trans_m"]["rmse"]
 
 
-def _mean_over_runs(runs, of) -> _Cell:
+def mean_over_runs(runs, of) -> Cell:
     """The cell of a per-run pair: its mean over the runs (ov_eval's ATE cells)."""
     if not runs:
-        return _Cell(None)
-    per_run = [tuple(_num(x) for x in of(c)) for c in runs]
-    return _Cell(tuple(_nanmean(v) for v in zip(*per_run)), runs=per_run)
+        return Cell(None)
+    per_run = [tuple(num(x) for x in of(c)) for c in runs]
+    return Cell(tuple(nanmean(v) for v in zip(*per_run)), runs=per_run)
 
 
-def _ate(runs, valid: bool) -> _Cell:
-    return _mean_over_runs(runs, lambda c: _run_ate(c, valid))
+def ate_cell(runs, valid: bool) -> Cell:
+    return mean_over_runs(runs, lambda c: run_ate(c, valid))
 
 
 def _per_run(runs, table: str, valid: bool, length=None) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -104,34 +105,34 @@ def _per_run(runs, table: str, valid: bool, length=None) -> list[tuple[np.ndarra
     return out
 
 
-def _pooled(runs, table: str, valid: bool, length=None):
+def pooled(runs, table: str, valid: bool, length=None):
     per_run = _per_run(runs, table, valid, length)
     return tuple(
         np.concatenate([r[k] for r in per_run]) if per_run else np.zeros(0) for k in (0, 1)
     )
 
 
-def _pooled_cell(runs, table, valid, length, of, width: int) -> _Cell:
+def _pooled_cell(runs, table, valid, length, of, width: int) -> Cell:
     """A cell pooling the pairs of all runs, ``of(rot, trans)`` giving its ``width`` numbers; its
     spread is over each run's own ``of`` (runs without pairs left out)."""
     per_run = _per_run(runs, table, valid, length)
     rot, trans = (np.concatenate([r[k] for r in per_run]) for k in (0, 1))
     if _all_nan_valid(runs, valid) or rot.size == 0:
-        return _Cell((np.nan,) * width)
-    return _Cell(of(rot, trans), runs=[of(r, t) for r, t in per_run if r.size])
+        return Cell((np.nan,) * width)
+    return Cell(of(rot, trans), runs=[of(r, t) for r, t in per_run if r.size])
 
 
-def _mean_pair(runs, table, valid, length=None) -> _Cell:
+def mean_pair_cell(runs, table, valid, length=None) -> Cell:
     if not runs:
-        return _Cell(None)
+        return Cell(None)
     return _pooled_cell(
         runs, table, valid, length, lambda rot, trans: (float(rot.mean()), float(trans.mean())), 2
     )
 
 
-def _drift_rate(runs, valid, length) -> _Cell:
+def drift_rate_cell(runs, valid, length) -> Cell:
     if not runs:
-        return _Cell(None, pair=False)
+        return Cell(None, pair=False)
     cell = _pooled_cell(
         runs,
         "segments",
@@ -146,29 +147,29 @@ def _drift_rate(runs, valid, length) -> _Cell:
 
 def _all_nan_valid(runs, valid):
     return valid and all(
-        c.drift["global_failed"] or not (_num(c.drift["success_rate_distance_pct"]) > 0)
+        c.drift["global_failed"] or not (num(c.drift["success_rate_distance_pct"]) > 0)
         for c in runs
     )
 
 
-def _single_over_runs(runs, of) -> _Cell:
+def _single_over_runs(runs, of) -> Cell:
     """The cell of a per-run number: its mean over the runs."""
-    cell = _mean_over_runs(runs, lambda c: (of(c),))
+    cell = mean_over_runs(runs, lambda c: (of(c),))
     cell.pair = False
     return cell
 
 
-def _success(runs) -> _Cell:
+def success_cell(runs) -> Cell:
     return _single_over_runs(runs, lambda c: c.drift["success_rate_distance_pct"])
 
 
-def _success_auc(runs) -> _Cell:
+def success_auc_cell(runs) -> Cell:
     return _single_over_runs(runs, lambda c: c.drift.get("success_auc_pct"))
 
 
-def _stat(d: dict, *keys):
+def stat(d: dict, *keys):
     for k in keys:
         if not isinstance(d, dict) or k not in d:
             return np.nan
         d = d[k]
-    return _num(d)
+    return num(d)

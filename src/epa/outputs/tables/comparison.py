@@ -6,7 +6,7 @@ import numpy as np
 
 from epa.metrics import statistics
 from epa.metrics.accuracy import segment_key
-from epa.outputs.tables.cells import _nanmean, _num, _ok_runs, _run_ate, _stat
+from epa.outputs.tables.cells import nanmean, num, ok_runs, run_ate, stat
 from epa.outputs.tables.latex import latex_escape, tex_document
 from epa.outputs.tables.results import CaseResult
 from epa.outputs.tables.text import RULE_LONG
@@ -14,8 +14,8 @@ from epa.outputs.tables.text import RULE_LONG
 
 def _run_rpe(c, segments) -> float:
     """One run's distance RPE: the mean over the segment lengths of its mean translation error (m)."""
-    return _nanmean(
-        _stat(c.metrics, "rpe_distance", segment_key(s), "trans_m", "mean") for s in segments
+    return nanmean(
+        stat(c.metrics, "rpe_distance", segment_key(s), "trans_m", "mean") for s in segments
     )
 
 
@@ -26,13 +26,13 @@ def comparisons(grid: list[CaseResult], segments) -> list[tuple[str, str, dict]]
 
     def by_dataset(alg, of):
         out = {}
-        for c in _ok_runs(grid, alg):
-            v = _num(of(c))
+        for c in ok_runs(grid, alg):
+            v = num(of(c))
             if np.isfinite(v):
                 out.setdefault(c.dataset, []).append(v)
         return out
 
-    ate = {a: by_dataset(a, lambda c: _run_ate(c)[1]) for a in algs}
+    ate = {a: by_dataset(a, lambda c: run_ate(c)[1]) for a in algs}
     rpe = {a: by_dataset(a, lambda c: _run_rpe(c, segments)) for a in algs}
     return [
         (a, b, statistics.compare(ate[a], ate[b], rpe[a], rpe[b]))

@@ -7,15 +7,15 @@ from dataclasses import dataclass
 
 from epa.metrics.accuracy import segment_key
 from epa.outputs.tables.cells import (
-    _ate,
-    _average,
-    _Cell,
-    _drift_rate,
-    _mean_over_runs,
-    _mean_pair,
-    _ok_runs,
-    _success,
-    _success_auc,
+    Cell,
+    ate_cell,
+    average_cell,
+    drift_rate_cell,
+    mean_over_runs,
+    mean_pair_cell,
+    ok_runs,
+    success_auc_cell,
+    success_cell,
 )
 from epa.outputs.tables.results import CaseResult
 
@@ -38,7 +38,7 @@ def latex_escape(text: str) -> str:
 
 
 def _latex_rows(
-    header: list[str], rows: list[tuple[str, list[_Cell]]], decimals: int, spread: str = "none"
+    header: list[str], rows: list[tuple[str, list[Cell]]], decimals: int, spread: str = "none"
 ) -> list[str]:
     lines = [
         " & " + " & ".join(r"\textbf{" + latex_escape(h) + "}" for h in header) + r" \\ \hline"
@@ -72,7 +72,7 @@ def build_tables(
     layout = _Layout.of(grid, decimals, spread)
     out = _base_tables(layout, segments)
     for metric in metrics:
-        for spec in metric.TABLES:
+        for spec in metric.tables:
             if text and not spec.in_text:
                 continue
             table = _metric_table(layout, metric, spec)
@@ -108,10 +108,10 @@ class _Layout:
         for a in self.algs:
             missing = marked(a)
             cells = [
-                _Cell(None, pair) if missing else cell_of(_ok_runs(self.grid, a, d))
+                Cell(None, pair) if missing else cell_of(ok_runs(self.grid, a, d))
                 for d in self.datasets
             ]
-            rows.append((f"{a} ({missing})" if missing else a, cells + [_average(cells, pair)]))
+            rows.append((f"{a} ({missing})" if missing else a, cells + [average_cell(cells, pair)]))
         return rows
 
     def per_dataset(self, name: str, title: str, rows, decimals: int | None = None):
@@ -130,7 +130,7 @@ def _per_segment(layout: _Layout, segments, name: str, title: str, fn):
     """A table with a row per algorithm and a column per segment length."""
     seg_labels = [f"{segment_key(s)}m" for s in segments]
     # these pool an algorithm's datasets: the spread is over every run of every dataset
-    rows = [(a, [fn(_ok_runs(layout.grid, a), s) for s in segments]) for a in layout.algs]
+    rows = [(a, [fn(ok_runs(layout.grid, a), s) for s in segments]) for a in layout.algs]
     return (
         name,
         title + SPREAD_TITLE[layout.spread].replace("RUNS]", "RUNS OF ALL DATASETS]"),
@@ -156,7 +156,7 @@ def _base_tables(layout: _Layout, segments) -> list[tuple[str, str, list[str], i
                 per_dataset(
                     "success_rate",
                     "DRIFT-VALID SUCCESS RATE LATEX TABLE (% PATH LENGTH)",
-                    _success,
+                    success_cell,
                     pair=False,
                     dec=2,
                 )
@@ -165,7 +165,7 @@ def _base_tables(layout: _Layout, segments) -> list[tuple[str, str, list[str], i
                 per_dataset(
                     "success_auc",
                     "SUCCESS RATE AREA LATEX TABLE (% PATH, MEAN OVER DRIFT THRESHOLDS x0.1-x10)",
-                    _success_auc,
+                    success_auc_cell,
                     pair=False,
                     dec=2,
                 )
@@ -174,7 +174,7 @@ def _base_tables(layout: _Layout, segments) -> list[tuple[str, str, list[str], i
             per_dataset(
                 prefix + "ate",
                 f"{tag} ATE LATEX TABLE (ROT DEG / TRANS M)",
-                lambda r, valid=valid: _ate(r, valid),
+                lambda r, valid=valid: ate_cell(r, valid),
             )
         )
         out.append(
@@ -183,7 +183,7 @@ def _base_tables(layout: _Layout, segments) -> list[tuple[str, str, list[str], i
                 segments,
                 prefix + "rpe_distance",
                 f"{tag} DISTANCE RPE LATEX TABLE (ROT DEG / TRANS M)",
-                lambda r, s, valid=valid: _mean_pair(r, "segments", valid, s),
+                lambda r, s, valid=valid: mean_pair_cell(r, "segments", valid, s),
             )
         )
         out.append(
@@ -192,14 +192,14 @@ def _base_tables(layout: _Layout, segments) -> list[tuple[str, str, list[str], i
                 segments,
                 prefix + "drift_rate",
                 f"{tag} DISTANCE DRIFT RATE LATEX TABLE (% TRANS / DIST)",
-                lambda r, s, valid=valid: _drift_rate(r, valid, s),
+                lambda r, s, valid=valid: drift_rate_cell(r, valid, s),
             )
         )
         out.append(
             per_dataset(
                 prefix + "rpe_time_1s",
                 f"{tag} 1S TIME RPE LATEX TABLE (ROT DEG / TRANS M)",
-                lambda r, valid=valid: _mean_pair(r, "time", valid),
+                lambda r, valid=valid: mean_pair_cell(r, "time", valid),
             )
         )
     return out
@@ -221,7 +221,7 @@ def _metric_table(layout: _Layout, metric, spec):
                 if c.algorithm == a and spec.has(c.record_of(metric))
             ]
             if records:
-                rows.append((a, [_Cell((v,), pair=False) for v in spec.per_algorithm(records)]))
+                rows.append((a, [Cell((v,), pair=False) for v in spec.per_algorithm(records)]))
         return (
             spec.name,
             spec.title,
@@ -231,7 +231,7 @@ def _metric_table(layout: _Layout, metric, spec):
 
     def cell_of(runs):
         runs = [c for c in runs if spec.has(c.record_of(metric))]
-        cell = _mean_over_runs(runs, lambda c: spec.per_run(c.record_of(metric)))
+        cell = mean_over_runs(runs, lambda c: spec.per_run(c.record_of(metric)))
         cell.pair = spec.pair
         return cell
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from epa.metrics import ate_2d
-from epa.outputs.tables.cells import _ok_runs, _pooled, _run_ate
+from epa.outputs.tables.cells import ok_runs, pooled, run_ate
 from epa.outputs.tables.latex import latex_escape
 from epa.outputs.tables.results import CaseResult
 from epa.outputs.tables.text import RULE_LONG
@@ -67,15 +67,15 @@ def ov_eval_text(grid: list[CaseResult], segments, idle_truths: dict | None = No
     cells: dict[str, dict] = {"ate": {}, "ate_2d": {}}
     for alg in algs:
         for ds in datasets:
-            runs = _ok_runs(grid, alg, ds)
+            runs = ok_runs(grid, alg, ds)
             if not runs:
                 out += f"{RED}[COMP]: {alg} dataset does not have any runs for {ds}!!!!!\n{RESET}"
                 continue
             for c in runs:
                 out += _ov_eval_warnings(c)
             for name, of in (
-                ("ate", _run_ate),
-                ("ate_2d", lambda c: ate_2d.per_run(c.record_of(ate_2d))),
+                ("ate", run_ate),
+                ("ate_2d", lambda c: ate_2d.per_run(c.record_of(ate_2d.METRIC))),
             ):
                 ori, pos = zip(*(of(c) for c in runs))
                 cells[name][(alg, ds)] = (float(np.mean(ori)), float(np.mean(pos)))
@@ -109,9 +109,9 @@ def ov_eval_text(grid: list[CaseResult], segments, idle_truths: dict | None = No
         "".join(f" & \\textbf{{{int(seg)}m}}" for seg in segments) + " \\\\\\hline",
     ]
     for alg in algs:
-        row, runs = latex_escape(alg), _ok_runs(grid, alg)
+        row, runs = latex_escape(alg), ok_runs(grid, alg)
         for seg in segments:
-            rot, trans = _pooled(runs, "segments", False, seg)
+            rot, trans = pooled(runs, "segments", False, seg)
             row += f" & {rot.mean():.3f} / {trans.mean():.3f}" if rot.size else " & - / -"
         lines.append(row + " \\\\")
     lines.append(RULE_LONG)

@@ -41,9 +41,9 @@ class CaseResult:
     def record_of(self, metric) -> dict:
         """A registered metric's record (:mod:`epa.metrics.registry`): ``metrics.json``'s entry for
         one the metrics stage computes, else its own stage's record; {} when there is none."""
-        if metric.STAGE == "metrics":
-            return self.metrics.get(metric.KEY) or {}
-        return self.records.get(metric.STAGE, {})
+        if metric.stage == "metrics":
+            return self.metrics.get(metric.key) or {}
+        return self.records.get(metric.stage, {})
 
 
 # Below this many cases one process reads them all: starting workers costs more than it saves.

@@ -10,7 +10,7 @@ import numpy as np
 from epa.metrics import registry
 from epa.metrics.accuracy import segment_key
 from epa.metrics.drift import CURVE_FACTORS
-from epa.outputs.tables.cells import _num, _ok_runs, _stat
+from epa.outputs.tables.cells import num, ok_runs, stat
 from epa.outputs.tables.results import CaseResult
 
 BASE_COLUMNS = [
@@ -44,7 +44,7 @@ BASE_COLUMNS = [
 
 def columns(segments) -> list[str]:
     """summary.csv's columns: the base ones, each registered metric's, notes, then per segment length."""
-    metric_cols = [col for metric in registry.REGISTRY for col in metric.SUMMARY_COLUMNS]
+    metric_cols = [col for metric in registry.REGISTRY for col in metric.summary_columns]
     seg_cols = []
     for s in segments:
         L = segment_key(s)
@@ -79,18 +79,18 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
             row.update(
                 eval_source=m.get("eval_source"),
                 n_matched=m.get("n_matched"),
-                ate_trans_rmse_m=_stat(m, "ate", "trans_m", "rmse"),
-                ate_rot_rmse_deg=_stat(m, "ate", "rot_deg", "rmse"),
-                time_rpe_1s_trans_mean_m=_stat(m, "rpe_time_1s", "trans_m", "mean"),
-                time_rpe_1s_rot_mean_deg=_stat(m, "rpe_time_1s", "rot_deg", "mean"),
+                ate_trans_rmse_m=stat(m, "ate", "trans_m", "rmse"),
+                ate_rot_rmse_deg=stat(m, "ate", "rot_deg", "rmse"),
+                time_rpe_1s_trans_mean_m=stat(m, "rpe_time_1s", "trans_m", "mean"),
+                time_rpe_1s_rot_mean_deg=stat(m, "rpe_time_1s", "rot_deg", "mean"),
                 time_offset_s=m.get("time_offset_s"),
                 extrinsic_rot_deg=m.get("extrinsic_rot_deg"),
                 extrinsic_trans_m=m.get("extrinsic_trans_m"),
                 **_confidence(m),
-                success_rate_distance_pct=_num(d.get("success_rate_distance_pct")),
-                success_rate_time_pct=_num(d.get("success_rate_time_pct")),
+                success_rate_distance_pct=num(d.get("success_rate_distance_pct")),
+                success_rate_time_pct=num(d.get("success_rate_time_pct")),
                 global_failed=d.get("global_failed"),
-                knee_threshold_m=_stat(d, "knee", "threshold_m"),
+                knee_threshold_m=stat(d, "knee", "threshold_m"),
                 fail_segments=d.get("n_fail_segments"),
                 diverged_at_s=d.get("diverged_at_s"),
             )
@@ -102,9 +102,9 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
             row["notes"] = "; ".join(failed + warned) or None
             for s in segments:
                 L = segment_key(s)
-                row[f"rpe_{L}m_trans_mean_m"] = _stat(m, "rpe_distance", L, "trans_m", "mean")
-                row[f"rpe_{L}m_rot_mean_deg"] = _stat(m, "rpe_distance", L, "rot_deg", "mean")
-                row[f"drift_rate_{L}m_pct"] = _stat(m, "drift_rate_pct", L)
+                row[f"rpe_{L}m_trans_mean_m"] = stat(m, "rpe_distance", L, "trans_m", "mean")
+                row[f"rpe_{L}m_rot_mean_deg"] = stat(m, "rpe_distance", L, "rot_deg", "mean")
+                row[f"drift_rate_{L}m_pct"] = stat(m, "drift_rate_pct", L)
         rows.append(row)
     return columns(segments), rows
 
@@ -149,7 +149,7 @@ def success_curves(grid: list[CaseResult]) -> list[dict]:
         for ds in sorted({c.dataset for c in grid}):
             curves = [
                 c.drift["success_curve"]["success_rate_distance_pct"]
-                for c in _ok_runs(grid, alg, ds)
+                for c in ok_runs(grid, alg, ds)
                 if c.drift.get("success_curve")
             ]
             if curves:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from epa.metrics.accuracy import segment_key
-from epa.outputs.tables.cells import _ate, _nanmean, _pooled
+from epa.outputs.tables.cells import ate_cell, nanmean, pooled
 from epa.outputs.tables.latex import build_tables
 from epa.outputs.tables.results import CaseResult
 
@@ -44,7 +44,7 @@ def report_text(
                 continue
             runs = [c for c in cases if c.ok]
             lines.append(f"[COMP]: processing {alg} algorithm => {ds} dataset")
-            ate = _ate(runs, False)
+            ate = ate_cell(runs, False)
             if ate.values is None:
                 lines.append("        ATE: - / - (0 runs)")
             else:
@@ -59,7 +59,7 @@ def report_text(
             lines.append(f"        eval_source: {_sources(src)}")
             if runs:
                 for s in segments:
-                    rot, trans = _pooled(runs, "segments", False, s)
+                    rot, trans = pooled(runs, "segments", False, s)
                     if rot.size:
                         lines.append(
                             f"        RPE: seg {segment_key(s)} - median_ori = {np.median(rot):.4f} | "
@@ -69,14 +69,14 @@ def report_text(
                         lines.append(
                             f"        RPE: seg {segment_key(s)} - no segment this long (0 samples)"
                         )
-                rot, trans = _pooled(runs, "time", False)
+                rot, trans = pooled(runs, "time", False)
                 if rot.size:
                     lines.append(
                         f"        RPE time 1s - mean_ori = {rot.mean():.3f} | mean_pos = {trans.mean():.3f}"
                         f" ({rot.size} samples)"
                     )
-                sr_d = _nanmean(c.drift["success_rate_distance_pct"] for c in runs)
-                sr_t = _nanmean(c.drift["success_rate_time_pct"] for c in runs)
+                sr_d = nanmean(c.drift["success_rate_distance_pct"] for c in runs)
+                sr_t = nanmean(c.drift["success_rate_time_pct"] for c in runs)
                 lines.append(f"        SR - distance = {sr_d:.2f}% | time = {sr_t:.2f}%")
             for c in cases:
                 if c.status != "ok":

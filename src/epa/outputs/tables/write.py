@@ -7,9 +7,9 @@ import logging
 from pathlib import Path
 
 from epa import readers
-from epa.artifacts import files as io
+from epa.artifacts import files
 from epa.core.errors import EpaError
-from epa.metrics import registry
+from epa.metrics import accuracy, registry
 from epa.outputs.tables import rpg as rpg_tables
 from epa.outputs.tables.across_runs import write_across_runs
 from epa.outputs.tables.comparison import comparison_tex, comparison_text, comparisons
@@ -27,18 +27,7 @@ from epa.outputs.tables.text import report_text
 log = logging.getLogger("epa")
 
 
-BASE_TABLES = (
-    "ate",
-    "rpe_distance",
-    "drift_rate",
-    "rpe_time_1s",
-    "success_rate",
-    "success_auc",
-    "valid_ate",
-    "valid_rpe_distance",
-    "valid_drift_rate",
-    "valid_rpe_time_1s",
-)
+BASE_TABLES = accuracy.BASE_TABLES  # the metrics' tables follow these (their Table.after)
 
 
 def enabled_metrics(cfg: dict) -> tuple:
@@ -49,7 +38,7 @@ def table_names(cfg: dict) -> tuple[str, ...]:
     """The .tex files the tables rule writes under these settings."""
     return (
         BASE_TABLES
-        + tuple(t.name for m in enabled_metrics(cfg) for t in m.TABLES)
+        + tuple(t.name for m in enabled_metrics(cfg) for t in m.tables)
         + mode_tables(cfg)
     )
 
@@ -78,23 +67,23 @@ def write_all(
         if cfg.get("mode") == "ov_eval"
         else report_text(grid, segments, decimals, spread, enabled_metrics(cfg))
     )
-    io.write_text(results_dir / "error_comparison.txt", text)
-    io.write_text(results_dir / "summary.csv", summary_csv(grid, segments))
+    files.write_text(results_dir / "error_comparison.txt", text)
+    files.write_text(results_dir / "summary.csv", summary_csv(grid, segments))
     for name, title, rows, n in build_tables(
         grid, segments, decimals, metrics=enabled_metrics(cfg), spread=spread
     ):
-        io.write_text(
+        files.write_text(
             results_dir / "tables" / f"{name}.tex", restyle(tex_document(title, rows, n), style)
         )
-    io.write_text(
+    files.write_text(
         results_dir / "success_curves.csv", records_csv(SUCCESS_CURVE_COLUMNS, success_curves(grid))
     )
     pairs = comparisons(grid, segments)
-    io.write_text(results_dir / "comparison.txt", comparison_text(pairs))
-    io.write_text(results_dir / "comparison.tex", restyle(comparison_tex(pairs), style))
+    files.write_text(results_dir / "comparison.txt", comparison_text(pairs))
+    files.write_text(results_dir / "comparison.tex", restyle(comparison_tex(pairs), style))
     write_across_runs(grid, results_dir)
     if cfg.get("mode") == "rpg":
-        rpg_tables.write_rpg_tables(grid, results_dir, cfg, io.write_text)
+        rpg_tables.write_rpg_tables(grid, results_dir, cfg, files.write_text)
 
 
 def make(

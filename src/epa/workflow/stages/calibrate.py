@@ -127,8 +127,7 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
             ref_c, est_c = data.cropped
             folder.write_pairs(NAME, *data.calibrate_pairs, ref_c.t, est_c.t)
         if info["plan"]["apply_extrinsic"]:
-            folder.write_tum(
-                NAME, "est.tum", est
-            )  # the matched estimate with the extrinsic applied
+            # the matched estimate with the extrinsic applied
+            folder.write_tum(NAME, "est.tum", est)
         else:
             folder.remove(NAME, "est.tum")

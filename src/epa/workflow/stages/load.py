@@ -10,20 +10,20 @@ from pathlib import Path
 
 from epa import readers
 from epa.artifacts.case import CaseData, remember
+from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.readers import bags, text
 from epa.readers import timing as timing_files
 
 NAME = "load"
-SETTINGS = (
-    "load",
-)  # a change re-runs this stage onward (the sources' settings travel with each case)
+# a change re-runs this stage onward (the sources' settings travel with each case)
+SETTINGS = ("load",)
 RECORDS = ("load.json",)
 ARRAYS = ("ref.tum", "est.tum", "timing.csv")
 
 # reference source -> (Trajectory, notes) parsed from the user's file, shared by a dataset's cases
-_LOADED: OrderedDict = OrderedDict()
+_LOADED: OrderedDict = runtime.register("workflow.stages.load.loaded", OrderedDict())
 
 
 def c_parser_min_bytes() -> int:
@@ -84,10 +84,8 @@ def compute(
         "ref_notes": ref_notes,
         "est_notes": est_notes,
     }
-    info["sources"] = {
-        "reference": ref_opts,
-        "estimate": est_opts,
-    }  # the settings each side was read with
+    # the settings each side was read with
+    info["sources"] = {"reference": ref_opts, "estimate": est_opts}
     info["covariance"] = est.cov_rot is not None
     timing = None
     try:  # a bad timing file costs the case its efficiency, not its accuracy: the efficiency stage reports it

@@ -14,10 +14,10 @@ from epa.metrics import accuracy, registry
 log = logging.getLogger("epa")
 
 NAME = "metrics"
-SETTINGS = ("mode", "metrics", "align")  # align: which registered metrics apply (sim3_check)
+SETTINGS = ("mode", "metrics")  # and the sections its registered metrics read (chain.settings_for)
 RECORDS = ("metrics.json",)
 BASE_ARRAYS = ("ape.csv", "rpe_segments.csv", "rpe_time.csv")
-ARRAYS = BASE_ARRAYS + tuple(a for m in registry.computed_in(NAME) for a in m.ARRAYS)
+ARRAYS = BASE_ARRAYS + tuple(a for m in registry.computed_in(NAME) for a in m.arrays)
 
 # A matched reference shorter than this has no distance metrics (RPE per metre, drift rate,
 # distance success rate would all be 0/0).
@@ -25,8 +25,9 @@ MIN_PATH_M = 0.01
 
 
 def _insert(record: dict, key: str, value, after: str | None) -> dict:
-    """``record`` with ``key`` placed right after ``after`` (None: last), keeping its key order."""
-    if after is None:
+    """``record`` with ``key`` placed right after ``after`` (None, or not in ``record``: last),
+    keeping its key order. Never drops ``value``."""
+    if after is None or after not in record:
         return {**record, key: value}
     out = {}
     for k, v in record.items():
@@ -38,7 +39,7 @@ def _insert(record: dict, key: str, value, after: str | None) -> dict:
 
 def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = None):
     """The metrics of the aligned matched poses. ``inputs``: {name: a function giving it} for the
-    registered metrics that declare ``INPUTS`` (mode rpg's: ``unaligned``, ``transform``,
+    registered metrics that declare ``inputs`` (mode rpg's: ``unaligned``, ``transform``,
     ``reference``); each is asked for only when such a metric is on."""
     c = cfg["metrics"]
     length = ref.length()
@@ -64,14 +65,19 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
         if rpe["trans_m"]["n"] == 0
     ]
     summary["notes"] += empty_relative_notes(summary, c)
+    records = {}
     for metric in registry.computed_in(NAME):
         if metric.enabled(cfg):
-            extra = {k: inputs[k]() for k in getattr(metric, "INPUTS", ())}
-            record, arrays, notes = metric.compute(ref, est, cfg, **extra)
-            summary = _insert(summary, metric.KEY, record, after=metric.AFTER)
+            extra = {k: inputs[k]() for k in metric.inputs}
+            records[metric.key], arrays, notes = metric.compute(ref, est, cfg, **extra)
             for name, columns in arrays.items():
                 tables.setdefault(name, {}).update(columns)
             summary["notes"] += notes
+    # each after the record it follows (where that one is off, after that one's anchor), anchors first
+    for metric in registry.placement():
+        if metric.key in records:
+            at = registry.anchor(metric, summary)
+            summary = _insert(summary, metric.key, records[metric.key], after=at)
     for note in summary["notes"]:
         log.warning("%s", note)
     return summary, tables
@@ -143,9 +149,9 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         elif name not in BASE_ARRAYS:  # from a run with that metric on
             folder.remove(NAME, name)
     for metric in registry.computed_in(NAME):
-        if hasattr(metric, "documents"):  # small files of its own, in 06_metrics/<KEY>/
-            folder.remove_folder(NAME, metric.KEY)
-            if metric.KEY in record:
-                for name, text in metric.documents(record[metric.KEY]).items():
-                    folder.write_text(NAME, f"{metric.KEY}/{name}", text)
+        if metric.documents is not None:  # small files of its own, in 06_metrics/<key>/
+            folder.remove_folder(NAME, metric.key)
+            if metric.key in record:
+                for name, text in metric.documents(record[metric.key]).items():
+                    folder.write_text(NAME, f"{metric.key}/{name}", text)
     folder.write_record(NAME, "metrics.json", record)

@@ -1,0 +1,61 @@
+"""The process's caches are gathered in epa.core.runtime, and reset() empties every one of them."""
+
+import logging
+from multiprocessing import spawn
+
+import pytest
+
+from epa.artifacts import case
+from epa.core import runtime
+from epa.outputs import figures
+from epa.outputs.tables import cells
+from epa.workflow import jobs
+from epa.workflow.stages import load
+
+
+def test_reset_empties_every_cache():
+    assert set(runtime.names()) >= {
+        "artifacts.case.parsed",
+        "artifacts.case.written",
+        "workflow.stages.load.loaded",
+        "outputs.figures.kept",
+        "outputs.tables.cells.index",
+        "workflow.jobs.inside",
+        "workflow.jobs.pool",
+        "workflow.jobs.spawn_patch",
+    }
+    original = spawn.get_preparation_data
+    epa_log = logging.getLogger("epa")
+    before = (epa_log.propagate, epa_log.level)
+
+    class Pool:  # stands for the worker pool: reset() shuts it down
+        closed = False
+
+        def shutdown(self, wait):
+            Pool.closed = wait
+
+    case._PARSED["key"] = "trajectory"
+    case._WRITTEN["source"] = "path"
+    load._LOADED["source"] = "trajectory"
+    figures._KEPT[("kind",)] = "figure"
+    cells.ok_runs([], "alg")  # indexes this grid
+    jobs._POOL = Pool()
+    jobs._context()  # patches multiprocessing.spawn
+    jobs._enter_logging()
+    assert cells._INDEX and spawn.get_preparation_data is not original and not epa_log.propagate
+
+    runtime.reset()
+
+    assert not case._PARSED and not case._WRITTEN and not load._LOADED
+    assert not figures._KEPT and not cells._INDEX
+    assert jobs._POOL is None and Pool.closed
+    assert spawn.get_preparation_data is original
+    assert jobs._INSIDE["n"] == 0 and (epa_log.propagate, epa_log.level) == before
+    runtime.reset()  # twice is harmless
+
+
+def test_register_takes_a_cache_or_a_reset_function():
+    with pytest.raises(TypeError):
+        runtime.register("x", {}, reset=lambda: None)
+    with pytest.raises(TypeError):
+        runtime.register("x")
