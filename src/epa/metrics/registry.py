@@ -114,3 +114,8 @@ def sections(stage: str | None = None) -> tuple[str, ...]:
     registry order."""
     metrics = REGISTRY if stage is None else computed_in(stage)
     return tuple(dict.fromkeys(s for m in metrics for s in m.sections))
+
+
+def protocols() -> tuple[str, ...]:
+    """The keys of the registered scoring protocols (``epa eval --protocol``)."""
+    return tuple(m.key for m in REGISTRY if m.protocol)

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 # what the metrics stage can pass a metric's compute beyond the aligned matched poses (Metric.inputs)
-INPUTS = ("unaligned", "transform", "reference", "estimate_source")
+INPUTS = ("unaligned", "transform", "reference", "estimate_source", "estimate")
 
 
 @dataclass(frozen=True)
@@ -66,8 +66,10 @@ class Metric:
       another metric of the stage; None: last);
     - ``inputs``: what ``compute`` needs beyond the aligned matched poses, passed as keywords (one
       of :data:`INPUTS`: the matched estimate before Step 3, ``05_align/transform.json``, the whole
-      cropped reference, the estimate's source settings as ``load.json`` records them); each is read
-      only when such a metric is on;
+      cropped reference, the estimate's source settings as ``load.json`` records them, the whole
+      cropped estimate); each is read only when such a metric is on;
+    - ``protocol``: one of the field's published scoring protocols (TUM RGB-D, TartanAir, ...), turned on by ``epa eval
+      --protocol <key>`` or ``metrics.<key>.enabled``;
     - ``arrays``: its own per-case files; ``tables``: its paper tables;
     - ``documents(record) -> {file name: text}``: small files of its own, written to
       ``06_metrics/<key>/`` (that folder is removed where the metric is off).
@@ -85,6 +87,7 @@ class Metric:
     summary_columns: tuple[str, ...] = ()
     tables: tuple[Table, ...] = ()
     documents: Callable[[dict], dict[str, str]] | None = None
+    protocol: bool = False
 
     def __post_init__(self):
         if not isinstance(self.key, str) or not self.key:

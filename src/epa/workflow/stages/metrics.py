@@ -131,6 +131,7 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         "transform": lambda: data.transform,
         "reference": lambda: data.cropped[0],
         "estimate_source": lambda: data.load_record.get("sources", {}).get("estimate") or {},
+        "estimate": lambda: data.cropped[1],
     }
     summary, tables = compute(data.matched[0], data.aligned, cfg, inputs)
     record = case_record(
