@@ -70,6 +70,13 @@ def _add_eval(sub) -> None:
     e.add_argument("--no-calibrate", action="store_true", help="skip Step 2")
     e.add_argument("--scale", action="store_true", help="Step 2 also solves a scale (monocular)")
     e.add_argument("--segments", type=float, nargs="+", help="distance-RPE segment lengths (m)")
+    e.add_argument(
+        "--protocol",
+        action="append",
+        choices=_protocols(),
+        help="also score by a benchmark's own protocol (metrics.<NAME>.enabled; repeatable;"
+        " docs/protocols.md)",
+    )
     _add_eval_sources(e)
     e.add_argument(
         "--report",
@@ -88,6 +95,12 @@ def _add_eval(sub) -> None:
     e.add_argument(
         "--rate", type=float, help="sensor rate (Hz) for EA-Drift (default: from the timing file)"
     )
+
+
+def _protocols() -> tuple[str, ...]:
+    from epa.metrics import registry
+
+    return registry.protocols()
 
 
 def _add_eval_sources(e) -> None:
@@ -427,6 +440,7 @@ def _eval_config(args) -> dict:
         ("sync", "max_diff"): args.max_diff,
         ("sync", "offset"): args.offset,
         ("metrics", "segments"): args.segments,
+        **{("metrics", name, "enabled"): True for name in args.protocol or ()},
         ("load", "truth_format"): args.ref_format,
         ("load", "estimate_format"): args.est_format,
         ("load", "unsorted"): args.unsorted,

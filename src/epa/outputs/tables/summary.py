@@ -42,9 +42,16 @@ BASE_COLUMNS = [
 ]
 
 
-def columns(segments) -> list[str]:
-    """summary.csv's columns: the base ones, each registered metric's, notes, then per segment length."""
-    metric_cols = [col for metric in registry.REGISTRY for col in metric.summary_columns]
+def columns(segments, metrics=None) -> list[str]:
+    """summary.csv's columns: the base ones, each registered metric's (a scoring protocol's only
+    when it is among ``metrics``, the enabled ones; None: every metric), notes, then per segment
+    length."""
+    metric_cols = [
+        col
+        for metric in registry.REGISTRY
+        if not metric.protocol or metrics is None or metric in metrics
+        for col in metric.summary_columns
+    ]
     seg_cols = []
     for s in segments:
         L = segment_key(s)
@@ -70,7 +77,7 @@ def _confidence(m: dict) -> dict:
     }
 
 
-def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict]]:
+def summary_rows(grid: list[CaseResult], segments, metrics=None) -> tuple[list[str], list[dict]]:
     rows = []
     for c in grid:
         m, d = c.metrics, c.drift
@@ -106,7 +113,7 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
                 row[f"rpe_{L}m_rot_mean_deg"] = stat(m, "rpe_distance", L, "rot_deg", "mean")
                 row[f"drift_rate_{L}m_pct"] = stat(m, "drift_rate_pct", L)
         rows.append(row)
-    return columns(segments), rows
+    return columns(segments, metrics), rows
 
 
 def records_csv(cols: list[str], rows: list[dict]) -> str:
@@ -126,8 +133,8 @@ def records_csv(cols: list[str], rows: list[dict]) -> str:
     return buf.getvalue()
 
 
-def summary_csv(grid, segments) -> str:
-    return records_csv(*summary_rows(grid, segments))
+def summary_csv(grid, segments, metrics=None) -> str:
+    return records_csv(*summary_rows(grid, segments, metrics))
 
 
 SUCCESS_CURVE_COLUMNS = [

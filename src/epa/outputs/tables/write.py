@@ -68,7 +68,7 @@ def write_all(
         else report_text(grid, segments, decimals, spread, enabled_metrics(cfg))
     )
     files.write_text(results_dir / "error_comparison.txt", text)
-    files.write_text(results_dir / "summary.csv", summary_csv(grid, segments))
+    files.write_text(results_dir / "summary.csv", summary_csv(grid, segments, enabled_metrics(cfg)))
     for name, title, rows, n in build_tables(
         grid, segments, decimals, metrics=enabled_metrics(cfg), spread=spread
     ):
