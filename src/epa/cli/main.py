@@ -316,6 +316,18 @@ def _add_tum_rpe(sub) -> None:
     )
 
 
+def _naming(path, compute):
+    """``compute``, its errors naming the estimate's file (the scripts' messages name none)."""
+
+    def run(*args, **kwargs):
+        try:
+            return compute(*args, **kwargs)
+        except EpaError as exc:
+            raise EpaError(exc.message, path=path) from None
+
+    return run
+
+
 def _tum_ate(args) -> None:
     import numpy as np
 
@@ -325,7 +337,7 @@ def _tum_ate(args) -> None:
 
     ref_t, ref_p = tum_script.positions(args.first_file)
     est_t, est_p = tum_script.positions(args.second_file)
-    fit = tum.ate(
+    fit = _naming(args.second_file, tum.ate)(
         ref_t,
         ref_p,
         est_t,
@@ -359,13 +371,15 @@ def _tum_rpe(args) -> None:
     from epa.readers import tum_script
 
     if args.plot and not args.fixed_delta:
-        raise EpaError("The '--plot' option can only be used in combination with '--fixed_delta'")
+        raise EpaError(
+            "--plot: The '--plot' option can only be used in combination with '--fixed_delta'"
+        )
     gt_t, gt_p, gt_q = tum_script.poses(args.groundtruth_file)
     est_t, est_p, est_q = tum_script.poses(args.estimated_file)
     for path, t in ((args.groundtruth_file, gt_t), (args.estimated_file, est_t)):
         if len(t) < 2:
             raise EpaError(f"{len(t)} poses: the relative pose error needs 2", path=path)
-    rows = tum.rpe(
+    rows = _naming(args.estimated_file, tum.rpe)(
         gt_t,
         tum.transform44(gt_q, gt_p),
         est_t,
