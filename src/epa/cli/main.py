@@ -379,11 +379,13 @@ def _tum_rpe(args) -> None:
     for path, t in ((args.groundtruth_file, gt_t), (args.estimated_file, est_t)):
         if len(t) < 2:
             raise EpaError(f"{len(t)} poses: the relative pose error needs 2", path=path)
+    gt = _naming(args.groundtruth_file, tum.transform44)(gt_q, gt_p)
+    est = _naming(args.estimated_file, tum.transform44)(est_q, est_p)
     rows = _naming(args.estimated_file, tum.rpe)(
         gt_t,
-        tum.transform44(gt_q, gt_p),
+        gt,
         est_t,
-        tum.transform44(est_q, est_p),
+        est,
         max_pairs=args.max_pairs,
         fixed_delta=args.fixed_delta,
         delta=args.delta,

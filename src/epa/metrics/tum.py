@@ -164,7 +164,9 @@ def transform44(q: np.ndarray, p: np.ndarray) -> np.ndarray:
     q = np.array(q, dtype=float)
     nq = (q[:, None, :] @ q[:, :, None])[:, 0, 0]
     if (nq < _EPS).any():
-        raise EpaError(f"pose {int(np.argmax(nq < _EPS))}: a quaternion of norm almost 0")
+        raise EpaError(
+            f"pose {int(np.argmax(nq < _EPS))} (by increasing stamp): a quaternion of norm almost 0"
+        )
     q *= np.sqrt(2.0 / nq)[:, None]
     o = q[:, :, None] * q[:, None, :]
     m = np.zeros((len(q), 4, 4))
