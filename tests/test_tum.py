@@ -19,10 +19,18 @@ from epa.readers import tum_script
 
 ORACLES = ROOT / "tests" / "oracles" / "tum"
 TUM = DATA / "MichaelGrupp_evo" / "test" / "data"
+EUROC = DATA / "rpng_open_vins" / "ov_data" / "euroc_mav"
+RPG = DATA / "uzh-rpg_rpg_trajectory_evaluation" / "results"
 FILES = {
     "gt": TUM / "freiburg1_xyz-groundtruth.txt",
     "rgbdslam": TUM / "freiburg1_xyz-rgbdslam.txt",
     "orb": TUM / "freiburg1_xyz-ORB_kf_mono.txt",
+    "mh01": EUROC / "MH_01_easy.txt",
+    "mh03": EUROC / "MH_03_medium.txt",
+    "mh01_vio_mono": RPG
+    / "euroc_mono_stereo/laptop/vio_mono/laptop_vio_mono_MH_01/stamped_traj_estimate.txt",
+    "mh03_ba3": RPG
+    / "euroc_vislam_mono/laptop/vislam_ba/laptop_vislam_ba_MH_03/stamped_ba_estimate3.txt",
 }
 needs_data = pytest.mark.skipif(not TUM.is_dir(), reason=f"no shared data at {TUM}")
 # The mean alone that evaluate_rpe.py prints is a float's repr (17 digits), so it shows the last bit
