@@ -1486,6 +1486,22 @@ CATALOGUE: list[Bad] = [
         blamed="--plot",
     ),
     Bad(
+        "tum-ate-inf-max-difference",
+        "command",
+        "`epa tum-ate ... --max_difference inf` (every pair of poses a candidate)",
+        "--max_difference must be a finite number, not inf",
+        args=("tum-ate", "{ref}", "{est}", "--max_difference", "inf"),
+        blamed="--max_difference",
+    ),
+    Bad(
+        "tum-rpe-negative-max-pairs",
+        "command",
+        "`epa tum-rpe ... --max_pairs -5` (the script fails in random.sample)",
+        "--max_pairs must be 0 (every pair) or a number of pairs, not -5",
+        args=("tum-rpe", "{ref}", "{est}", "--fixed_delta", "--max_pairs", "-5"),
+        blamed="--max_pairs",
+    ),
+    Bad(
         "tum-rpe-no-overlap",
         "command",
         "`epa tum-rpe REF EST --offset 1000`: the shifted estimate does not overlap the reference",

@@ -328,6 +328,14 @@ def _naming(path, compute):
     return run
 
 
+def _finite_options(args, names) -> None:
+    """A NaN or infinite option would give NaN numbers or a candidate for every pair of poses."""
+    for name in names:
+        value = getattr(args, name)
+        if not math.isfinite(value):
+            raise EpaError(f"--{name} must be a finite number, not {value}")
+
+
 def _tum_ate(args) -> None:
     import numpy as np
 
@@ -335,6 +343,7 @@ def _tum_ate(args) -> None:
     from epa.metrics import tum
     from epa.readers import tum_script
 
+    _finite_options(args, ("offset", "scale", "max_difference"))
     ref_t, ref_p = tum_script.positions(args.first_file)
     est_t, est_p = tum_script.positions(args.second_file)
     fit = _naming(args.second_file, tum.ate)(
@@ -370,6 +379,11 @@ def _tum_rpe(args) -> None:
     from epa.metrics import tum
     from epa.readers import tum_script
 
+    _finite_options(args, ("offset", "scale", "delta"))
+    if args.max_pairs < 0:
+        raise EpaError(
+            f"--max_pairs must be 0 (every pair) or a number of pairs, not {args.max_pairs}"
+        )
     if args.plot and not args.fixed_delta:
         raise EpaError(
             "--plot: The '--plot' option can only be used in combination with '--fixed_delta'"
