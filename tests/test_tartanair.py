@@ -21,7 +21,7 @@ from epa.workflow import chain, settings
 
 ORACLE = Path(__file__).resolve().parent / "oracles" / "tartanair"
 sys.path.insert(0, str(ORACLE))
-import cases  # noqa: E402  (the oracle's inputs, shared with its driver)
+import tartanair_cases as cases  # noqa: E402  (the oracle's inputs, shared with its driver)
 
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"no shared data at {DATA}")
 # The script's numbers differ from epica's by the rounding of other operation orders: measured at

@@ -1,4 +1,4 @@
-"""Runs the Hilti SLAM Challenge 2022 evaluation on the cases of cases.py; writes its outputs here.
+"""Runs the Hilti SLAM Challenge 2022 evaluation on the cases of hilti_cases.py; writes its outputs here.
 
     /tmp/venv-h4-hilti/bin/python tests/oracles/hilti/run_oracle.py EVALUATION_2022_DIR DATA_DIR
 
@@ -26,8 +26,8 @@ sys.path.insert(0, sys.argv[1])
 
 import numpy as np  # noqa: E402
 from batch_evaluation import evaluate_submission  # noqa: E402
-from cases import CASES, control_points, estimate, reference  # noqa: E402
 from evaluation import evaluate  # noqa: E402
+from hilti_cases import CASES, control_points, estimate, reference  # noqa: E402
 
 HEADER = "# timestamp_s x y z qx qy qz qw"
 data = Path(sys.argv[2])

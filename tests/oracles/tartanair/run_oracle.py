@@ -1,6 +1,8 @@
-"""Runs tartanair_tools' evaluator on the cases of cases.py and writes its outputs here.
+"""Runs tartanair_tools' evaluator on the cases of tartanair_cases.py and writes its outputs here.
 
     /tmp/venv-h4/bin/python tests/oracles/tartanair/run_oracle.py TOOLS_EVALUATION_DIR DATA_DIR
+
+(see README.md here for the environment)
 
 TOOLS_EVALUATION_DIR: the ``evaluation/`` folder of castacks/tartanair_tools (unchanged).
 Each case is run with scale=False and scale=True; ``random.seed(0)`` is called before each, since
@@ -8,10 +10,10 @@ the script draws its RPE pairs with the unseeded ``random`` module.
 """
 
 import contextlib
-import io as stdio
 import random
 import sys
 import tempfile
+from io import StringIO
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -19,7 +21,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, sys.argv[1])
 
 import numpy as np  # noqa: E402
-from cases import CASES, equal_length  # noqa: E402
+from tartanair_cases import CASES, equal_length  # noqa: E402
 from tartanair_evaluator import TartanAirEvaluator  # noqa: E402
 
 data = Path(sys.argv[2])
@@ -31,7 +33,7 @@ with tempfile.TemporaryDirectory() as tmp:
         np.savetxt(est_file, est, fmt="%.17g")
         for scale in (False, True):
             random.seed(0)
-            printed = stdio.StringIO()
+            printed = StringIO()
             with contextlib.redirect_stdout(printed):
                 result = TartanAirEvaluator().evaluate_one_trajectory(
                     str(gt_file), str(est_file), scale=scale

@@ -42,9 +42,15 @@ BASE_COLUMNS = [
 ]
 
 
-def columns(segments) -> list[str]:
-    """summary.csv's columns: the base ones, each registered metric's, notes, then per segment length."""
-    metric_cols = [col for metric in registry.REGISTRY for col in metric.summary_columns]
+def columns(segments, protocols=()) -> list[str]:
+    """summary.csv's columns: the base ones, each registered metric's (a scoring protocol's only when
+    it is among ``protocols``, those on), notes, then per segment length."""
+    metric_cols = [
+        col
+        for metric in registry.REGISTRY
+        if not metric.protocol or metric.key in protocols
+        for col in metric.summary_columns
+    ]
     seg_cols = []
     for s in segments:
         L = segment_key(s)
@@ -106,7 +112,9 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
                 row[f"rpe_{L}m_rot_mean_deg"] = stat(m, "rpe_distance", L, "rot_deg", "mean")
                 row[f"drift_rate_{L}m_pct"] = stat(m, "drift_rate_pct", L)
         rows.append(row)
-    return columns(segments), rows
+    # a protocol's columns only when it was on: some case has its record
+    on = [m.key for m in registry.REGISTRY if m.protocol and any(c.record_of(m) for c in grid)]
+    return columns(segments, on), rows
 
 
 def records_csv(cols: list[str], rows: list[dict]) -> str:
