@@ -174,6 +174,7 @@ def test_epa_eval_and_a_grid_give_the_challenge_score(tmp_path):
     values = dict(zip(header.split(","), row.split(",")))
     assert float(values["hilti_score"]) == pytest.approx(float(want["score_printed"]), rel=1e-8)
     assert f"{float(want['score_printed']):.3f}" in (results / "tables/hilti.tex").read_text()
+    assert "HILTI SLAM CHALLENGE SCORE" in (results / "error_comparison.txt").read_text()
     off = settings.resolve({"truth_dir": "t", "algorithms_dir": "a"})
     assert "hilti" in tables.table_names(grid_cfg) and "hilti" not in tables.table_names(off)
 

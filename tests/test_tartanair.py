@@ -180,5 +180,7 @@ def test_a_grid_writes_its_record_summary_columns_and_tables(tmp_path):
     assert float(values["tartanair_kitti_trans"]) == pytest.approx(want["kitti_score"][1], rel=1e-8)
     assert f"{want['ate_score']:.3f}" in (out / "tables/tartanair.tex").read_text()
     assert "TARTANAIR KITTI" in (out / "tables/tartanair_kitti.tex").read_text()
+    text = (out / "error_comparison.txt").read_text()
+    assert "TARTANAIR ATE (M)" in text and "TARTANAIR KITTI SCORE" in text
     off = settings.resolve({"truth_dir": "t", "algorithms_dir": "a"})
     assert "tartanair" in tables.table_names(cfg) and "tartanair" not in tables.table_names(off)

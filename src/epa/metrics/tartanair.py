@@ -103,6 +103,7 @@ def rpe_pairs(n: int, max_pairs: int, seed: int) -> tuple[np.ndarray, np.ndarray
         i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
         return i.ravel(), j.ravel()
     draw = random.Random(seed).randint
+    # call by call, as the script: its draws bit for bit (10000 pairs: 0.04 s, whatever N)
     ij = np.array([draw(0, n - 1) for _ in range(2 * max_pairs)], dtype=np.int64)
     return ij[0::2], ij[1::2]
 
