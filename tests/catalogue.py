@@ -1564,6 +1564,35 @@ CATALOGUE: list[Bad] = [
         config="truth_dir: !!python/object/apply:os.system ['touch HACKED']\n",
         blame="none",
     ),
+    # ------------------------------------------------------------------ scoring protocols
+    Bad(
+        "tartanair-unequal",
+        "stage",
+        "TartanAir (pairs by index) on an estimate with fewer poses than the reference",
+        "metrics: metrics.tartanair: TartanAir pairs poses by index, but the reference has 600"
+        " poses and the estimate 590",
+        est=_rows(T[:590], P[:590], Q[:590]),
+        config="metrics:\n  tartanair: {enabled: true}\n",
+    ),
+    Bad(
+        "hilti-few-control-points",
+        "stage",
+        "Hilti control points (every 10 s) that the estimate reaches only one of within 2 s",
+        "metrics.hilti: 1 of the 3 control points have an estimate pose within 2 s; the SE3 fit"
+        " needs at least 3",
+        est=_rows(T[:100], P[:100], Q[:100]),
+        config="metrics:\n  hilti: {enabled: true, control_every_s: 10}\n",
+    ),
+    Bad(
+        "hilti-dense",
+        "stage",
+        "Hilti on a dense reference (more than 100 poses) without `control_every_s`",
+        "no score: 600 control points (more than 100: a dense trajectory, which the challenge does"
+        " not score; set metrics.hilti.control_every_s)",
+        est=GOOD,
+        config="metrics:\n  hilti: {enabled: true}\n",
+        ok=True,
+    ),
 ]
 
 

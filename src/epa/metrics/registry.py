@@ -13,10 +13,12 @@ from epa.metrics import (
     ate_2d,
     consistency,
     efficiency,
+    hilti,
     kitti,
     per_axis,
     rpg,
     sim3_check,
+    tartanair,
     tum,
 )
 from epa.metrics.spec import Metric
@@ -111,7 +113,19 @@ def placement(metrics: Sequence[Metric] | None = None) -> tuple[Metric, ...]:
 
 REGISTRY = validate(
     tuple(
-        m.METRIC for m in (ate_2d, consistency, efficiency, kitti, per_axis, rpg, sim3_check, tum)
+        m.METRIC
+        for m in (
+            ate_2d,
+            consistency,
+            efficiency,
+            kitti,
+            per_axis,
+            rpg,
+            sim3_check,
+            tum,
+            tartanair,
+            hilti,
+        )
     )
 )
 
