@@ -8,7 +8,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from epa.metrics import accuracy, ate_2d, consistency, efficiency, kitti, per_axis, rpg, sim3_check
+from epa.metrics import (
+    accuracy,
+    ate_2d,
+    consistency,
+    efficiency,
+    eth3d,
+    kitti,
+    per_axis,
+    rpg,
+    sim3_check,
+)
 from epa.metrics.spec import Metric
 
 
@@ -100,7 +110,10 @@ def placement(metrics: Sequence[Metric] | None = None) -> tuple[Metric, ...]:
 
 
 REGISTRY = validate(
-    tuple(m.METRIC for m in (ate_2d, consistency, efficiency, kitti, per_axis, rpg, sim3_check))
+    tuple(
+        m.METRIC
+        for m in (ate_2d, consistency, efficiency, kitti, per_axis, rpg, sim3_check, eth3d)
+    )
 )
 
 
