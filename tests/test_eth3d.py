@@ -9,13 +9,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_stages
 
 from epa.cli import main as cli
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.metrics import eth3d, registry
+from epa.outputs import tables
 from epa.readers.image_stamps import read_image_stamps
 from epa.readers.text import read_trajectory
+from epa.workflow import chain, settings
 
 ORACLE = Path(__file__).parent / "oracles" / "eth3d"
 GT = "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt"
@@ -271,3 +274,56 @@ def test_epa_eval_writes_the_programs_output(data, tmp_path):
     assert record["available"] and record["n_images"] == 3638 and record["n_held"] == 0
     text = (out / "06_metrics" / "eth3d" / "eth3d.txt").read_text()
     _compare(text, (ORACLE / "vio_stereo.cam0.txt").read_text(), _epica_tolerance)
+
+
+def test_a_grid_with_eth3d_on_has_its_table_and_columns(data, tmp_path):
+    """Each stage a job; the case folder's dataset names the image stamps file ({dataset})."""
+    stamps = tmp_path / "stamps" / "MH_01.csv"
+    stamps.parent.mkdir()
+    first = (data / CAM0).read_text().splitlines(keepends=True)[:1000]  # the first 999 images
+    stamps.write_text("".join(first))  # in tmp_path: no data file is kept in the project
+    cfg = settings.resolve(
+        {
+            "truth_dir": str(tmp_path),
+            "algorithms_dir": str(tmp_path),
+            "metrics": {
+                "eth3d": {
+                    "enabled": True,
+                    "image_stamps": str(tmp_path / "stamps" / "{dataset}.csv"),
+                    "image_stamps_unit": "ns",
+                }
+            },
+        }
+    )
+    cases = [
+        {
+            "key": f"{name}/MH_01/run1",
+            "truth": str(data / GT),
+            "estimate": str(data / ESTIMATES[name]),
+        }
+        for name in ("vio_stereo", "vislam_rp")
+    ]
+    out = tmp_path / "results"
+    run_stages(cases, out, cfg, chain.NAMES[:-1])  # every stage but the report
+    assert tables.make([c["key"] for c in cases], out, cfg) == []
+    summary = (out / "summary.csv").read_text().splitlines()
+    header = summary[0].split(",")
+    row = dict(zip(header, next(r for r in summary if r.startswith("vio_stereo,")).split(",")))
+    record = json.loads((out / "cases/vio_stereo/MH_01/run1/06_metrics/metrics.json").read_text())
+    record = record["eth3d"]
+    n_images = len(read_image_stamps(stamps, "ns"))
+    assert record["image_stamps"].endswith("{dataset}.csv") and record["n_images"] == n_images
+    se3 = record["modes"][0]["ate_rmse_cm"]
+    assert float(row["eth3d_se3_ate_rmse_cm"]) == pytest.approx(se3, rel=1e-8)  # 9 digits printed
+    tex = (out / "tables/eth3d.tex").read_text()
+    assert "ETH3D SLAM" in tex and f"{se3:.3f}" in tex and "eth3d" in tables.table_names(cfg)
+    assert "ETH3D SLAM" in (out / "error_comparison.txt").read_text()
+    off = settings.resolve({"truth_dir": "t", "algorithms_dir": "a"})
+    assert "eth3d" not in tables.table_names(off)
+
+
+def test_no_eth3d_columns_where_it_is_off(tmp_path):
+    from epa.outputs.tables import summary
+
+    assert not any(c.startswith("eth3d_") for c in summary.columns([8], summary.shown([])))
+    assert any(c.startswith("eth3d_") for c in summary.columns([8]))

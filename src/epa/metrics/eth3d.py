@@ -358,9 +358,11 @@ def evaluate(
         "max_interpolation_timespan_s": max_interpolation_timespan,
     }
     if len(kept) < 2:
+        step = float(np.median(np.diff(reference.t)))
         raise EpaError(
-            f"eth3d: {len(kept)} of {len(stamps)} image stamps have a reference pose within"
-            f" {max_interpolation_timespan:g} s gaps: at least 2 are needed"
+            f"eth3d: {len(kept)} of {len(stamps)} image stamps lie between two reference poses at"
+            f" most {max_interpolation_timespan:g} s apart (metrics.eth3d.max_interpolation_timespan;"
+            f" the reference's median step is {step:g} s): at least 2 are needed"
         )
     if kept[0] >= estimate.t[-1]:  # the program interpolates none and prints nothing
         why = "the estimate ends at or before the first image stamp: the program prints no numbers"

@@ -42,9 +42,11 @@ BASE_COLUMNS = [
 ]
 
 
-def columns(segments) -> list[str]:
-    """summary.csv's columns: the base ones, each registered metric's, notes, then per segment length."""
-    metric_cols = [col for metric in registry.REGISTRY for col in metric.summary_columns]
+def columns(segments, metrics=None) -> list[str]:
+    """summary.csv's columns: the base ones, each registered metric's (of ``metrics``, None: all),
+    notes, then per segment length."""
+    metrics = registry.REGISTRY if metrics is None else metrics
+    metric_cols = [col for metric in metrics for col in metric.summary_columns]
     seg_cols = []
     for s in segments:
         L = segment_key(s)
@@ -70,7 +72,16 @@ def _confidence(m: dict) -> dict:
     }
 
 
+def shown(grid: list[CaseResult]) -> tuple:
+    """The registered metrics with summary.csv columns: all but a scoring protocol no case has a
+    record of (its columns only where it is on)."""
+    return tuple(
+        m for m in registry.REGISTRY if not m.protocol or any(c.ok and c.record_of(m) for c in grid)
+    )
+
+
 def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict]]:
+    metrics = shown(grid)
     rows = []
     for c in grid:
         m, d = c.metrics, c.drift
@@ -94,7 +105,7 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
                 fail_segments=d.get("n_fail_segments"),
                 diverged_at_s=d.get("diverged_at_s"),
             )
-            for metric in registry.REGISTRY:
+            for metric in metrics:
                 row.update(metric.summary(c.record_of(metric)))
             # a stage after drift that failed (a broken timing file) leaves the accuracy standing
             failed = [r["failed"] for r in c.records.values() if r.get("failed")]
@@ -106,7 +117,7 @@ def summary_rows(grid: list[CaseResult], segments) -> tuple[list[str], list[dict
                 row[f"rpe_{L}m_rot_mean_deg"] = stat(m, "rpe_distance", L, "rot_deg", "mean")
                 row[f"drift_rate_{L}m_pct"] = stat(m, "drift_rate_pct", L)
         rows.append(row)
-    return columns(segments), rows
+    return columns(segments, metrics), rows
 
 
 def records_csv(cols: list[str], rows: list[dict]) -> str:
