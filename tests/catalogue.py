@@ -937,6 +937,14 @@ CATALOGUE: list[Bad] = [
         stamps=f"{T[0] - 100:.6f}\n{T[0] - 99:.6f}\n",
     ),
     Bad(
+        "eth3d-dataset-in-eval",
+        "stage",
+        "`metrics.eth3d.image_stamps` naming `{dataset}` in `epa eval` (one case, no dataset)",
+        "names {dataset} and this case has no dataset (epa eval): name the file itself",
+        est=GOOD,
+        config="metrics:\n  eth3d:\n    enabled: true\n    image_stamps: '{dataset}.txt'\n",
+    ),
+    Bad(
         "eth3d-sparse-reference",
         "stage",
         "the ETH3D protocol on a 20 Hz reference (gaps over its 1/75 s limit)",

@@ -209,6 +209,16 @@ def test_missing_output_is_penalised():
     assert record["modes"][0]["ate_rmse_cm"] == pytest.approx(expected, rel=1e-9)
 
 
+def test_an_estimate_after_the_images_has_no_fit():
+    """Held at its first pose at every image stamp: no alignment, no NaN (the program's would be)."""
+    t = np.arange(100) * 0.01
+    reference = Trajectory(t, np.column_stack([t, 0 * t, 0 * t]), np.tile([0, 0, 0, 1.0], (100, 1)))
+    late = reference.shifted(5.0)
+    record, errors = eth3d.evaluate(reference, late, t)
+    assert not record["available"] and "no alignment" in record["reason"] and errors == {}
+    assert eth3d.printed(record) == ""
+
+
 def test_sim3_only_with_the_flag_and_scale_absorbed():
     t = np.arange(400) * 0.05
     p = np.column_stack([np.sin(t), np.cos(t), 0.1 * t])
@@ -226,7 +236,7 @@ def test_sim3_only_with_the_flag_and_scale_absorbed():
 
 def test_bad_image_stamps(tmp_path):
     reference = Trajectory(np.arange(10.0), np.zeros((10, 3)), np.tile([0, 0, 0, 1.0], (10, 1)))
-    with pytest.raises(EpaError, match="0 of 2 image stamps have a reference pose"):
+    with pytest.raises(EpaError, match="0 of 2 image stamps lie between two reference poses"):
         eth3d.evaluate(reference, reference, np.array([20.0, 21.0]))
     with pytest.raises(EpaError, match="not sorted"):
         eth3d.evaluate(reference, reference, np.array([2.0, 1.0]))

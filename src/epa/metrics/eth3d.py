@@ -368,6 +368,12 @@ def evaluate(
         why = "the estimate ends at or before the first image stamp: the program prints no numbers"
         return {"available": False, "reason": why, **base}, {}
     _, e_p, e_q = poses_at(estimate.t, estimate.p, estimate.q, kept, None)
+    if not np.any(np.ptp(e_p, axis=0) > 0):  # one point: no fit (the program would print nan)
+        why = (
+            "the estimate stands at one position at every image stamp (it starts after the last"
+            " one, or does not move): no alignment"
+        )
+        return {"available": False, "reason": why, **base}, {}
     held = (kept < estimate.t[0]) | (kept > estimate.t[-1])
     d = path_from_start(g_p)
     refs = reference_pairs(g_p, g_q, d)
@@ -394,6 +400,8 @@ def printed(record: dict) -> str:
     distance has fewer than 50 pairs, a blank line after each mode; a distance without pairs is not
     printed. Where the program prints no numbers, its two warnings (the last without a line end, as
     it prints it)."""
+    if not record["available"] and "no alignment" in record["reason"]:
+        return ""  # the program's numbers would be nan: none printed
     if not record["available"]:
         return (
             "WARNING: Failed to interpolate any pose, maybe the timestamps are incorrect?\n"
@@ -521,7 +529,7 @@ METRIC = Metric(
     tables=(
         Table(
             "eth3d",
-            "ETH3D SLAM LATEX TABLE (ATE RMSE CM AT THE IMAGE STAMPS, SE3; SIM3 WITH sim3: true;"
+            "ETH3D SLAM LATEX TABLE (ATE RMSE CM AT THE IMAGE STAMPS: SE3, SIM3 WITH SIM3: TRUE;"
             " MEAN OVER RUNS)",
             pair=False,
             per_run=per_run,

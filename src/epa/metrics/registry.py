@@ -111,8 +111,7 @@ def placement(metrics: Sequence[Metric] | None = None) -> tuple[Metric, ...]:
 
 REGISTRY = validate(
     tuple(
-        m.METRIC
-        for m in (ate_2d, consistency, efficiency, kitti, per_axis, rpg, sim3_check, eth3d)
+        m.METRIC for m in (ate_2d, consistency, efficiency, kitti, per_axis, rpg, sim3_check, eth3d)
     )
 )
 

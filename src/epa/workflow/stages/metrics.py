@@ -131,9 +131,13 @@ def image_stamps(cfg: dict, case: Case | None):
     c = cfg["metrics"]["eth3d"]
     if c["image_stamps"] is None:
         return None
-    if "{dataset}" in c["image_stamps"] and case is None:
-        raise EpaError("metrics.eth3d.image_stamps names {dataset}, and this case has no dataset")
-    path = c["image_stamps"].replace("{dataset}", case.dataset if case else "")
+    dataset = case.dataset if case is not None else ""
+    if "{dataset}" in c["image_stamps"] and not dataset:  # epa eval: a case of no dataset
+        raise EpaError(
+            "metrics.eth3d.image_stamps names {dataset} and this case has no dataset (epa eval):"
+            " name the file itself"
+        )
+    path = c["image_stamps"].replace("{dataset}", dataset)
     return read_image_stamps(path, c["image_stamps_unit"])
 
 
