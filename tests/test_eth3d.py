@@ -234,6 +234,32 @@ def test_sim3_only_with_the_flag_and_scale_absorbed():
     assert both["modes"][0]["ate_rmse_cm"] > 10
 
 
+def test_sim3_relative_translation_by_hand():
+    """The program's Sim3 quirk, derived by hand: an estimate at half the scale, its rotations exact.
+    The fit is s = 2, R = I; the program's quaternion of 2 I is (0, 0, 0, sqrt(7)/2), of squared norm
+    7/4, so the aligned estimate's relative translation, turned by the inverse of that quaternion
+    times q_j (squared norm 4/7) with a formula for unit quaternions, is (4/7) R_j^T d + (3/7) d for
+    d = p_i - p_j, where the reference's is R_j^T d: the error is (3/7) |d - R_j^T d|."""
+    t = np.arange(600) * 0.01
+    yaw = 0.8 * np.sin(t)
+    p = np.column_stack([np.cos(t), np.sin(t), 0.2 * t])
+    q = np.column_stack([0 * t, 0 * t, np.sin(yaw / 2), np.cos(yaw / 2)])
+    reference = Trajectory(t, p, q)
+    half = Trajectory(t, 0.5 * p, q)
+    record, _ = eth3d.evaluate(reference, half, t, sim3=True, max_interpolation_timespan=0.1)
+    assert record["modes"][0]["ate_rmse_cm"] == pytest.approx(0.0, abs=1e-9)
+    d_path = eth3d.path_from_start(p[:-1])  # the last stamp has no reference pose after it
+    for rel in record["modes"][0]["relative"]:
+        i, j = eth3d.pairs(d_path, rel["distance_m"], 0.025)
+        d = p[i] - p[j]
+        c, s = np.cos(yaw[j]), np.sin(yaw[j])
+        back = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
+        err = 100 * (3 / 7) * np.linalg.norm(d - back, axis=1) / (d_path[j] - d_path[i])
+        assert rel["n_pairs"] == len(i) > 50
+        assert rel["translation_pct"] == pytest.approx(np.mean(err), rel=1e-9)
+        assert rel["rotation_deg_per_m"] == pytest.approx(0.0, abs=1e-9)
+
+
 def test_bad_image_stamps(tmp_path):
     reference = Trajectory(np.arange(10.0), np.zeros((10, 3)), np.tile([0, 0, 0, 1.0], (10, 1)))
     with pytest.raises(EpaError, match="0 of 2 image stamps lie between two reference poses"):
