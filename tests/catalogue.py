@@ -85,11 +85,13 @@ class Bad:
         "est"  # whose path the error line names: est, ref, config or none (the command line)
     )
     timing: str | None = None  # content of est's <run>_timing.txt
+    stamps: str | None = None  # content of stamps.txt in the working folder (metrics.eth3d)
     keeps_accuracy: bool = False  # the error is a later stage's: metrics.json stands
     blamed: str | None = None  # command rows: what the error line starts with ({ref}, {est}, {tmp})
 
 
 S = GOOD.splitlines(keepends=True)
+ETH3D_STAMPS = "metrics:\n  eth3d:\n    enabled: true\n    image_stamps: stamps.txt\n"
 CATALOGUE: list[Bad] = [
     # ------------------------------------------------------------------ readers: what the file is
     Bad(
@@ -895,6 +897,69 @@ CATALOGUE: list[Bad] = [
         ref=_rows(T, 0 * P, Q),
         est=_rows(T, 0 * P, Q),
         args=("--no-offset-estimate", "--no-calibrate", "--align", "none"),
+    ),
+    Bad(
+        "eth3d-stamps-missing",
+        "stage",
+        "`metrics.eth3d.image_stamps` naming a file that does not exist",
+        "cannot read the image stamps: FileNotFoundError",
+        est=GOOD,
+        config=ETH3D_STAMPS,
+        blame="stamps",
+    ),
+    Bad(
+        "eth3d-stamps-text",
+        "stage",
+        "an image stamps file with a word for a stamp",
+        "image stamp 'rgb/1.png' is not a number",
+        est=GOOD,
+        config=ETH3D_STAMPS,
+        stamps=f"# timestamp filename\n{T[10]:.6f} rgb/0.png\nrgb/1.png {T[11]:.6f}\n",
+        blame="stamps",
+    ),
+    Bad(
+        "eth3d-stamps-unsorted",
+        "stage",
+        "image stamps out of order",
+        "image stamp before the one above it (the stamps must be sorted)",
+        est=GOOD,
+        config=ETH3D_STAMPS,
+        stamps=f"{T[20]:.6f}\n{T[10]:.6f}\n",
+        blame="stamps",
+    ),
+    Bad(
+        "eth3d-stamps-outside",
+        "stage",
+        "image stamps outside the reference's time span",
+        "eth3d: 0 of 2 image stamps lie between two reference poses",
+        est=GOOD,
+        config=ETH3D_STAMPS,
+        stamps=f"{T[0] - 100:.6f}\n{T[0] - 99:.6f}\n",
+    ),
+    Bad(
+        "eth3d-dataset-in-eval",
+        "stage",
+        "`metrics.eth3d.image_stamps` naming `{dataset}` in `epa eval` (one case, no dataset)",
+        "names {dataset} and this case has no dataset (epa eval): name the file itself",
+        est=GOOD,
+        config="metrics:\n  eth3d:\n    enabled: true\n    image_stamps: '{dataset}.txt'\n",
+    ),
+    Bad(
+        "eth3d-sparse-reference",
+        "stage",
+        "the ETH3D protocol on a 20 Hz reference (gaps over its 1/75 s limit)",
+        "max_interpolation_timespan; the reference's median step is 0.05 s",
+        est=GOOD,
+        config="metrics:\n  eth3d:\n    enabled: true\n",
+    ),
+    Bad(
+        "eth3d-missing-output",
+        "stage",
+        "the ETH3D protocol on an estimate that stops before the reference",
+        "lie outside the estimate: it is held at its first or last pose there",
+        est="".join(S[:400]),
+        config="metrics:\n  eth3d:\n    enabled: true\n    max_interpolation_timespan: 0.1\n",
+        ok=True,
     ),
     Bad(
         "collinear",

@@ -54,6 +54,8 @@ def _eval_paths(tmp: Path, b: catalogue.Bad) -> tuple[Path, Path, list[str]]:
         _write(est, b.est)
     if b.timing is not None:
         _write(est.with_name(est.stem + "_timing.txt"), b.timing)
+    if b.stamps is not None:
+        _write(tmp / "stamps.txt", b.stamps)
     if b.setup and b.setup.startswith("bag"):
         est = _bag(tmp, est, b.setup)
         if b.setup == "bag-same":
@@ -194,6 +196,7 @@ def test_epa_eval(tmp_path, capsys, caplog, monkeypatch, b):
         "none": "command line",
         "timing": est.with_name(est.stem + "_timing.txt"),
         "timing-arg": tmp_path / "nowhere_timing.txt",
+        "stamps": "stamps.txt",  # as metrics.eth3d.image_stamps names it (the test's folder)
     }
     who = "config" if b.where == "config" else b.blame
     assert lines[0].startswith(f"epa: error: {blamed[who]}"), lines[0]

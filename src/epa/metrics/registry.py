@@ -13,6 +13,7 @@ from epa.metrics import (
     ate_2d,
     consistency,
     efficiency,
+    eth3d,
     hilti,
     kitti,
     per_axis,
@@ -125,6 +126,7 @@ REGISTRY = validate(
             tum,
             tartanair,
             hilti,
+            eth3d,
         )
     )
 )

@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import logging
 
-from epa.artifacts.case import CaseData
+from epa.artifacts.case import Case, CaseData
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.metrics import accuracy, registry
+from epa.readers.image_stamps import read_image_stamps
 
 log = logging.getLogger("epa")
 
@@ -124,6 +125,22 @@ def case_record(
     }
 
 
+def image_stamps(cfg: dict, case: Case | None):
+    """The ETH3D protocol's image stamps: None (the reference's own) or those of the file
+    ``metrics.eth3d.image_stamps`` names, ``{dataset}`` replaced by the case's dataset."""
+    c = cfg["metrics"]["eth3d"]
+    if c["image_stamps"] is None:
+        return None
+    dataset = case.dataset if case is not None else ""
+    if "{dataset}" in c["image_stamps"] and not dataset:  # epa eval: a case of no dataset
+        raise EpaError(
+            "metrics.eth3d.image_stamps names {dataset} and this case has no dataset (epa eval):"
+            " name the file itself"
+        )
+    path = c["image_stamps"].replace("{dataset}", dataset)
+    return read_image_stamps(path, c["image_stamps_unit"])
+
+
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     folder = data.folder
     inputs = {
@@ -132,6 +149,7 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         "reference": lambda: data.cropped[0],
         "estimate_source": lambda: data.load_record.get("sources", {}).get("estimate") or {},
         "estimate": lambda: data.cropped[1],
+        "image_stamps": lambda: image_stamps(cfg, data.folder.case),
     }
     summary, tables = compute(data.matched[0], data.aligned, cfg, inputs)
     record = case_record(
