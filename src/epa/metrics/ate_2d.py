@@ -34,9 +34,11 @@ def errors(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
 
 
 def compute(ref: Trajectory, est: Trajectory, cfg: dict) -> tuple[dict, dict, list[str]]:
-    yaw, trans_xy = errors(ref, est)
+    yaw, trans_xy = errors(ref, est)  # a position-only estimate's yaw errors are NaN: none
     record = {
-        "yaw_deg": stats(yaw),  # signed: its rmse is ov_eval's
+        "yaw_deg": stats(
+            np.zeros(0) if est.position_only else yaw
+        ),  # signed: its rmse is ov_eval's
         "trans_xy_m": stats(trans_xy),
     }
     return record, {"ape": {"yaw_deg": yaw, "trans_xy_m": trans_xy}}, []
@@ -73,6 +75,7 @@ METRIC = Metric(
     summary=summary,
     compute=compute,
     after="ate",  # its record follows the ATE's in metrics.json
+    orientation=False,  # its planar error stands for a position-only estimate; its yaw is null
     arrays=(),  # its per-pose columns (yaw_deg, trans_xy_m) extend ape.csv
     tables=_TABLES,
 )

@@ -48,7 +48,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
             f"the reference does not move ({length:.3g} m over the matched poses): distance RPE,"
             " drift rate and success rate are undefined"
         )
-    summary, tables = accuracy.evaluate(
+    summary, tables = (accuracy.evaluate_positions if est.position_only else accuracy.evaluate)(
         ref,
         est,
         segments=c["segments"],
@@ -66,8 +66,14 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
     ]
     summary["notes"] += empty_relative_notes(summary, c)
     records = {}
+    if est.position_only:
+        summary["position_only"] = True
+        summary["notes"].append(accuracy.POSITION_ONLY)
     for metric in registry.computed_in(NAME):
-        if metric.enabled(cfg):
+        if metric.enabled(cfg) and est.position_only and metric.orientation:
+            records[metric.key] = None  # never a rotation invented from positions
+            summary["notes"].append(f"{metric.key}: null: it needs the estimate's orientation")
+        elif metric.enabled(cfg):
             extra = {k: inputs[k]() for k in metric.inputs}
             records[metric.key], arrays, notes = metric.compute(ref, est, cfg, **extra)
             for name, columns in arrays.items():
@@ -152,7 +158,7 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     for metric in registry.computed_in(NAME):
         if metric.documents is not None:  # small files of its own, in 06_metrics/<key>/
             folder.remove_folder(NAME, metric.key)
-            if metric.key in record:
+            if record.get(metric.key) is not None:
                 for name, text in metric.documents(record[metric.key]).items():
                     folder.write_text(NAME, f"{metric.key}/{name}", text)
     folder.write_record(NAME, "metrics.json", record)
