@@ -3,6 +3,7 @@ translation, every rotation quantity null with its reason, the tables marking th
 
 from __future__ import annotations
 
+import csv
 import json
 import logging
 
@@ -223,6 +224,13 @@ def test_a_grid_marks_the_position_only_algorithms_rotation_cells(data, tmp_path
         assert cells and all(c.startswith("- / ") and "nan" not in c for c in cells), (name, row)
     drift_rate = (results / "tables/drift_rate.tex").read_text()
     assert "gnss & 2.221 & 1.623" in drift_rate  # translation-only tables: numbers, no mark
+    with open(results / "summary.csv", encoding="utf-8") as fh:
+        rows = {r["algorithm"]: r for r in csv.DictReader(fh)}
+    assert rows["gnss"]["ate_rot_rmse_deg"] == "nan" and rows["vio_mono"]["notes"] == ""
+    assert (
+        rows["gnss"]["notes"]
+        == "position-only estimate: its rotation columns are nan (no orientation)"
+    )
     comparison = (results / "error_comparison.txt").read_text()
     assert "ATE: mean_ori = - | mean_pos = 0.204 (1 runs)" in comparison
     assert "RPE: seg 8 - median_ori = - | median_pos = 0.1166" in comparison
