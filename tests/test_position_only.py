@@ -162,8 +162,32 @@ def test_every_rotation_quantity_is_null_with_its_reason(euroc_runs):
     assert pos["per_axis"] is None and full["per_axis"]["ate"]  # a rotation metric: null
     notes = " ".join(pos["notes"])
     assert "the estimate is position-only: every rotation error is null" in notes
-    assert "per_axis: null: it needs the estimate's orientation" in notes
+    assert "per_axis: null: it needs orientations (the estimate is position-only)" in notes
     assert np.isnan(files.read_tum_file(pos_dir / "05_align/aligned.tum").q).all()  # none invented
+
+
+def test_a_position_only_reference_gives_the_same_translation_errors(data, tmp_path, euroc_runs):
+    """GNSS-like ground truth (the reference stripped to ``t x y z``) and a full-pose estimate: the
+    same translation numbers as the stripped estimate against the full reference, rotation null."""
+    (_, full), (_, pos) = euroc_runs
+    strip_to_positions(data / GT, tmp_path / "gt_positions.txt")
+    out = tmp_path / "ref_pos"
+    args = ["--no-offset-estimate", "--no-calibrate"]
+    rc = cli.main(
+        ["eval", str(tmp_path / "gt_positions.txt"), str(data / EST), "--out", str(out), *args]
+    )
+    assert rc in (0, None)
+    ref_pos = json.loads((out / "06_metrics/metrics.json").read_text())
+    assert compare_record(
+        "ate", json.dumps(full["ate"]["trans_m"]), json.dumps(ref_pos["ate"]["trans_m"])
+    ).ok
+    assert compare_record(
+        "rpe", json.dumps(pos["rpe_distance"]), json.dumps(ref_pos["rpe_distance"])
+    ).ok  # D = I either way: the world-frame displacement error
+    assert ref_pos["ate"]["rot_deg"] == NULL_STATS and ref_pos["position_only"] is True
+    assert "the reference is position-only: every rotation error is null" in " ".join(
+        ref_pos["notes"]
+    )
 
 
 def test_steps_1_and_2_of_a_position_only_estimate(data, tmp_path):

@@ -9,6 +9,17 @@ import numpy as np
 from epa.core import geometry
 
 
+def position_only(ref: Trajectory, est: Trajectory) -> str | None:
+    """Which side has no orientation, as a clause ("the estimate is position-only"); None when both
+    are full poses. Either side's lack makes every rotation error of the pair null."""
+    sides = [
+        name for name, traj in (("the reference", ref), ("the estimate", est)) if traj.position_only
+    ]
+    if not sides:
+        return None
+    return " and ".join(sides) + (" are" if len(sides) == 2 else " is") + " position-only"
+
+
 @dataclass(frozen=True)
 class Trajectory:
     t: np.ndarray  # (N,) seconds

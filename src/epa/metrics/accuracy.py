@@ -241,10 +241,12 @@ def evaluate(
 
 
 # ----------------------------------------------------------------------------- position-only estimates
-POSITION_ONLY = (
-    "the estimate is position-only: every rotation error is null (no orientation was read and none"
-    " is derived from positions); the RPE's translation error is the world-frame displacement error"
-)
+def position_only_note(which: str) -> str:
+    """Why a case's rotation errors are null; ``which``: :func:`epa.core.trajectory.position_only`."""
+    return (
+        f"{which}: every rotation error is null (no orientation was read and none is derived from"
+        " positions); the RPE's translation error is the world-frame displacement error"
+    )
 
 
 def evaluate_positions(
@@ -256,11 +258,12 @@ def evaluate_positions(
     per-pose and per-pair rotation error NaN (not a number: no orientation). An RPE whose pairs are
     chosen by the estimate's rotation angle cannot be formed: an error."""
     for spec in rpe:
-        if spec["unit"] in ("deg", "rad") and spec.get("pairs_from", "est") == "est":
+        side = "reference" if spec.get("pairs_from", "est") == "ref" else "estimate"
+        if spec["unit"] in ("deg", "rad") and (ref if side == "reference" else est).position_only:
             raise EpaError(
-                f"rpe delta {spec['delta']:g} {spec['unit']}: its pairs are chosen by the estimate's"
-                " rotation angle, and the estimate is position-only (no orientation); choose them on"
-                " the reference (pairs_from: ref) or use frames, m or s"
+                f"rpe delta {spec['delta']:g} {spec['unit']}: its pairs are chosen by the {side}'s"
+                f" rotation angle, and the {side} is position-only (no orientation); use frames, m or s"
+                + (" or pairs_from: ref" if side == "estimate" and not ref.position_only else "")
             )
     identity = np.zeros((len(ref), 4))
     identity[:, 3] = 1.0

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from epa.core import geometry
-from epa.core.trajectory import Trajectory
+from epa.core.trajectory import Trajectory, position_only
 from epa.metrics.accuracy import stats
 from epa.metrics.spec import Metric, Table
 
@@ -37,7 +37,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict) -> tuple[dict, dict, li
     yaw, trans_xy = errors(ref, est)  # a position-only estimate's yaw errors are NaN: none
     record = {
         "yaw_deg": stats(
-            np.zeros(0) if est.position_only else yaw
+            np.zeros(0) if position_only(ref, est) else yaw
         ),  # signed: its rmse is ov_eval's
         "trans_xy_m": stats(trans_xy),
     }

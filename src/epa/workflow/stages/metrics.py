@@ -8,7 +8,7 @@ import logging
 
 from epa.artifacts.case import CaseData
 from epa.core.errors import EpaError
-from epa.core.trajectory import Trajectory
+from epa.core.trajectory import Trajectory, position_only
 from epa.metrics import accuracy, registry
 
 log = logging.getLogger("epa")
@@ -48,7 +48,8 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
             f"the reference does not move ({length:.3g} m over the matched poses): distance RPE,"
             " drift rate and success rate are undefined"
         )
-    summary, tables = (accuracy.evaluate_positions if est.position_only else accuracy.evaluate)(
+    which = position_only(ref, est)  # a side without orientation: every rotation error null
+    summary, tables = (accuracy.evaluate_positions if which else accuracy.evaluate)(
         ref,
         est,
         segments=c["segments"],
@@ -66,13 +67,13 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
     ]
     summary["notes"] += empty_relative_notes(summary, c)
     records = {}
-    if est.position_only:
+    if which:
         summary["position_only"] = True
-        summary["notes"].append(accuracy.POSITION_ONLY)
+        summary["notes"].append(accuracy.position_only_note(which))
     for metric in registry.computed_in(NAME):
-        if metric.enabled(cfg) and est.position_only and metric.orientation:
+        if metric.enabled(cfg) and which and metric.orientation:
             records[metric.key] = None  # never a rotation invented from positions
-            summary["notes"].append(f"{metric.key}: null: it needs the estimate's orientation")
+            summary["notes"].append(f"{metric.key}: null: it needs orientations ({which})")
         elif metric.enabled(cfg):
             extra = {k: inputs[k]() for k in metric.inputs}
             records[metric.key], arrays, notes = metric.compute(ref, est, cfg, **extra)
