@@ -14,6 +14,7 @@ from conftest import run_stages, smooth_path
 from epa import readers
 from epa.artifacts import files
 from epa.cli import main as cli
+from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.outputs import tables
 from epa.outputs.contract import compare_record
@@ -76,6 +77,26 @@ def test_four_columns_and_a_t_x_y_z_header_are_read_as_positions(tmp_path):
     # the stage artifacts keep "no orientation" (NaN), so a job reading them sees a position-only one
     files.write_tum(tmp_path / "est.tum", read)
     assert files.read_tum_file(tmp_path / "est.tum").position_only
+
+
+def test_a_position_only_trajectory_is_written_without_orientation(tmp_path, capsys):
+    traj = Trajectory.positions(smooth_path(20).t, smooth_path(20).p)
+    files.write_trajectory(tmp_path / "gnss.txt", traj, "position")
+    assert cli.main(["traj", str(tmp_path / "gnss.txt"), "--export", str(tmp_path / "o.csv")]) in (
+        0,
+        None,
+    )
+    assert "wrote 20 poses to" in capsys.readouterr().out
+    assert (tmp_path / "o.csv").read_text().startswith("t,x,y,z\n")
+    assert cli.main(["traj", str(tmp_path / "gnss.txt"), "--export", str(tmp_path / "o.txt")]) in (
+        0,
+        None,
+    )
+    assert "o.txt (position)" in capsys.readouterr().out  # t x y z, not TUM with NaN quaternions
+    back = text.read_trajectory(tmp_path / "o.txt")
+    assert back.position_only and np.array_equal(back.p, traj.p)
+    with pytest.raises(EpaError, match="position-only .* the kitti format holds orientations"):
+        files.write_trajectory(tmp_path / "k.txt", traj, "kitti")
 
 
 def test_step1_finds_a_known_offset_on_linear_speed():
