@@ -211,6 +211,24 @@ def test_a_position_only_reference_gives_the_same_translation_errors(data, tmp_p
     )
 
 
+def test_an_estimate_with_covariance_against_a_position_only_reference(tmp_path):
+    """The example's OpenVINS run (with covariance) against its ground truth stripped to t x y z:
+    translation errors, and no NEES (it joins rotation errors), said so."""
+    from conftest import ROOT
+
+    strip_to_positions(ROOT / "example/truth/drone_figure8.txt", tmp_path / "truth.txt")
+    est = ROOT / "example/algorithms/vio_body/drone_figure8/run1.txt"
+    out = tmp_path / "out"
+    assert cli.main(["eval", str(tmp_path / "truth.txt"), str(est), "--out", str(out)]) in (0, None)
+    nees = json.loads((out / "08_consistency/consistency.json").read_text())
+    assert nees == {
+        "available": False,
+        "reason": "the reference is position-only: the NEES needs the rotation errors",
+    }
+    metrics = json.loads((out / "06_metrics/metrics.json").read_text())
+    assert metrics["ate"]["rot_deg"] == NULL_STATS and metrics["ate"]["trans_m"]["n"] > 2000
+
+
 def test_steps_1_and_2_of_a_position_only_estimate(data, tmp_path):
     """Step 1 on linear speed agrees with the full-pose run's angular one within its deviation;
     Step 2 is off with its reason; the translation numbers stand."""
