@@ -34,11 +34,10 @@ def errors(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
 
 
 def compute(ref: Trajectory, est: Trajectory, cfg: dict) -> tuple[dict, dict, list[str]]:
-    yaw, trans_xy = errors(ref, est)  # a position-only estimate's yaw errors are NaN: none
+    yaw, trans_xy = errors(ref, est)
+    measured = np.zeros(0) if position_only(ref, est) else yaw  # NaN there: no yaw error at all
     record = {
-        "yaw_deg": stats(
-            np.zeros(0) if position_only(ref, est) else yaw
-        ),  # signed: its rmse is ov_eval's
+        "yaw_deg": stats(measured),  # signed: its rmse is ov_eval's
         "trans_xy_m": stats(trans_xy),
     }
     return record, {"ape": {"yaw_deg": yaw, "trans_xy_m": trans_xy}}, []
