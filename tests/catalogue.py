@@ -347,6 +347,14 @@ CATALOGUE: list[Bad] = [
         est_name="est.csv",
     ),
     Bad(
+        "position-geodetic",
+        "eval",
+        "a GNSS export in latitude, longitude, altitude (a NavSatFix dump): never converted by guess",
+        "cannot tell the columns from the header (time, lat, lon, alt)",
+        est="time,lat,lon,alt\n" + POSITIONS.replace(" ", ","),
+        est_name="est.csv",
+    ),
+    Bad(
         "position-rpe-angle",
         "eval",
         "a position-only estimate asked for an RPE whose pairs its rotation angle chooses",
