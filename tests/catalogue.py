@@ -38,6 +38,7 @@ T, P, Q = motion()
 THREE = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0.5]])  # three poses, not on one line
 LINE = np.column_stack([2 * (T - T[0]), 0 * T, 0 * T])  # 2 m/s along x, never turning
 GOOD = _rows(T, P, Q)
+POSITIONS = "".join(" ".join(f"{v:.9f}" for v in (a, *b)) + "\n" for a, b in zip(T, P))  # t x y z
 GOOD_CSV = (
     "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []\n"
     + "".join(
@@ -315,8 +316,61 @@ CATALOGUE: list[Bad] = [
         "unknown-width",
         "eval",
         "rows of 10 numbers",
-        "cannot tell the format from 10 columns: expected 8 (TUM), 12 (KITTI), 20 (OpenVINS)",
+        "cannot tell the format from 10 columns: expected 4 (t x y z, position only), 8 (TUM)",
         est=GOOD.replace("\n", " 0 0\n"),
+    ),
+    # ------------------------------------------------------------------ position-only estimates
+    Bad(
+        "position-only",
+        "eval",
+        "positions only: `t x y z` rows (GNSS, UWB, some LiDAR odometry)",
+        "position only: no orientation, so every rotation quantity is null",
+        est=POSITIONS,
+        ok=True,
+    ),
+    Bad(
+        "position-only-csv",
+        "eval",
+        "a CSV whose header names only time and x, y, z",
+        "position only: no orientation, so every rotation quantity is null",
+        est="#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m]\n"
+        + "".join(
+            f"{int(round(a * 1e9))},{b[0]:.9f},{b[1]:.9f},{b[2]:.9f}\n" for a, b in zip(T, P)
+        ),
+        est_name="est.csv",
+        ok=True,
+    ),
+    Bad(
+        "position-unknown-column",
+        "eval",
+        "positions beside a column the header does not name as part of a pose (`speed`)",
+        "cannot tell the columns from the header (t, x, y, z, speed)",
+        est="t,x,y,z,speed\n" + POSITIONS.replace(" ", ",").replace("\n", ",1.0\n"),
+        est_name="est.csv",
+    ),
+    Bad(
+        "position-geodetic",
+        "eval",
+        "a GNSS export in latitude, longitude, altitude (a NavSatFix dump): never converted by guess",
+        "cannot tell the columns from the header (time, lat, lon, alt)",
+        est="time,lat,lon,alt\n" + POSITIONS.replace(" ", ","),
+        est_name="est.csv",
+    ),
+    Bad(
+        "position-rpe-angle",
+        "eval",
+        "a position-only estimate asked for an RPE whose pairs its rotation angle chooses",
+        "its pairs are chosen by the estimate's rotation angle, and the estimate is position-only",
+        est=POSITIONS,
+        config="metrics:\n  rpe:\n    - {delta: 10, unit: deg}\n",
+    ),
+    Bad(
+        "position-rpg-one-pose",
+        "eval",
+        "a position-only estimate aligned in mode rpg on its first pose's orientation",
+        "aligns on the first pose's orientation, and the estimate is position-only",
+        est=POSITIONS,
+        args=("--mode", "rpg", "--first-n", "1"),
     ),
     Bad(
         "unnamed-time",

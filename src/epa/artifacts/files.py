@@ -227,8 +227,17 @@ def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
     ``tum``; ``euroc`` (integer nanoseconds, ``qw`` first); ``kitti`` (3x4 poses, stamps in
     ``<name>_times.txt`` beside it, evo's naming); ``openvins`` (TUM + the orientation and position
     covariance upper triangles; only for a trajectory with covariance); ``csv`` (named columns, with
-    covariance columns when it has them)."""
+    covariance columns when it has them); ``position`` (``t x y z``, any trajectory's positions). A
+    position-only trajectory is written as ``position`` or ``csv`` (``t,x,y,z``) only."""
     path = Path(path)
+    if fmt == "position" or (fmt == "csv" and traj.position_only):
+        return _write_positions(path, traj, fmt)
+    if traj.position_only and fmt in FORMATS:  # never a NaN quaternion in a file for a user
+        raise EpaError(
+            f"this trajectory is position-only (no orientation) and the {fmt} format holds"
+            " orientations; write position (t x y z) or csv",
+            path=str(path),
+        )
     cov = _cov_columns(traj)
     # never invent an uncertainty the estimator did not report
     if fmt == "openvins" and cov is None:
@@ -266,6 +275,16 @@ def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
     raise EpaError(
         f"unknown format {fmt!r}; choose one of {', '.join(FORMATS[1:])}", path=str(path)
     )
+
+
+def _write_positions(path: Path, traj: Trajectory, fmt: str) -> None:
+    """``t x y z`` rows (``position``), or the same under a ``t,x,y,z`` header (``csv``)."""
+    data = np.column_stack([traj.t, traj.p])
+    if fmt == "csv":
+        return _atomic_write(
+            path, lambda fh: savetxt(fh, data, delimiter=",", header="t,x,y,z", comments="")
+        )
+    return _atomic_write(path, lambda fh: savetxt(fh, data))
 
 
 # pandas' C parser costs about 1 ms a call, loadtxt about 0.25 ms plus 3.5 ms per 100 KB: the same

@@ -733,8 +733,10 @@ def _traj(args) -> None:
             fmt_written = "openvins" if fmt == "tum" else fmt
         else:
             traj, fmt_written = Trajectory(traj.t, traj.p, traj.q), fmt
+            if traj.position_only and fmt == "tum":  # t x y z: no orientation to write
+                fmt_written = "position"
         files.write_trajectory(out, traj, fmt_written)
-        what = "OpenVINS layout: TUM + covariance" if fmt_written == "openvins" else fmt
+        what = "OpenVINS layout: TUM + covariance" if fmt_written == "openvins" else fmt_written
         left = (
             "; its covariance is left out (--covariance writes it)"
             if has_cov and not args.covariance

@@ -9,11 +9,22 @@ import numpy as np
 from epa.core import geometry
 
 
+def position_only(ref: Trajectory, est: Trajectory) -> str | None:
+    """Which side has no orientation, as a clause ("the estimate is position-only"); None when both
+    are full poses. Either side's lack makes every rotation error of the pair null."""
+    sides = [
+        name for name, traj in (("the reference", ref), ("the estimate", est)) if traj.position_only
+    ]
+    if not sides:
+        return None
+    return " and ".join(sides) + (" are" if len(sides) == 2 else " is") + " position-only"
+
+
 @dataclass(frozen=True)
 class Trajectory:
     t: np.ndarray  # (N,) seconds
     p: np.ndarray  # (N, 3) metres
-    q: np.ndarray  # (N, 4) unit quaternions (x, y, z, w)
+    q: np.ndarray  # (N, 4) unit quaternions (x, y, z, w); all NaN for a position-only source
     # Optional per-pose marginal covariances kept for consistency metrics:
     # orientation (N, 3, 3) rad^2 and position (N, 3, 3) m^2.
     cov_rot: np.ndarray | None = field(default=None, repr=False)
@@ -27,6 +38,12 @@ class Trajectory:
 
     def __len__(self) -> int:
         return len(self.t)
+
+    @property
+    def position_only(self) -> bool:
+        """Whether the source gave positions only (``t x y z``): its orientations are NaN, never a
+        rotation invented from positions, and they stay NaN through every stage's artifacts."""
+        return len(self.q) > 0 and bool(np.isnan(self.q[0]).all())
 
     @property
     def r(self) -> np.ndarray:
@@ -61,6 +78,12 @@ class Trajectory:
 
     def length(self) -> float:
         return float(geometry.path_distances(self.p)[-1]) if len(self) else 0.0
+
+    @staticmethod
+    def positions(t, p) -> Trajectory:
+        """A position-only trajectory: its orientations unknown (NaN)."""
+        t = np.asarray(t, float)
+        return Trajectory(t, np.asarray(p, float), np.full((len(t), 4), np.nan))
 
     @staticmethod
     def from_rp(t, r, p, **extra) -> Trajectory:

@@ -181,11 +181,14 @@ def evaluate(
     time_delta: float = 1.0,
     time_tol: float = 0.1,
     rpe=(),
+    discrepancy: np.ndarray | None = None,
 ) -> tuple[dict, dict]:
-    """All metrics of one case. Returns (summary dict for metrics.json, per-pose/per-pair tables)."""
+    """All metrics of one case. Returns (summary dict for metrics.json, per-pose/per-pair tables).
+    ``discrepancy``: D = Q P^T of every matched pose when not the poses' own (position-only: I)."""
     if len(ref) != len(est):
         raise EpaError("reference and estimate must be matched pose for pose")
-    d = geometry.pose_discrepancy(ref.q, est.q)  # once, shared by every metric below
+    # once, shared by every metric below
+    d = geometry.pose_discrepancy(ref.q, est.q) if discrepancy is None else discrepancy
     trans, rot = ape(ref, est, d)
     dist = geometry.path_distances(ref.p)
     summary = {
@@ -235,3 +238,48 @@ def evaluate(
         er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
         summary["rpe"].append({**spec, "trans_m": stats(et), "rot_deg": stats(er)})
     return summary, tables
+
+
+# ----------------------------------------------------------------------------- position-only estimates
+def position_only_note(which: str) -> str:
+    """Why a case's rotation errors are null; ``which``: :func:`epa.core.trajectory.position_only`."""
+    return (
+        f"{which}: every rotation error is null (no orientation was read and none is derived from"
+        " positions); the RPE's translation error is the world-frame displacement error"
+    )
+
+
+def evaluate_positions(
+    ref: Trajectory, est: Trajectory, *, rpe=(), **settings
+) -> tuple[dict, dict]:
+    """:func:`evaluate` for a position-only estimate: the translation errors with D = I (a relative
+    translation compared in the aligned world frame, |(p_j - p_i) - (q_j - q_i)|: the estimate's
+    orientation at pose i is unknown), every rotation statistic empty (``n`` 0, None) and every
+    per-pose and per-pair rotation error NaN (not a number: no orientation). An RPE whose pairs are
+    chosen by the estimate's rotation angle cannot be formed: an error."""
+    for spec in rpe:
+        side = "reference" if spec.get("pairs_from", "est") == "ref" else "estimate"
+        if spec["unit"] in ("deg", "rad") and (ref if side == "reference" else est).position_only:
+            raise EpaError(
+                f"rpe delta {spec['delta']:g} {spec['unit']}: its pairs are chosen by the {side}'s"
+                f" rotation angle, and the {side} is position-only (no orientation); use frames, m or s"
+                + (" or pairs_from: ref" if side == "estimate" and not ref.position_only else "")
+            )
+    identity = np.zeros((len(ref), 4))
+    identity[:, 3] = 1.0
+    summary, tables = evaluate(ref, est, rpe=rpe, discrepancy=identity, **settings)
+    for table in tables.values():
+        if "rot_deg" in table:
+            table["rot_deg"] = np.full(len(table["rot_deg"]), np.nan)
+    return null_rotation(summary), tables
+
+
+def null_rotation(record):
+    """``record`` with every ``rot_deg`` statistics emptied (``n`` 0, each statistic None)."""
+    if isinstance(record, list):
+        return [null_rotation(v) for v in record]
+    if not isinstance(record, dict):
+        return record
+    return {
+        k: stats(np.zeros(0)) if k == "rot_deg" else null_rotation(v) for k, v in record.items()
+    }

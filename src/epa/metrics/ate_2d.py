@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from epa.core import geometry
-from epa.core.trajectory import Trajectory
+from epa.core.trajectory import Trajectory, position_only
 from epa.metrics.accuracy import stats
 from epa.metrics.spec import Metric, Table
 
@@ -35,8 +35,9 @@ def errors(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
 
 def compute(ref: Trajectory, est: Trajectory, cfg: dict) -> tuple[dict, dict, list[str]]:
     yaw, trans_xy = errors(ref, est)
+    measured = np.zeros(0) if position_only(ref, est) else yaw  # NaN there: no yaw error at all
     record = {
-        "yaw_deg": stats(yaw),  # signed: its rmse is ov_eval's
+        "yaw_deg": stats(measured),  # signed: its rmse is ov_eval's
         "trans_xy_m": stats(trans_xy),
     }
     return record, {"ape": {"yaw_deg": yaw, "trans_xy_m": trans_xy}}, []
@@ -73,6 +74,7 @@ METRIC = Metric(
     summary=summary,
     compute=compute,
     after="ate",  # its record follows the ATE's in metrics.json
+    orientation=False,  # its planar error stands for a position-only estimate; its yaw is null
     arrays=(),  # its per-pose columns (yaw_deg, trans_xy_m) extend ape.csv
     tables=_TABLES,
 )

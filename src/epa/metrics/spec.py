@@ -73,7 +73,9 @@ class Metric:
       --protocol <key>`` or ``metrics.<key>.enabled``;
     - ``arrays``: its own per-case files; ``tables``: its paper tables;
     - ``documents(record) -> {file name: text}``: small files of its own, written to
-      ``06_metrics/<key>/`` (that folder is removed where the metric is off).
+      ``06_metrics/<key>/`` (that folder is removed where the metric is off);
+    - ``orientation``: whether ``compute`` needs the estimate's orientation (the default); for a
+      position-only estimate (``t x y z``) such a metric's record is None, with a note saying why.
     """
 
     key: str
@@ -89,6 +91,8 @@ class Metric:
     tables: tuple[Table, ...] = ()
     documents: Callable[[dict], dict[str, str]] | None = None
     protocol: bool = False
+    # it needs the estimate's orientation: a position-only case's record is None, with a note
+    orientation: bool = True
 
     def __post_init__(self):
         if not isinstance(self.key, str) or not self.key:

@@ -290,8 +290,10 @@ def steps_lines(m: dict, T: dict) -> list[str]:
             if ext
             else ""
         )
+        # a position-only estimate's Step 2 is off for its own reason, not by the settings
+        meaning = calib.get("step2_reason") or _meaning(status, T)
         two = found + T["s2_not"].format(
-            status=status, meaning=_meaning(status, T), reason=plan.get("reason", "")
+            status=status, meaning=meaning, reason=plan.get("reason", "")
         )
     three = T["s3"].format(
         method=align.get("method"),

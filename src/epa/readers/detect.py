@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from epa.core.errors import EpaError
-from epa.readers.header import named_columns
+from epa.readers.header import named_columns, position_columns
 from epa.readers.table import Table, is_number
 
 # Files that are not text trajectories, by their first bytes: say what they are.
@@ -38,10 +38,11 @@ def detect_format(path: Path, tab: Table) -> str:
 
     A header naming time, position and quaternion columns means ``csv``. A header of the file's
     width that names them otherwise (``t_s``, a byte-order mark, another language) is not guessed
-    at. Without such a header: ``.csv`` with 8+ columns is EuRoC (``qw`` first), else 8 columns
+    at; nor is one naming exactly time, x, y, z (a position-only ``csv``). Without such a header:
+    ``.csv`` with 8+ columns is EuRoC (``qw`` first), else 4 columns position-only ``t x y z``, 8
     TUM, 12 KITTI, 20 OpenVINS."""
     width = tab.rows.shape[1]
-    if named_columns(tab.header, width) is not None:
+    if named_columns(tab.header, width) is not None or position_columns(tab.header, width):
         return "csv"
     if tab.header and len(tab.header) == width and not all(is_number(h) for h in tab.header):
         raise EpaError(
@@ -51,11 +52,11 @@ def detect_format(path: Path, tab: Table) -> str:
         )
     if path.suffix.lower() == ".csv" and width >= 8:
         return "euroc"
-    by_width = {8: "tum", 12: "kitti", 20: "openvins"}
+    by_width = {4: "position", 8: "tum", 12: "kitti", 20: "openvins"}
     if width in by_width:
         return by_width[width]
     raise EpaError(
-        f"cannot tell the format from {width} columns: expected 8 (TUM), 12 (KITTI),"
-        f" 20 (OpenVINS) or a CSV header naming the columns; set {FORMAT_SETTINGS}",
+        f"cannot tell the format from {width} columns: expected 4 (t x y z, position only), 8 (TUM),"
+        f" 12 (KITTI), 20 (OpenVINS) or a CSV header naming the columns; set {FORMAT_SETTINGS}",
         path=str(path),
     )

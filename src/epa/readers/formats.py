@@ -13,10 +13,10 @@ from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.readers.checks import MAX_POSITION_M, Unordered, beyond_reach, in_order
-from epa.readers.header import named_columns
+from epa.readers.header import named_columns, position_columns
 from epa.readers.table import Table, split_fields
 
-FORMATS = ("auto", "tum", "kitti", "euroc", "openvins", "csv")
+FORMATS = ("auto", "tum", "kitti", "euroc", "openvins", "csv", "position")
 TIME_UNITS = ("auto", "s", "ns", "sec_nsec")
 # A stamp this large cannot be seconds (it would be ~30,000 years); it is nanoseconds.
 NS_THRESHOLD = 1e12
@@ -42,17 +42,7 @@ def _finish(
     cov_rot=None,
     cov_pos=None,
 ) -> Trajectory:
-    if time_unit == "sec_nsec":
-        t = _sec_nsec(tab)
-    elif time_unit == "ns" or (
-        time_unit == "auto" and (header_ns or np.median(np.abs(t)) > NS_THRESHOLD)
-    ):
-        if time_unit == "auto" and not header_ns:  # decided by the median: all must agree
-            _check_one_unit(tab, t, ns=True)
-            tab.notes.append("stamps read as nanoseconds (above 1e12, so not seconds)")
-        t = t / 1e9
-    elif time_unit == "auto":
-        _check_one_unit(tab, t, ns=False)
+    t = _seconds(tab, t, time_unit, header_ns)
     _check_positions(tab, p)
     norms = np.linalg.norm(q_xyzw, axis=1)
     zero = norms < 1e-6
@@ -67,6 +57,22 @@ def _finish(
     q = q_xyzw / norms[:, None]
     traj = Trajectory(t, p, q, cov_rot=cov_rot, cov_pos=cov_pos)
     return _check_order(traj, tab, on_unsorted)
+
+
+def _seconds(tab: Table, t: np.ndarray, time_unit: str, header_ns: bool) -> np.ndarray:
+    """The stamps in seconds under ``time_unit`` (``auto``: told by the header or the median)."""
+    if time_unit == "sec_nsec":
+        return _sec_nsec(tab)
+    if time_unit == "ns" or (
+        time_unit == "auto" and (header_ns or np.median(np.abs(t)) > NS_THRESHOLD)
+    ):
+        if time_unit == "auto" and not header_ns:  # decided by the median: all must agree
+            _check_one_unit(tab, t, ns=True)
+            tab.notes.append("stamps read as nanoseconds (above 1e12, so not seconds)")
+        return t / 1e9
+    if time_unit == "auto":
+        _check_one_unit(tab, t, ns=False)
+    return t
 
 
 def _check_one_unit(tab: Table, t: np.ndarray, *, ns: bool) -> None:
@@ -158,11 +164,30 @@ def read_euroc(tab: Table, *, time_unit="auto", on_unsorted="error", **_) -> Tra
     return _finish(tab, rows[:, 0], rows[:, 1:4], q, time_unit=time_unit, on_unsorted=on_unsorted)
 
 
+def read_positions(tab: Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
+    """Position-only ``t x y z`` rows (GNSS, UWB, some LiDAR odometry): orientations stay unknown."""
+    rows = tab.rows
+    if rows.shape[1] != 4:
+        tab.fail(0, f"position needs 4 columns (t x y z), found {rows.shape[1]}")
+    return _positions(tab, rows[:, 0], rows[:, 1:4], time_unit, False, on_unsorted)
+
+
+def _positions(tab: Table, t, p, time_unit: str, header_ns: bool, on_unsorted: str) -> Trajectory:
+    t = _seconds(tab, t, time_unit, header_ns)
+    _check_positions(tab, p)
+    tab.notes.append("position only: no orientation, so every rotation quantity is null")
+    return _check_order(Trajectory.positions(t, p), tab, on_unsorted)
+
+
 def read_named_csv(tab: Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
     cols = named_columns(tab.header, tab.rows.shape[1])
+    only = position_columns(tab.header, tab.rows.shape[1]) if cols is None else None
+    if only is not None:
+        p = tab.rows[:, [only["px"], only["py"], only["pz"]]]
+        return _positions(tab, tab.rows[:, only["t"]], p, time_unit, only["ns"], on_unsorted)
     if cols is None:
         raise EpaError(
-            "the header does not name time, x, y, z, qx, qy, qz, qw columns"
+            "the header does not name time, x, y, z, qx, qy, qz, qw columns (or only t, x, y, z)"
             f" (header: {', '.join(tab.header or ['none'])})",
             path=str(tab.path),
         )
@@ -224,6 +249,7 @@ READERS = {
     "euroc": read_euroc,
     "csv": read_named_csv,
     "kitti": read_kitti,
+    "position": read_positions,
 }
 
 

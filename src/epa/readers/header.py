@@ -80,6 +80,34 @@ def named_columns(header: list[str] | None, width: int) -> dict | None:
     if not header or len(header) != width:
         return None
     names = [_norm_name(h) for h in header]
+    cols = _pose_names(names)
+    if not {"t", "px", "py", "pz", "qx", "qy", "qz", "qw"} <= cols.keys():
+        return None
+    cols["ns"] = _in_ns(header)
+    for kind, alternatives in _COV_NAMES.items():
+        for names6 in alternatives:
+            if all(c in names for c in names6):
+                cols["cov_" + kind] = [names.index(c) for c in names6]
+    return cols
+
+
+def position_columns(header: list[str] | None, width: int) -> dict | None:
+    """Map a header naming exactly time and x, y, z (a position-only source) to column indices, or
+    None. Any other column (an orientation, a speed) is not a position-only header: never guessed."""
+    if not header or len(header) != width or width != 4:
+        return None
+    cols = _pose_names([_norm_name(h) for h in header])
+    if set(cols) != {"t", "px", "py", "pz"}:
+        return None
+    return {**cols, "ns": _in_ns(header)}
+
+
+def _in_ns(header: list[str]) -> bool:
+    return any("[ns]" in h.lower() or h.lower().endswith("_ns") for h in header)
+
+
+def _pose_names(names: list[str]) -> dict:
+    """The time, position and quaternion columns that normalised header ``names`` name."""
     cols: dict = {}
     for k, n in enumerate(names):
         if "t" not in cols and (n in _TIME_NAMES or n.startswith("timestamp")):
@@ -92,11 +120,4 @@ def named_columns(header: list[str] | None, width: int) -> dict | None:
         m = _POS_RE.match(n)
         if m and "p" + m.group(1) not in cols:
             cols["p" + m.group(1)] = k
-    if not {"t", "px", "py", "pz", "qx", "qy", "qz", "qw"} <= cols.keys():
-        return None
-    cols["ns"] = any("[ns]" in h.lower() or h.lower().endswith("_ns") for h in header)
-    for kind, alternatives in _COV_NAMES.items():
-        for names6 in alternatives:
-            if all(c in names for c in names6):
-                cols["cov_" + kind] = [names.index(c) for c in names6]
     return cols

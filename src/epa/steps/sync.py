@@ -104,6 +104,14 @@ def angular_speed(traj: Trajectory, step: int = 1) -> tuple[np.ndarray, np.ndarr
     return traj.t[i] + dt / 2, geometry.quat_angle(rel) / dt
 
 
+def linear_speed(traj: Trajectory, step: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """|p_{i+step} - p_i| / dt, stamped at the midpoints: Step 1's signal for a position-only
+    estimate (a world rotation leaves it unchanged; a scale changes its size, not its shape)."""
+    i = np.arange(len(traj) - step)
+    dt = traj.t[i + step] - traj.t[i]
+    return traj.t[i] + dt / 2, np.linalg.norm(traj.p[i + step] - traj.p[i], axis=1) / dt
+
+
 @dataclass
 class OffsetEstimate:
     offset: float  # the offset used (estimated, or the configured fallback)
@@ -261,7 +269,7 @@ def _jackknife_std(
     return float(np.hypot(jack, dt / np.sqrt(12.0)))
 
 
-def _speed_signals(ref: Trajectory, est: Trajectory, speed_interval: float):
+def _speed_signals(ref: Trajectory, est: Trajectory, speed_interval: float, speed=angular_speed):
     """Each side's angular speed over the same interval: the coarser trajectory only sees chord rates
     over its own sample interval, so the finer one is measured over that interval too (the magnitude
     of a mean rate is not the mean of magnitudes), and over at least ``speed_interval``: differencing
@@ -269,8 +277,8 @@ def _speed_signals(ref: Trajectory, est: Trajectory, speed_interval: float):
     rate and biases a gentle motion's peak."""
     dt_ref, dt_est = np.median(np.diff(ref.t)), np.median(np.diff(est.t))
     interval = max(dt_ref, dt_est, speed_interval)
-    t_a, w_a = angular_speed(ref, max(1, int(round(interval / dt_ref))))
-    t_b, w_b = angular_speed(est, max(1, int(round(interval / dt_est))))
+    t_a, w_a = speed(ref, max(1, int(round(interval / dt_ref))))
+    t_b, w_b = speed(est, max(1, int(round(interval / dt_est))))
     return t_a, w_a, t_b, w_b
 
 
@@ -330,6 +338,7 @@ def estimate_offset(
     speed_interval: float = 0.1,
     fallback: float = 0.0,
     max_samples: int = 2_000_000,
+    speed=angular_speed,
 ) -> OffsetEstimate:
     """Time offset by cross-correlating angular-speed signals on a uniform timeline (FFT).
 
@@ -352,6 +361,9 @@ def estimate_offset(
         Angular speed is measured over at least this interval (s).
     fallback : float
         The offset returned when the estimate is not trusted.
+    speed : callable
+        The signal: :func:`angular_speed` (rad/s), or :func:`linear_speed` (m/s) for a position-only
+        estimate; ``min_motion`` is in its unit.
 
     Returns
     -------
@@ -360,9 +372,9 @@ def estimate_offset(
 
     if len(ref) < 4 or len(est) < 4:
         return _not_used(fallback, Step1Status.TOO_LITTLE_MOTION, "too few poses for a correlation")
-    t_a, w_a, t_b, w_b = _speed_signals(ref, est, speed_interval)
+    t_a, w_a, t_b, w_b = _speed_signals(ref, est, speed_interval, speed)
     motion = dict(ref_motion_rad_s=float(np.std(w_a)), est_motion_rad_s=float(np.std(w_b)))
-    refused = _signals_refused(t_a, t_b, motion, window, min_motion)
+    refused = _signals_refused(t_a, t_b, motion, window, min_motion, speed is linear_speed)
     if refused is not None:
         return _not_used(fallback, *refused, **motion)
     w_a, w_b = _clip_spikes(w_a), _clip_spikes(w_b)
@@ -392,14 +404,16 @@ def estimate_offset(
     )
 
 
-def _signals_refused(t_a, t_b, motion: dict, window: float, min_motion: float):
-    """Why the angular-speed signals cannot give an offset (a status and the reason), or None."""
+def _signals_refused(t_a, t_b, motion: dict, window: float, min_motion: float, linear=False):
+    """Why the speed signals cannot give an offset (a status and the reason), or None."""
     weakest = min(motion.values())
     if weakest < min_motion:
+        what = (
+            "linear motion (std of speed" if linear else "rotational motion (std of angular speed"
+        )
         return (
             Step1Status.TOO_LITTLE_MOTION,
-            f"too little rotational motion (std of angular speed {weakest:.3g}"
-            f" rad/s < {min_motion})",
+            f"too little {what} {weakest:.3g} {'m/s' if linear else 'rad/s'} < {min_motion})",
         )
     if t_b[0] > t_a[-1] + window or t_b[-1] < t_a[0] - window:
         return (

@@ -38,6 +38,9 @@ class Cell:
             return "- / -" if self.pair else "-"
         parts = []
         for k, v in enumerate(self.values):
+            if v is None:  # no such number at all (a position-only estimate's rotation)
+                parts.append("-")
+                continue
             text = "nan" if np.isnan(v) else f"{v:.{decimals}f}"
             if spread != "none" and self.runs is not None and not np.isnan(v):
                 pm = statistics.spread(self.runs[:, k], spread)
@@ -51,8 +54,22 @@ def average_cell(cells: list[Cell], pair=True) -> Cell:
     have = [c.values for c in cells if c.values is not None]
     if not have:
         return Cell(None, pair)
-    arr = np.array(have, float)
-    return Cell(tuple(nanmean(arr[:, k]) for k in range(arr.shape[1])), pair)
+    arr = np.array([[num(v) for v in values] for values in have], float)
+    none = [all(values[k] is None for values in have) for k in range(arr.shape[1])]
+    return Cell(tuple(None if none[k] else nanmean(arr[:, k]) for k in range(arr.shape[1])), pair)
+
+
+def position_only(c) -> bool:
+    """Whether a case's estimate is position-only (its rotation errors are null)."""
+    return bool(c.metrics.get("position_only"))
+
+
+def rotation_marked(cell: Cell, runs) -> Cell:
+    """A rotation / translation cell whose runs are all position-only: its rotation is no number
+    at all (printed ``-``), never a nan that reads as a failed computation."""
+    if runs and cell.values is not None and all(position_only(c) for c in runs):
+        cell.values = (None, *cell.values[1:])
+    return cell
 
 
 def ok_runs(grid, alg, ds=None):
@@ -88,7 +105,7 @@ def mean_over_runs(runs, of) -> Cell:
 
 
 def ate_cell(runs, valid: bool) -> Cell:
-    return mean_over_runs(runs, lambda c: run_ate(c, valid))
+    return rotation_marked(mean_over_runs(runs, lambda c: run_ate(c, valid)), runs)
 
 
 def _per_run(runs, table: str, valid: bool, length=None) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -125,9 +142,10 @@ def _pooled_cell(runs, table, valid, length, of, width: int) -> Cell:
 def mean_pair_cell(runs, table, valid, length=None) -> Cell:
     if not runs:
         return Cell(None)
-    return _pooled_cell(
+    cell = _pooled_cell(
         runs, table, valid, length, lambda rot, trans: (float(rot.mean()), float(trans.mean())), 2
     )
+    return rotation_marked(cell, runs)
 
 
 def drift_rate_cell(runs, valid, length) -> Cell:

@@ -14,6 +14,7 @@ from epa.outputs.tables.cells import (
     mean_over_runs,
     mean_pair_cell,
     ok_runs,
+    rotation_marked,
     success_auc_cell,
     success_cell,
 )
@@ -233,7 +234,7 @@ def _metric_table(layout: _Layout, metric, spec):
         runs = [c for c in runs if spec.has(c.record_of(metric))]
         cell = mean_over_runs(runs, lambda c: spec.per_run(c.record_of(metric)))
         cell.pair = spec.pair
-        return cell
+        return rotation_marked(cell, runs) if spec.pair else cell
 
     def marked(alg):
         if not spec.missing or has(alg):

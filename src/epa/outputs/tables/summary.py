@@ -10,8 +10,10 @@ import numpy as np
 from epa.metrics import registry
 from epa.metrics.accuracy import segment_key
 from epa.metrics.drift import CURVE_FACTORS
-from epa.outputs.tables.cells import num, ok_runs, stat
+from epa.outputs.tables.cells import num, ok_runs, position_only, stat
 from epa.outputs.tables.results import CaseResult
+
+POSITION_ONLY_NOTE = "position-only estimate: its rotation columns are nan (no orientation)"
 
 BASE_COLUMNS = [
     "algorithm",
@@ -106,7 +108,9 @@ def summary_rows(grid: list[CaseResult], segments, metrics=None) -> tuple[list[s
             # a stage after drift that failed (a broken timing file) leaves the accuracy standing
             failed = [r["failed"] for r in c.records.values() if r.get("failed")]
             warned = [w for w in (c.record_of(m).get("warning") for m in registry.REGISTRY) if w]
-            row["notes"] = "; ".join(failed + warned) or None
+            # a position-only estimate's rotation columns are nan for want of an orientation
+            only = [POSITION_ONLY_NOTE] if position_only(c) else []
+            row["notes"] = "; ".join(failed + warned + only) or None
             for s in segments:
                 L = segment_key(s)
                 row[f"rpe_{L}m_trans_mean_m"] = stat(m, "rpe_distance", L, "trans_m", "mean")

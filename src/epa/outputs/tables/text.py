@@ -48,8 +48,11 @@ def report_text(
             if ate.values is None:
                 lines.append("        ATE: - / - (0 runs)")
             else:
+                ori = (
+                    "-" if ate.values[0] is None else f"{ate.values[0]:.3f}"
+                )  # position-only: none
                 lines.append(
-                    f"        ATE: mean_ori = {ate.values[0]:.3f} | mean_pos = {ate.values[1]:.3f} ({len(runs)} runs)"
+                    f"        ATE: mean_ori = {ori} | mean_pos = {ate.values[1]:.3f} ({len(runs)} runs)"
                 )
             src = {"epa": 0, "ov_eval": 0, "rpg": 0}
             for c in runs:
@@ -62,7 +65,7 @@ def report_text(
                     rot, trans = pooled(runs, "segments", False, s)
                     if rot.size:
                         lines.append(
-                            f"        RPE: seg {segment_key(s)} - median_ori = {np.median(rot):.4f} | "
+                            f"        RPE: seg {segment_key(s)} - median_ori = {_ori(rot, np.median, 4)} | "
                             f"median_pos = {np.median(trans):.4f} ({rot.size} samples)"
                         )
                     else:
@@ -72,7 +75,7 @@ def report_text(
                 rot, trans = pooled(runs, "time", False)
                 if rot.size:
                     lines.append(
-                        f"        RPE time 1s - mean_ori = {rot.mean():.3f} | mean_pos = {trans.mean():.3f}"
+                        f"        RPE time 1s - mean_ori = {_ori(rot, np.mean, 3)} | mean_pos = {trans.mean():.3f}"
                         f" ({rot.size} samples)"
                     )
                 sr_d = nanmean(c.drift["success_rate_distance_pct"] for c in runs)
@@ -95,3 +98,8 @@ def report_text(
             RULE_LONG,
         ]
     return "\n".join(lines) + "\n"
+
+
+def _ori(rot: np.ndarray, of, decimals: int) -> str:
+    """A rotation statistic; ``-`` where every error is NaN: a position-only estimate has none."""
+    return "-" if np.isnan(rot).all() else f"{of(rot):.{decimals}f}"

@@ -6,7 +6,8 @@ rpg_trajectory_evaluation's (``align.method`` and ``align.first_n`` are its ``al
 from __future__ import annotations
 
 from epa.artifacts.case import CaseData
-from epa.core.trajectory import Trajectory
+from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory, position_only
 from epa.steps import align as alignment
 from epa.steps import rpg
 from epa.steps.plan import alignment_of
@@ -21,6 +22,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, calib_info: dict):
     plan = calib_info["plan"]
     method, first_n = alignment_of(plan, cfg)
     if plan["eval_source"] == "rpg":
+        _orientation_needed(ref, est, method, first_n)
         fit, aligned = rpg.fit(ref, est, method, first_n)
     else:
         fit = alignment.fit(ref, est, method=method, first_n=first_n)
@@ -40,3 +42,13 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     data.folder.write_record(NAME, "transform.json", info)
     if write_arrays:
         data.folder.write_tum(NAME, "aligned.tum", aligned)
+
+
+def _orientation_needed(ref: Trajectory, est: Trajectory, method: str, first_n: int) -> None:
+    """rpg aligns se3 / posyaw on one pose by its orientations: a position-only side has none."""
+    which = position_only(ref, est)
+    if which and first_n == 1 and method in ("se3", "posyaw"):
+        raise EpaError(
+            f"align.first_n 1 with {method} in mode rpg aligns on the first pose's orientation, and"
+            f" {which} (no orientation); align on 2 or more poses"
+        )

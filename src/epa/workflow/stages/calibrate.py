@@ -7,7 +7,7 @@ import logging
 import math
 
 from epa.artifacts.case import CaseData
-from epa.core.trajectory import Trajectory
+from epa.core.trajectory import Trajectory, position_only
 from epa.steps import calibrate as calibration
 from epa.steps.plan import evaluation_plan
 from epa.workflow.stages.sync import associate
@@ -51,6 +51,15 @@ UNDEFINED_UNCERTAINTY = (
 )
 
 
+def position_only_reason(which: str) -> str:
+    """Why Step 2 is off where a side is position-only (docs/inputs.md says more)."""
+    return (
+        f"{which}: the hand-eye equations need both sides' relative rotations; a lever arm alone"
+        " would have to be fitted jointly with Step 3's alignment, which is not done (an offset of"
+        " the tracked point from the body stays in the translation errors)"
+    )
+
+
 def extrinsic_record(ext: calibration.Extrinsic) -> dict:
     """The extrinsic's record (calibrate.json's ``extrinsic``): an undefined uncertainty entry is
     None, with a note, never NaN."""
@@ -87,7 +96,10 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict, croppe
         ),
     }
     ext = None
-    if plan["eval_source"] == "epa" and c["enabled"]:
+    if plan["eval_source"] == "epa" and c["enabled"] and position_only(ref, est):
+        info["step2_status"] = calibration.Step2Status.DISABLED
+        info["step2_reason"] = position_only_reason(position_only(ref, est))
+    elif plan["eval_source"] == "epa" and c["enabled"]:
         # Step 2 compares each estimate pose with the reference at its very instant: a matched
         # reference pose may be up to max_diff away, which biases the lever arm (1 cm at 8 m/s and a
         # 50 Hz reference). Step 1's uncertainty is carried into Step 2's (a configured offset is exact).

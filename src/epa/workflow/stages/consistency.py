@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 
 from epa.artifacts.case import CaseData
+from epa.core.trajectory import position_only
 from epa.metrics import consistency
 from epa.steps.align import Similarity
 from epa.steps.calibrate import Extrinsic
@@ -25,7 +26,14 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     extrinsic = (
         Extrinsic.from_dict(calib["extrinsic"]) if calib["plan"]["apply_extrinsic"] else None
     )
-    summary, table = consistency.evaluate(ref, est, Similarity.from_dict(data.transform), extrinsic)
+    which = position_only(ref, est)
+    if est.cov_rot is not None and which:
+        reason = f"{which}: the NEES needs the rotation errors"
+        summary, table = {"available": False, "reason": reason}, {}
+    else:
+        summary, table = consistency.evaluate(
+            ref, est, Similarity.from_dict(data.transform), extrinsic
+        )
     if summary.get("available") is False and summary.get("reason"):
         log.info("consistency: %s", summary["reason"])
     data.consistency_record, data.nees = summary, table

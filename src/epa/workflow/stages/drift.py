@@ -3,8 +3,11 @@ the metrics stage's per-pose and per-pair errors (07_drift/)."""
 
 from __future__ import annotations
 
+import numpy as np
+
 from epa.artifacts.case import CaseData
 from epa.metrics import drift
+from epa.metrics.accuracy import null_rotation
 
 NAME = "drift"
 SETTINGS = ("drift", "metrics")
@@ -63,6 +66,8 @@ def compute(tables: dict, cfg: dict):
             if det["ape_p5_m"] is not None
             else "globally failed: no finite APE"
         )
+    if len(ape["rot_deg"]) and np.isnan(ape["rot_deg"]).all():  # a position-only estimate
+        summary["drift_valid"] = null_rotation(valid)
     if notes:  # why a drift-valid quantity is empty (None); absent when none is
         summary["notes"] = notes
     artifacts = {

@@ -8,7 +8,7 @@ import logging
 
 from epa.artifacts.case import Case, CaseData
 from epa.core.errors import EpaError
-from epa.core.trajectory import Trajectory
+from epa.core.trajectory import Trajectory, position_only
 from epa.metrics import accuracy, registry
 from epa.readers.image_stamps import read_image_stamps
 
@@ -49,7 +49,8 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
             f"the reference does not move ({length:.3g} m over the matched poses): distance RPE,"
             " drift rate and success rate are undefined"
         )
-    summary, tables = accuracy.evaluate(
+    which = position_only(ref, est)  # a side without orientation: every rotation error null
+    summary, tables = (accuracy.evaluate_positions if which else accuracy.evaluate)(
         ref,
         est,
         segments=c["segments"],
@@ -67,8 +68,14 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
     ]
     summary["notes"] += empty_relative_notes(summary, c)
     records = {}
+    if which:
+        summary["position_only"] = True
+        summary["notes"].append(accuracy.position_only_note(which))
     for metric in registry.computed_in(NAME):
-        if metric.enabled(cfg):
+        if metric.enabled(cfg) and which and metric.orientation:
+            records[metric.key] = None  # never a rotation invented from positions
+            summary["notes"].append(f"{metric.key}: null: it needs orientations ({which})")
+        elif metric.enabled(cfg):
             extra = {k: inputs[k]() for k in metric.inputs}
             records[metric.key], arrays, notes = metric.compute(ref, est, cfg, **extra)
             for name, columns in arrays.items():
@@ -170,7 +177,7 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     for metric in registry.computed_in(NAME):
         if metric.documents is not None:  # small files of its own, in 06_metrics/<key>/
             folder.remove_folder(NAME, metric.key)
-            if metric.key in record:
+            if record.get(metric.key) is not None:
                 for name, text in metric.documents(record[metric.key]).items():
                     folder.write_text(NAME, f"{metric.key}/{name}", text)
     folder.write_record(NAME, "metrics.json", record)

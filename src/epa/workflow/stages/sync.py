@@ -1,4 +1,5 @@
-"""Step 1: the time offset by cross-correlating angular speed, then association (03_sync/)."""
+"""Step 1: the time offset by cross-correlating angular speed (linear speed for a position-only
+estimate), then association (03_sync/)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import math
 
 from epa.artifacts.case import CaseData
 from epa.core.errors import EpaError
-from epa.core.trajectory import Trajectory
+from epa.core.trajectory import Trajectory, position_only
 from epa.steps import sync
 
 log = logging.getLogger("epa")
@@ -37,6 +38,8 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict):
             k: None if isinstance(v, float) and math.isnan(v) else v
             for k, v in est_off.to_dict().items()
         }
+        if position_only(ref, est):
+            info["step1"] = linear_record(info["step1"], position_only(ref, est))
         offset = est_off.offset
         curve = {"lag_s": est_off.curve_lag, "corr": est_off.curve_corr}
     else:
@@ -73,7 +76,18 @@ def offset_step(ref: Trajectory, est: Trajectory, cfg: dict) -> sync.OffsetEstim
         max_std=c["max_offset_std"],
         speed_interval=c["speed_interval"],
         fallback=c["offset"],
+        speed=sync.linear_speed if position_only(ref, est) else sync.angular_speed,
     )
+
+
+def linear_record(step1: dict, which: str) -> dict:
+    """Step 1's record where a side is position-only (``which``): its signal is the linear speed,
+    in m/s."""
+    rename = {"ref_motion_rad_s": "ref_motion_m_s", "est_motion_rad_s": "est_motion_m_s"}
+    return {
+        "signal": f"linear speed ({which}: no angular speed)",
+        **{rename.get(k, k): v for k, v in step1.items()},
+    }
 
 
 def associate(ref: Trajectory, est: Trajectory, c: dict, offset: float):
