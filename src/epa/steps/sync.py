@@ -90,7 +90,7 @@ def associate(
     """Indices (i_ref, i_est) of matched poses under the chosen policy."""
     if policy not in POLICIES:
         raise EpaError(f"unknown sync policy {policy!r}; choose one of {', '.join(POLICIES)}")
-    max_diff = POLICIES[policy] if max_diff is None else max_diff
+    max_diff = POLICIES[Policy(policy)] if max_diff is None else max_diff
     fn = {"ov_eval": associate_ov_eval, "evo": associate_evo, "rpg": associate_rpg}[policy]
     return fn(ref.t, est.t, max_diff, offset)
 
@@ -240,7 +240,7 @@ def _jackknife_std(
     span_c = (span[0] // q, min(span[1] // q, len(b_c) - 1))
     starts = np.linspace(0, span_c[1] + 1 - span_c[0], blocks + 1).astype(int)[:-1]
     centre, reach_c = int(round(peak_lag / q)), max(3, reach // q)
-    columns: dict[int, np.ndarray] = {}
+    columns: dict[np.integer, np.ndarray] = {}  # keyed by the lags as numpy gives them
     half = min(16, reach_c)
     while True:
         lags = np.arange(centre - half, centre + half + 1)
@@ -409,7 +409,7 @@ def _signals_refused(t_a, t_b, motion: dict, window: float, min_motion: float):
     return None
 
 
-def _not_used(fallback: float, status: Step1Status, reason: str, **kw) -> OffsetEstimate:
+def _not_used(fallback: float, status: Step1Status, reason: str, /, **kw) -> OffsetEstimate:
     """The fallback offset, with why the estimate (``estimated``, when there is one) is not used."""
     return OffsetEstimate(
         offset=fallback,

@@ -87,7 +87,7 @@ def empty_relative_notes(summary: dict, c: dict) -> list[str]:
     """Why the 1 s RPE and each evo-style RPE without a pair of poses are empty (their statistics
     are None): one note each, as for a segment length that does not fit."""
     notes = []
-    if summary["rpe_time_1s"]["trans_m"]["n"] == 0:
+    if summary[accuracy.time_rpe_key(c["time_delta"])]["trans_m"]["n"] == 0:
         delta = c["time_delta"]
         notes.append(
             f"no two matched poses are {delta:g} s (±{100 * c['time_tol']:g} %) apart in"
