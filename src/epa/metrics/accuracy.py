@@ -6,12 +6,13 @@ errors when it keeps only the valid ones.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from epa.core import geometry
 from epa.core.errors import EpaError
+from epa.core.records import AccuracyRecord
 from epa.core.stamps import closest_pairs
 from epa.core.trajectory import Trajectory
 
@@ -214,7 +215,7 @@ def evaluate(
     time_delta: float = 1.0,
     time_tol: float = 0.1,
     rpe=(),
-) -> tuple[dict, dict]:
+) -> tuple[AccuracyRecord, dict]:
     """All metrics of one case. Returns (summary dict for metrics.json, per-pose/per-pair tables)."""
     if len(ref) != len(est):
         raise EpaError("reference and estimate must be matched pose for pose")
@@ -273,4 +274,5 @@ def evaluate(
         )
         er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
         summary["rpe"].append({**spec, "trans_m": stats(et), "rot_deg": stats(er)})
-    return summary, tables
+    # built as a plain dict: the time RPE's key follows time_delta, which a TypedDict cannot name
+    return cast(AccuracyRecord, summary), tables

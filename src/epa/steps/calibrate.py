@@ -10,11 +10,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from epa.core import geometry
+from epa.core.records import ExtrinsicRecord
 from epa.core.stamps import closest_pairs
 from epa.core.trajectory import Trajectory
 
@@ -76,8 +77,8 @@ class Extrinsic:
             status=d.get("status", "trusted" if d["trusted"] else "untrusted"),
         )
 
-    def to_dict(self) -> dict:
-        return {
+    def to_dict(self) -> ExtrinsicRecord:
+        record = {
             "trusted": self.trusted,
             "status": self.status,
             "reason": self.reason,
@@ -89,6 +90,8 @@ class Extrinsic:
             "scale": float(self.scale),
             **self.info,
         }
+        # info's keys are the solve's, gathered as far as it got: ExtrinsicRecord's NotRequired ones
+        return cast(ExtrinsicRecord, record)
 
 
 def _kabsch(beta: np.ndarray, alpha: np.ndarray):

@@ -13,6 +13,7 @@ import numpy as np
 
 from epa.core import geometry
 from epa.core.errors import EpaError
+from epa.core.records import Step1Record
 from epa.core.stamps import nearest_from
 from epa.core.trajectory import Trajectory
 from epa.steps import rpg
@@ -122,8 +123,22 @@ class OffsetEstimate:
     curve_lag: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     curve_corr: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
-    def to_dict(self) -> dict:
-        return {k: v for k, v in self.__dict__.items() if not k.startswith("curve_")}
+    def to_dict(self) -> Step1Record:
+        """sync.json's ``step1`` (the stage turns a NaN figure into None)."""
+        return Step1Record(
+            offset=self.offset,
+            estimated=self.estimated,
+            used=self.used,
+            reason=self.reason,
+            status=self.status,
+            std=self.std,
+            peak_corr=self.peak_corr,
+            peak_ratio=self.peak_ratio,
+            beyond_window_corr=self.beyond_window_corr,
+            ref_motion_rad_s=self.ref_motion_rad_s,
+            est_motion_rad_s=self.est_motion_rad_s,
+            dt=self.dt,
+        )
 
 
 class Step1Status(StrEnum):

@@ -48,7 +48,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
             f"the reference does not move ({length:.3g} m over the matched poses): distance RPE,"
             " drift rate and success rate are undefined"
         )
-    summary, tables = accuracy.evaluate(
+    evaluated, tables = accuracy.evaluate(
         ref,
         est,
         segments=c["segments"],
@@ -57,6 +57,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
         time_tol=c["time_tol"],
         rpe=c["rpe"],
     )
+    summary: dict = dict(evaluated)  # metrics.json grows from here (records.MetricsRecord)
     summary["est_length_m"] = est.length()  # the aligned estimate's matched path (EA-Drift's L)
     # an empty segment length is shown as empty, never as a number; say why once, here
     summary["notes"] = [
