@@ -3,6 +3,7 @@ tables (the .tex files and error_comparison.txt's titles), its summary.csv colum
 report's row. The default's names (1 s) are the golden copies' (tests/test_golden.py)."""
 
 import csv
+import dataclasses
 import json
 
 import pytest
@@ -82,3 +83,17 @@ def test_the_case_report_row_names_the_interval(two_seconds):
     out, _, _ = two_seconds
     report = (out / "10_report/report_en.md").read_text()
     assert "RPE 2 s (m / deg)" in report and "RPE 1 s" not in report
+
+
+def test_a_table_after_the_time_rpe_follows_it_under_any_interval(two_seconds):
+    """A metric's Table.after names the base tables as BASE_TABLES spells them (the default's)."""
+    from epa.metrics import ate_2d
+    from epa.outputs.tables.latex import build_tables
+    from epa.outputs.tables.results import collect
+
+    _, results, cfg = two_seconds
+    grid = collect([CASE], results)
+    table = dataclasses.replace(ate_2d.METRIC.tables[0], after="rpe_time_1s")
+    moved = dataclasses.replace(ate_2d.METRIC, tables=(table,))
+    names = [t[0] for t in build_tables(grid, [8.0], metrics=(moved,), time_delta=2.0)]
+    assert names[names.index("rpe_time_2s") + 1] == table.name

@@ -1,9 +1,10 @@
 """Local drift/fail detection, success rate and drift-valid metrics (seed 000, issue 4).
 
-Signals are computed on the final aligned case: the 1 s time-RPE pairs and the APE translation
-series. A pose is invalid when a 1 s pair spanning it has a translation error above the threshold
-(or not finite), or when it lies in an APE growth stretch. An interval between consecutive poses
-is valid when both ends are valid. A constant bias never invalidates anything: only growth does.
+Signals are computed on the final aligned case: the time-RPE pairs (``metrics.time_delta``, 1 s by
+default) and the APE translation series. A pose is invalid when a time-RPE pair spanning it has a
+translation error above the threshold (or not finite), or when it lies in an APE growth stretch. An
+interval between consecutive poses is valid when both ends are valid. A constant bias never
+invalidates anything: only growth does.
 """
 
 from __future__ import annotations

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from epa.metrics import accuracy
 from epa.metrics.accuracy import segment_key, time_rpe_key, time_rpe_name
 from epa.outputs.tables.cells import (
     Cell,
@@ -74,12 +75,17 @@ def build_tables(
     ``metrics.time_delta``, which names the time RPE's tables."""
     layout = _Layout.of(grid, decimals, spread)
     out = _base_tables(layout, segments, time_delta)
+    # a Table.after names a base table as BASE_TABLES spells it: the time RPE's under the default
+    named = dict(zip(accuracy.BASE_TABLES, accuracy.base_tables(time_delta)))
     for metric in metrics:
         for spec in metric.tables:
             if text and not spec.in_text:
                 continue
             table = _metric_table(layout, metric, spec)
-            at = next((k + 1 for k, t in enumerate(out) if t[0] == spec.after), len(out))
+            at = next(
+                (k + 1 for k, t in enumerate(out) if t[0] == named.get(spec.after, spec.after)),
+                len(out),
+            )
             out.insert(at, table)
     return out
 
