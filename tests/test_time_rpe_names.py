@@ -97,3 +97,14 @@ def test_a_table_after_the_time_rpe_follows_it_under_any_interval(two_seconds):
     moved = dataclasses.replace(ate_2d.METRIC, tables=(table,))
     names = [t[0] for t in build_tables(grid, [8.0], metrics=(moved,), time_delta=2.0)]
     assert names[names.index("rpe_time_2s") + 1] == table.name
+
+
+def test_a_record_after_the_time_rpe_follows_it_under_any_interval():
+    """A metric's ``after`` names the base record's keys as RECORD_KEYS spells them (the default's)."""
+    from epa.metrics import ate_2d, registry
+
+    moved = dataclasses.replace(ate_2d.METRIC, after="rpe_time_1s")
+    record = {"drift_rate_pct": {}, "rpe_time_2s": {"delta_s": 2.0}, "rpe": []}
+    assert registry.anchor(moved, record, [moved]) == "rpe_time_2s"
+    assert registry.anchor(moved, {"rpe_time_1s": {}, "rpe": []}, [moved]) == "rpe_time_1s"
+    assert registry.anchor(moved, {"rpe": []}, [moved]) is None  # no time RPE: last
