@@ -1753,6 +1753,11 @@ PACKAGE_ROWS = (
         "`epa verify` of a package one of whose tables was edited after packing",
         "1 files changed since packed",
     ),
+    (
+        "manifest-not-a-file",
+        "`epa verify` of an archive whose `package.json` is a folder (or a link), not a file",
+        "not an epica package: its package.json is not a file",
+    ),
 )
 
 

@@ -28,6 +28,7 @@ RUN_HERE = {  # each row of the catalogue's package section is run by a test bel
     "not-an-archive",
     "cut-archive",
     "newer-package",
+    "manifest-not-a-file",
     "escaping-member",
     "wrong-hash-input",
     "input-not-found",
@@ -170,11 +171,17 @@ def test_bad_packages_and_inputs_are_one_line(moved, tmp_path, capsys, monkeypat
         return json.dumps({**json.loads(data), "epica": "99.0.0"}).encode()
 
     future = _rewrite_archive(good, tmp_path / "future.tar.gz", newer)
+    folder = tmp_path / "folder.tar.gz"
+    with tarfile.open(folder, "w:gz") as tar:
+        member = tarfile.TarInfo("package.json")
+        member.type = tarfile.DIRTYPE
+        tar.addfile(member)
     capsys.readouterr()
     for archive, key in (
         (not_one, "not-an-archive"),
         (cut, "cut-archive"),
         (future, "newer-package"),
+        (folder, "manifest-not-a-file"),
     ):
         said = EXPECT[key]
         assert cli.main(["verify", str(archive), "--data", str(moved / "data")]) == 2

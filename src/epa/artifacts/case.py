@@ -59,14 +59,15 @@ class Case:
         parts = key.split("/")
         if len(parts) != 3 or any(not plain_name(p) for p in parts):
             raise EpaError(f"case {key!r} is not <algorithm>/<dataset>/<run> with plain names")
-        return cls(*parts, **inputs)
+        algorithm, dataset, run = parts
+        return cls(algorithm, dataset, run, **inputs)
 
     @classmethod
     def unchecked(cls, key: str) -> Case:
         """The identity of a key that may not be plain (its failure is marked under its own name;
         never used for a path)."""
-        parts = (key.split("/", 2) + ["", ""])[:3]
-        return cls(*parts)
+        algorithm, dataset, run = (key.split("/", 2) + ["", ""])[:3]
+        return cls(algorithm, dataset, run)
 
 
 def plain_name(name: str) -> bool:

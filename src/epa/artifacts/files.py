@@ -321,7 +321,7 @@ def read_tum_file(path) -> Trajectory:
     """Read a TUM artifact this project wrote (no detection, no repair)."""
     rows = _numbers(path, " ", skip=0)
     cov, printed = _WIDTH.get(rows.shape[1], (False, False))  # the columns write_tum wrote
-    extra = {}
+    extra: dict[str, np.ndarray] = {}
     if cov:
         extra.update(cov_rot=upper_to_full(rows[:, 8:14]), cov_pos=upper_to_full(rows[:, 14:20]))
     if printed:

@@ -12,6 +12,7 @@ import logging
 import math
 import sys
 from pathlib import Path
+from typing import Any
 
 from epa import __version__
 from epa.core.errors import EpaError
@@ -573,7 +574,7 @@ def _eval(args) -> None:
     if document.is_file():  # a previous run's: never beside this run's stage folders
         document.unlink()
     _eval_provenance(args, cfg)  # first: the report (--report) lists the inputs from it
-    clock = {"stage": None, "t": time.perf_counter()}
+    clock: dict[str, Any] = {"stage": None, "t": time.perf_counter()}
     size_mb = sum(_input_bytes(p) for p in (args.ref, args.est)) / 1e6
     progress = args.verbose or size_mb >= LARGE_INPUT_MB
     if progress and not args.verbose:
@@ -699,7 +700,7 @@ def _traj(args) -> None:
         for i in infos:
             span = (
                 ""
-                if i.start_s is None
+                if i.start_s is None or i.end_s is None
                 else f"{i.end_s - i.start_s:9.3f} s  {i.start_s:.6f} .. {i.end_s:.6f}"
             )
             mark = "*" if i.supported else " "
@@ -752,7 +753,7 @@ def _selftest(args) -> None:
     from epa.workflow import settings
     from epa.workflow.stages import load
 
-    cfg = {"truth_dir": ".", "algorithms_dir": "."}
+    cfg: dict[str, Any] = {"truth_dir": ".", "algorithms_dir": "."}
     if args.config:
         cfg.update(settings.load_yaml(args.config))
     if args.scale:

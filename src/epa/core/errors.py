@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import os
+
 
 class EpaError(Exception):
     """A user mistake (bad input, impossible setting); reported as one line, never a traceback."""
 
-    def __init__(self, message: str, *, path: str | None = None, line: int | None = None):
+    def __init__(
+        self, message: str, *, path: str | os.PathLike[str] | None = None, line: int | None = None
+    ):
         self.message = message
         self.path = None if path is None else str(path)
         self.line = line

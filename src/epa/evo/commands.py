@@ -160,7 +160,7 @@ def read_source(
     opts = readers.options(settings.defaults(), "reference")
     opts["unsorted"] = unsorted
     if form in ("bag", "bag2", "mcap"):
-        if ":" in topic:  # evo's TF id: /tf:parent.child(:/tf_static)
+        if topic is not None and ":" in topic:  # evo's TF id: /tf:parent.child(:/tf_static)
             tf_topic, _, frames = topic.partition(":")
             frames, _, static_topic = frames.partition(":")
             parent, _, child = frames.partition(".")

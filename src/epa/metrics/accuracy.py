@@ -6,10 +6,13 @@ errors when it keeps only the valid ones.
 
 from __future__ import annotations
 
+from typing import Any, cast
+
 import numpy as np
 
 from epa.core import geometry
 from epa.core.errors import EpaError
+from epa.core.records import AccuracyRecord
 from epa.core.stamps import closest_pairs
 from epa.core.trajectory import Trajectory
 
@@ -26,6 +29,7 @@ RECORD_KEYS = (
     "rpe",
 )
 # the paper tables of these metrics (epa.outputs.tables), in order: what a metric's table can follow
+# (the time RPE's under the default metrics.time_delta: base_tables gives them under any)
 BASE_TABLES = (
     "ate",
     "rpe_distance",
@@ -41,6 +45,36 @@ BASE_TABLES = (
 
 
 STATISTICS = ("rmse", "mean", "median", "std", "min", "max")
+
+
+def time_rpe_name(time_delta: float) -> str:
+    """The time RPE's name under ``metrics.time_delta`` (s): 1.0 -> ``1s``, 2.0 -> ``2s``, 0.5 ->
+    ``0.5s``. Its record in metrics.json and drift.json is ``rpe_time_<name>``, its tables
+    ``rpe_time_<name>`` and ``valid_rpe_time_<name>``, its summary.csv columns ``time_rpe_<name>_*``."""
+    return f"{float(time_delta):g}s"  # as segment_key spells a length
+
+
+def time_rpe_key(time_delta: float) -> str:
+    """The time RPE's record key under ``metrics.time_delta`` (``rpe_time_1s`` at 1 s)."""
+    return "rpe_time_" + time_rpe_name(time_delta)
+
+
+def time_rpe_in(record: dict) -> tuple[str, dict] | None:
+    """The name (``1s``) and entry of the time RPE a written record holds, whatever the
+    ``metrics.time_delta`` it was made with; None without one."""
+    for key, value in record.items():
+        if key.startswith("rpe_time_") and isinstance(value, dict):
+            return key.removeprefix("rpe_time_"), value
+    return None
+
+
+def base_tables(time_delta: float) -> tuple[str, ...]:
+    """BASE_TABLES with the time RPE's tables named after ``metrics.time_delta``."""
+    default, named = time_rpe_key(1.0), time_rpe_key(time_delta)
+    return tuple(
+        named if t == default else f"valid_{named}" if t == f"valid_{default}" else t
+        for t in BASE_TABLES
+    )
 
 
 def stats(x: np.ndarray) -> dict:
@@ -98,8 +132,8 @@ def consecutive_pairs(d: np.ndarray, delta: float):
         if k >= n:
             break
         ids.append(k)
-    ids = np.asarray(ids)
-    return ids[:-1], ids[1:]
+    starts = np.asarray(ids)
+    return starts[:-1], starts[1:]
 
 
 def evo_pairs(
@@ -182,7 +216,7 @@ def evaluate(
     time_tol: float = 0.1,
     rpe=(),
     discrepancy: np.ndarray | None = None,
-) -> tuple[dict, dict]:
+) -> tuple[AccuracyRecord, dict]:
     """All metrics of one case. Returns (summary dict for metrics.json, per-pose/per-pair tables).
     ``discrepancy``: D = Q P^T of every matched pose when not the poses' own (position-only: I)."""
     if len(ref) != len(est):
@@ -191,7 +225,7 @@ def evaluate(
     d = geometry.pose_discrepancy(ref.q, est.q) if discrepancy is None else discrepancy
     trans, rot = ape(ref, est, d)
     dist = geometry.path_distances(ref.p)
-    summary = {
+    summary: dict[str, Any] = {
         "n_matched": len(ref),
         "ref_length_m": float(dist[-1]) if len(dist) else 0.0,
         "duration_s": float(ref.t[-1] - ref.t[0]),
@@ -206,7 +240,9 @@ def evaluate(
         }
     }
 
-    seg_rows = {k: [] for k in ("length_m", "i", "j", "rot_deg", "trans_m")}
+    seg_rows: dict[str, list[np.ndarray]] = {
+        k: [] for k in ("length_m", "i", "j", "rot_deg", "trans_m")
+    }
     summary["rpe_distance"], summary["drift_rate_pct"] = {}, {}
     for length in segments:
         i, j = segment_pairs(dist, float(length), segment_tol)
@@ -222,7 +258,11 @@ def evaluate(
 
     i, j = time_pairs(ref.t, time_delta, time_tol)
     er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
-    summary["rpe_time_1s"] = {"delta_s": time_delta, "trans_m": stats(et), "rot_deg": stats(er)}
+    summary[time_rpe_key(time_delta)] = {
+        "delta_s": time_delta,
+        "trans_m": stats(et),
+        "rot_deg": stats(er),
+    }
     tables["rpe_time"] = {"i": i, "j": j, "t": ref.t[i], "rot_deg": er, "trans_m": et}
 
     summary["rpe"] = []
@@ -237,7 +277,8 @@ def evaluate(
         )
         er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
         summary["rpe"].append({**spec, "trans_m": stats(et), "rot_deg": stats(er)})
-    return summary, tables
+    # built as a plain dict: the time RPE's key follows time_delta, which a TypedDict cannot name
+    return cast(AccuracyRecord, summary), tables
 
 
 # ----------------------------------------------------------------------------- position-only estimates

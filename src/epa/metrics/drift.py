@@ -1,16 +1,19 @@
 """Local drift/fail detection, success rate and drift-valid metrics (seed 000, issue 4).
 
-Signals are computed on the final aligned case: the 1 s time-RPE pairs and the APE translation
-series. A pose is invalid when a 1 s pair spanning it has a translation error above the threshold
-(or not finite), or when it lies in an APE growth stretch. An interval between consecutive poses
-is valid when both ends are valid. A constant bias never invalidates anything: only growth does.
+Signals are computed on the final aligned case: the time-RPE pairs (``metrics.time_delta``, 1 s by
+default) and the APE translation series. A pose is invalid when a time-RPE pair spanning it has a
+translation error above the threshold (or not finite), or when it lies in an APE growth stretch. An
+interval between consecutive poses is valid when both ends are valid. A constant bias never
+invalidates anything: only growth does.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-from epa.metrics.accuracy import drift_rate, segment_key, stats
+from epa.metrics.accuracy import drift_rate, segment_key, stats, time_rpe_key
 
 
 def thresholds(settings: dict, ref_t: np.ndarray, ref_dist: np.ndarray, time_pairs) -> dict:
@@ -141,7 +144,8 @@ def success_curve(t, dist, ape_trans, time_i, time_j, time_trans, th: dict) -> d
         )
         for f in CURVE_FACTORS
     ]
-    auc = None if None in rates else float(np.mean(rates))  # None: a path without length
+    known = [r for r in rates if r is not None]
+    auc = float(np.mean(known)) if len(known) == len(rates) else None  # None: a path without length
     return {
         "factor": CURVE_FACTORS,
         "rpe_trans_max_m": CURVE_FACTORS * th["rpe_trans_max_m"],
@@ -205,9 +209,10 @@ NO_VALID_INTERVAL = (
 
 
 def valid_metrics(
-    det: dict, ape_trans, ape_rot, seg: dict, tpairs: dict, segments
+    det: dict, ape_trans, ape_rot, seg: dict, tpairs: dict, segments, *, time_delta: float
 ) -> tuple[dict, np.ndarray, np.ndarray, list[str]]:
-    """Drift-valid ATE (poses touching a valid interval) and RPE / drift rate / 1 s RPE over valid pairs.
+    """Drift-valid ATE (poses touching a valid interval) and RPE / drift rate / time RPE over valid pairs
+    (the time RPE keyed by ``time_delta``, :func:`epa.metrics.accuracy.time_rpe_key`).
 
     Returns the metrics, the validity of each segment pair and each time pair (all False when
     the case is globally failed or has no valid path) and a note for each drift-valid quantity left
@@ -217,7 +222,7 @@ def valid_metrics(
     touch = np.zeros(len(ape_trans), bool)
     touch[:-1] |= viv
     touch[1:] |= viv
-    out = {
+    out: dict[str, Any] = {
         "ate": {"trans_m": stats(ape_trans[touch]), "rot_deg": stats(ape_rot[touch])},
         "rpe_distance": {},
         "drift_rate_pct": {},
@@ -250,7 +255,7 @@ def valid_metrics(
         if len(tpairs["i"])
         else np.zeros(0, bool)
     )
-    out["rpe_time_1s"] = {
+    out[time_rpe_key(time_delta)] = {
         "trans_m": stats(tpairs["trans_m"][tv]),
         "rot_deg": stats(tpairs["rot_deg"][tv]),
     }

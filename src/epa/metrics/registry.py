@@ -89,8 +89,15 @@ def anchor(metric: Metric, record: dict, metrics: Sequence[Metric] | None = None
     by_key = {m.key: m for m in (REGISTRY if metrics is None else metrics)}
     at = metric.after
     while at is not None and at not in record:
-        at = by_key[at].after if at in by_key else None
+        at = by_key[at].after if at in by_key else _time_rpe_as_named(at, record)
     return at
+
+
+def _time_rpe_as_named(at: str, record: dict) -> str | None:
+    """RECORD_KEYS spells the time RPE as under the default metrics.time_delta (``rpe_time_1s``):
+    for that anchor, the record's own time-RPE key; None for any other."""
+    found = accuracy.time_rpe_in(record) if at == accuracy.time_rpe_key(1.0) else None
+    return None if found is None else "rpe_time_" + found[0]
 
 
 def placement(metrics: Sequence[Metric] | None = None) -> tuple[Metric, ...]:

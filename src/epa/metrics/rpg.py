@@ -425,10 +425,15 @@ def compute(
     }
     rows = [(d, e) for d, e in res["rel"].items() if len(e["pairs"])]
     table = {
-        "distance_m": np.concatenate([np.full(len(e["pairs"]), d) for d, e in rows] or [[]]),
-        "i_start": np.concatenate([e["pairs"][:, 0] for _, e in rows] or [[]]).astype(int),
-        "i_end": np.concatenate([e["pairs"][:, 1] for _, e in rows] or [[]]).astype(int),
-        **{c: np.concatenate([e[m] for _, e in rows] or [[]]) for m, c in REL_COLUMNS.items()},
+        "distance_m": np.concatenate(
+            [np.full(len(e["pairs"]), d) for d, e in rows] or [np.zeros(0)]
+        ),
+        "i_start": np.concatenate([e["pairs"][:, 0] for _, e in rows] or [np.zeros(0)]).astype(int),
+        "i_end": np.concatenate([e["pairs"][:, 1] for _, e in rows] or [np.zeros(0)]).astype(int),
+        **{
+            c: np.concatenate([e[m] for _, e in rows] or [np.zeros(0)])
+            for m, c in REL_COLUMNS.items()
+        },
     }
     notes += [
         f"rpg: fewer than 2 pairs {d} m apart in the {length:.2f} m reference: rpg's statistics at"

@@ -9,6 +9,8 @@ rather than a p presented as evidence.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 ALPHA = 0.05
@@ -146,7 +148,7 @@ def compare(a: dict, b: dict, rpe_a: dict, rpe_b: dict) -> dict:
     shared = sorted(set(a) & set(b))
     mean_a = np.array([np.mean(a[d]) for d in shared])
     mean_b = np.array([np.mean(b[d]) for d in shared])
-    out = {
+    out: dict[str, Any] = {
         "datasets": shared,
         "wins_a": int(np.sum(mean_a < mean_b)),
         "wins_b": int(np.sum(mean_b < mean_a)),

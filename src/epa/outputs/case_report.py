@@ -10,14 +10,15 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from epa import __version__
-from epa.metrics import registry
+from epa.metrics import accuracy, registry
 from epa.outputs import provenance
 
-TEXT = {
+TEXT: dict[str, dict[str, Any]] = {
     "en": {
         "title": "Evaluation of",
         "lead": "Evaluated as `{source}`: {n} matched poses over {length:.1f} m of the reference.",
@@ -32,7 +33,7 @@ TEXT = {
         "ate": "ATE (m / deg)",
         "ate_2d": "ATE 2D (xy m / yaw deg)",
         "rpe_seg": "RPE {L} m (m / deg)",
-        "rpe_1s": "RPE 1 s (m / deg)",
+        "rpe_time": "RPE {delta} s (m / deg)",
         "drift_rate": "drift rate {L} m (%)",
         "valid": "Drift-valid only (fail segments left out)",
         "no_fail": "No fail segment: the drift-valid metrics are the ones above.",
@@ -106,7 +107,7 @@ TEXT = {
         "ate": "ATE (m / deg)",
         "ate_2d": "ATE 2D (xy m / 航向 deg)",
         "rpe_seg": "RPE {L} m (m / deg)",
-        "rpe_1s": "RPE 1 s (m / deg)",
+        "rpe_time": "RPE {delta} s (m / deg)",
         "drift_rate": "漂移率 {L} m (%)",
         "valid": "仅漂移有效部分（去除失效区段）",
         "no_fail": "无失效区段：漂移有效指标与上表相同。",
@@ -197,8 +198,8 @@ STATS = ("rmse", "mean", "median", "max")
 
 
 def metrics_table(m: dict, T: dict) -> list[str]:
-    """Rows ATE, ATE 2D, RPE per segment length, RPE 1 s, drift rate per length; columns RMSE,
-    mean, median, max."""
+    """Rows ATE, ATE 2D, RPE per segment length, time RPE (over the record's ``metrics.time_delta``),
+    drift rate per length; columns RMSE, mean, median, max."""
     lines = [
         f"| {T['row']} | " + " | ".join(T[s] for s in STATS) + " |",
         "|---|" + "---:|" * len(STATS),
@@ -214,8 +215,10 @@ def metrics_table(m: dict, T: dict) -> list[str]:
     segs = m.get("rpe_distance") or {}
     for L, rec in segs.items():
         row(T["rpe_seg"].format(L=L), [_pair(rec, s) for s in STATS])
-    if m.get("rpe_time_1s"):
-        row(T["rpe_1s"], [_pair(m["rpe_time_1s"], s) for s in STATS])
+    time_rpe = accuracy.time_rpe_in(m)
+    if time_rpe is not None and time_rpe[1]:
+        name, rec = time_rpe
+        row(T["rpe_time"].format(delta=name.removesuffix("s")), [_pair(rec, s) for s in STATS])
     for L, rec in segs.items():
         trans = (rec or {}).get("trans_m") or {}
         length = _num(L)

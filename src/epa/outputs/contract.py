@@ -168,7 +168,7 @@ def compare_printed(name: str, a: str, b: str) -> Comparison:
     la, lb = a.splitlines(), b.splitlines()
     if len(la) != len(lb):
         i = next((k for k, (x, y) in enumerate(zip(la, lb)) if x != y), min(len(la), len(lb)))
-        place = Place(f"line {i + 1}", *(_line(lines, i) for lines in (la, lb)))
+        place = Place(f"line {i + 1}", _line(la, i), _line(lb, i))
         return Comparison(name, "printed", Verdict.DIFFERS, place)
     flips = []
     for i, (x, y) in enumerate(zip(la, lb)):
@@ -277,7 +277,7 @@ def _compare_json(a, b, path: str, worst: _Worst, stamp: bool = False) -> None:
     elif _numeric_array(a) and _numeric_array(b) and _shape(a) == _shape(b) is not None:
         fa, fb = _flat(a), _flat(b)
         scale = max(max(map(abs, fa)), max(map(abs, fb)))
-        shape = _shape(a)
+        shape = np.shape(a)  # not ragged: _shape(a) is not None
         for k, (x, y) in enumerate(zip(fa, fb)):
             index = "".join(f"[{i}]" for i in np.unravel_index(k, shape))
             _compare_values(x, y, path + index, scale, stamp, worst)

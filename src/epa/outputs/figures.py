@@ -16,12 +16,16 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from epa.artifacts import files
 from epa.core import runtime
 from epa.core.errors import EpaError
+
+if TYPE_CHECKING:
+    from matplotlib.artist import Artist
 
 OKABE_ITO = ["#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000"]
 STYLES = {  # name: (width in, height in, base font pt)
@@ -131,6 +135,7 @@ def _setup(style: str):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.rcsetup import cycler  # what matplotlib.cycler is; the stubs declare it here
 
     w, h, pt = STYLES[style]
     plt.rcParams.update(
@@ -151,7 +156,7 @@ def _setup(style: str):
             "savefig.dpi": 150,
             "pdf.fonttype": 42,
             "svg.fonttype": "none",
-            "axes.prop_cycle": matplotlib.cycler(color=OKABE_ITO),
+            "axes.prop_cycle": cycler(color=OKABE_ITO),
             # 1e4 and beyond as a power of ten above the axis: tick labels stay short enough for fixed margins
             # no mathtext: parsing it would cost more than drawing
             "axes.formatter.limits": (-3, 4),
@@ -590,7 +595,7 @@ def _lines(plt, b, w, h):
             ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     axes[0, 0].set_ylabel(d["ylabel"])
     # one legend for every panel, under them: inside, it would hide some line of some panel
-    handles = {}
+    handles: dict[str, Artist] = {}
     for ax in axes[0]:
         for handle, label in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(label, handle)

@@ -21,8 +21,10 @@ import socket
 import stat
 import subprocess
 import sys
+from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 from epa import __version__
 
@@ -90,7 +92,7 @@ def where(path, roots: dict[str, str]) -> dict:
     return {}
 
 
-def input_roots(kind: str, cfg: dict, case: dict | None = None) -> dict[str, str]:
+def input_roots(kind: str | None, cfg: dict, case: dict | None = None) -> dict[str, str]:
     """The folders a record's inputs are relative to: a grid's ``truth_dir`` and ``algorithms_dir``;
     a case's reference and estimate folders."""
     if kind == "case" and case:
@@ -105,7 +107,7 @@ def case_inputs(truth, estimate, timing=None) -> list[str]:
     """The files one case reads: each side's file or a ROS 2 bag folder's files, and a timing file."""
     from epa.readers import bags
 
-    paths = set()
+    paths: set[str] = set()
     for p in (truth, estimate):
         try:
             paths.update(str(f) for f in bags.bag_files(p))
@@ -116,7 +118,7 @@ def case_inputs(truth, estimate, timing=None) -> list[str]:
     return sorted(paths)
 
 
-def run_timing(cfg: dict, estimate, algorithm: str):
+def run_timing(cfg: dict, estimate, algorithm: str | None):
     """A run's timing file under ``cfg`` (None when it has none or its configured one is missing)."""
     from epa import readers
     from epa.core.errors import EpaError
@@ -184,7 +186,7 @@ def checkout(folder) -> dict:
 def environment() -> dict:
     """Python, every runtime dependency's version, the platform and what the numbers ran on
     (deterministic on one machine with one environment)."""
-    packages = {}
+    packages: dict[str, str | None] = {}
     for name in RUNTIME_PACKAGES:
         try:
             packages[name] = importlib.metadata.version(name)
@@ -255,26 +257,19 @@ def _cpu_model() -> str:
 def _simd() -> dict:
     """numpy's SIMD: the baseline it was compiled for and the dispatch targets it found on this CPU
     (``numpy.show_runtime()``'s found and not found); NPY_DISABLE_CPU_FEATURES turns targets off."""
-    try:
-        from numpy._core._multiarray_umath import (
-            __cpu_baseline__,
-            __cpu_dispatch__,
-            __cpu_features__,
-        )
+    try:  # by name: the module moved between numpy 1 and 2, and neither has a stub
+        umath = importlib.import_module("numpy._core._multiarray_umath")
     except ImportError:  # numpy 1.26
-        from numpy.core._multiarray_umath import (
-            __cpu_baseline__,
-            __cpu_dispatch__,
-            __cpu_features__,
-        )
+        umath = importlib.import_module("numpy.core._multiarray_umath")
+    dispatch, features = umath.__cpu_dispatch__, umath.__cpu_features__
     return {
-        "baseline": list(__cpu_baseline__),
-        "dispatched": [f for f in __cpu_dispatch__ if __cpu_features__.get(f)],
-        "not_found": [f for f in __cpu_dispatch__ if not __cpu_features__.get(f)],
+        "baseline": list(umath.__cpu_baseline__),
+        "dispatched": [f for f in dispatch if features.get(f)],
+        "not_found": [f for f in dispatch if not features.get(f)],
     }
 
 
-def _library(build: dict) -> dict:
+def _library(build: Mapping[str, Any]) -> dict:
     """A BLAS or LAPACK as numpy or scipy was built with it: its name and version."""
     return {"name": build.get("name"), "version": build.get("version")}
 
@@ -290,15 +285,17 @@ def _scipy_build() -> dict:
             if not origin:
                 return {}
             path = Path(list(origin)[0]) / "__config__.py"
-            spec = importlib.util.spec_from_file_location("_epa_scipy_config", path)
-            module = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(module)
+            config = importlib.util.spec_from_file_location("_epa_scipy_config", path)
+            if config is None or config.loader is None:  # not a file Python can load
+                return {}
+            module = importlib.util.module_from_spec(config)
+            config.loader.exec_module(module)
         except Exception:  # another layout of scipy's: its BLAS is then not recorded
             return {}
     return module.CONFIG.get("Build Dependencies", {})
 
 
-def _openblas(build: dict) -> dict:
+def _openblas(build: Mapping[str, Any]) -> dict:
     """The core type, thread count and configuration numpy's OpenBLAS runs with (chosen at load time
     from the CPU and OPENBLAS_CORETYPE), read through ctypes from the library already loaded:
     /proc/self/maps lists it; its symbols are numpy's build's family (scipy-openblas64: the

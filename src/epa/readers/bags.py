@@ -129,6 +129,8 @@ def _span(reader, conns, count) -> tuple[float | None, float | None]:
     for _, stamp, _ in reader.messages(connections=conns):
         first = stamp if first is None else first
         last = stamp
+    if first is None or last is None:  # the index counted messages the reader does not give
+        return None, None
     return first / 1e9, last / 1e9
 
 
@@ -398,7 +400,7 @@ def _chain(
     for a, b in sorted(edges):
         nbrs.setdefault(a, []).append((b, (a, b), False))
         nbrs.setdefault(b, []).append((a, (a, b), True))
-    prev: dict[str, tuple] = {parent: None}
+    prev: dict[str, tuple | None] = {parent: None}
     queue = [parent]
     while queue:
         f = queue.pop(0)
@@ -412,8 +414,8 @@ def _chain(
         return None
     steps = []
     f = child
-    while prev[f] is not None:
-        f0, edge, inv = prev[f]
+    while (link := prev[f]) is not None:
+        f0, edge, inv = link
         steps.append((edge[0], edge[1], inv))
         f = f0
     return steps[::-1]
@@ -473,7 +475,7 @@ def _read_tf(
     steps = _tf_steps(dynamic, static, parent, child, where)
     series = _tf_series(steps, dynamic, static)
     moving = [e for e, (_, _, is_static) in series.items() if not is_static]
-    if not moving:
+    if not moving or first_ns is None:
         raise EpaError(
             f"the chain {parent} -> {child} is static (only {static_topic}): no trajectory",
             path=where,

@@ -18,6 +18,7 @@ import logging
 import stat
 import warnings
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -255,7 +256,7 @@ def frame_rows(frame) -> np.ndarray:
     return rows
 
 
-def _diagnose(tab: Table):
+def _diagnose(tab: Table) -> NoReturn:
     """The numeric parse failed: find the first offending line, slowly, for the error message."""
     data, numbers = tab.data_lines()
     width = len(split_fields(data[0]))

@@ -9,6 +9,7 @@ import numpy as np
 
 from epa.core import geometry
 from epa.core.errors import EpaError
+from epa.core.records import SimilarityRecord
 from epa.core.trajectory import Trajectory
 
 
@@ -50,7 +51,7 @@ class Similarity:
     def inverse(self) -> Similarity:
         return Similarity(self.R.T, -self.R.T @ self.t / self.s, 1.0 / self.s)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> SimilarityRecord:
         return {
             "rotation": self.R.tolist(),
             "translation": self.t.tolist(),

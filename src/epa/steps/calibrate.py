@@ -10,10 +10,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import StrEnum
+from typing import Any, cast
 
 import numpy as np
 
 from epa.core import geometry
+from epa.core.records import ExtrinsicRecord
 from epa.core.stamps import closest_pairs
 from epa.core.trajectory import Trajectory
 
@@ -75,8 +77,8 @@ class Extrinsic:
             status=d.get("status", "trusted" if d["trusted"] else "untrusted"),
         )
 
-    def to_dict(self) -> dict:
-        return {
+    def to_dict(self) -> ExtrinsicRecord:
+        record = {
             "trusted": self.trusted,
             "status": self.status,
             "reason": self.reason,
@@ -88,6 +90,8 @@ class Extrinsic:
             "scale": float(self.scale),
             **self.info,
         }
+        # info's keys are the solve's, gathered as far as it got: ExtrinsicRecord's NotRequired ones
+        return cast(ExtrinsicRecord, record)
 
 
 def _kabsch(beta: np.ndarray, alpha: np.ndarray):
@@ -123,7 +127,7 @@ def solve(
     ``offset_std`` (s), Step 1's uncertainty, is carried into those deviations: a wrong offset
     pairs each estimate pose with a slightly different reference pose and bends the solution. The
     solve is repeated on the reference moved by +-offset_std and half the difference is added."""
-    fit = dict(
+    fit: dict[str, Any] = dict(
         pair_step=pair_step,
         min_rotation_deg=min_rotation_deg,
         scale=scale,
@@ -178,8 +182,13 @@ def _fit(
     if len(i) < min_pairs:
         return _too_little(f"only {len(i)} motion pairs ({min_pairs} needed)", info)
     qa, ta = geometry.relative_motions(ref.q, ref.p, i, j)
-    kept = (motions or {}).get("pairs")
-    if kept is not None and np.array_equal(kept[0], i) and np.array_equal(kept[1], j):
+    kept = None if motions is None else motions.get("pairs")
+    if (
+        motions is not None
+        and kept is not None
+        and np.array_equal(kept[0], i)
+        and np.array_equal(kept[1], j)
+    ):
         qb, tb, beta = motions["estimate"]
     else:
         qb, tb = geometry.relative_motions(est.q, est.p, i, j)

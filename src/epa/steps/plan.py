@@ -3,10 +3,11 @@ The one place that decides the ov_eval fallback."""
 
 from __future__ import annotations
 
+from epa.core.records import PlanRecord
 from epa.steps.calibrate import Extrinsic
 
 
-def evaluation_plan(cfg: dict, step1: dict, extrinsic: Extrinsic | None = None) -> dict:
+def evaluation_plan(cfg: dict, step1: dict, extrinsic: Extrinsic | None = None) -> PlanRecord:
     """How a case is evaluated: the one place that decides the ov_eval fallback.
 
     An untrusted Step 1 or Step 2 means the case is evaluated the ov_eval way: the configured
@@ -14,20 +15,24 @@ def evaluation_plan(cfg: dict, step1: dict, extrinsic: Extrinsic | None = None) 
     poses (see :func:`alignment_of`); it is marked ``eval_source: ov_eval``. ``mode: ov_eval`` is
     that evaluation by choice, with the configured alignment; ``mode: rpg`` is rpg_trajectory_evaluation's
     (``eval_source: rpg``: rpg's association, the configured alignment in rpg's arithmetic)."""
-    fallback = {
-        "eval_source": "ov_eval",
-        "fallback": True,
-        "offset_s": cfg["sync"]["offset"],
-        "apply_extrinsic": False,
-    }
+
+    def fallback(reason: str, eval_source: str = "ov_eval", by_choice: bool = False) -> PlanRecord:
+        return {
+            "eval_source": eval_source,
+            "fallback": not by_choice,
+            "offset_s": cfg["sync"]["offset"],
+            "apply_extrinsic": False,
+            "reason": reason,
+        }
+
     if cfg["mode"] == "ov_eval":
-        return {**fallback, "fallback": False, "reason": "ov_eval mode"}
+        return fallback("ov_eval mode", by_choice=True)
     if cfg["mode"] == "rpg":
-        return {**fallback, "eval_source": "rpg", "fallback": False, "reason": "rpg mode"}
+        return fallback("rpg mode", "rpg", by_choice=True)
     if cfg["sync"]["estimate_offset"] and not step1.get("used", False):
-        return {**fallback, "reason": f"Step 1 not trusted: {step1.get('reason')}"}
+        return fallback(f"Step 1 not trusted: {step1.get('reason')}")
     if extrinsic is not None and not extrinsic.trusted:
-        return {**fallback, "reason": f"Step 2 not trusted: {extrinsic.reason}"}
+        return fallback(f"Step 2 not trusted: {extrinsic.reason}")
     applied = extrinsic is not None
     return {
         "eval_source": "epa",
@@ -38,6 +43,6 @@ def evaluation_plan(cfg: dict, step1: dict, extrinsic: Extrinsic | None = None) 
     }
 
 
-def alignment_of(plan: dict, cfg: dict) -> tuple[str, int]:
+def alignment_of(plan: PlanRecord, cfg: dict) -> tuple[str, int]:
     """Step 3 method and first_n under an evaluation plan: the fallback aligns SE3 on all poses."""
     return ("se3", -1) if plan["fallback"] else (cfg["align"]["method"], cfg["align"]["first_n"])

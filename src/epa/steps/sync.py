@@ -13,6 +13,7 @@ import numpy as np
 
 from epa.core import geometry
 from epa.core.errors import EpaError
+from epa.core.records import Step1Record
 from epa.core.stamps import nearest_from
 from epa.core.trajectory import Trajectory
 from epa.steps import rpg
@@ -90,7 +91,7 @@ def associate(
     """Indices (i_ref, i_est) of matched poses under the chosen policy."""
     if policy not in POLICIES:
         raise EpaError(f"unknown sync policy {policy!r}; choose one of {', '.join(POLICIES)}")
-    max_diff = POLICIES[policy] if max_diff is None else max_diff
+    max_diff = POLICIES[Policy(policy)] if max_diff is None else max_diff
     fn = {"ov_eval": associate_ov_eval, "evo": associate_evo, "rpg": associate_rpg}[policy]
     return fn(ref.t, est.t, max_diff, offset)
 
@@ -130,8 +131,22 @@ class OffsetEstimate:
     curve_lag: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     curve_corr: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
-    def to_dict(self) -> dict:
-        return {k: v for k, v in self.__dict__.items() if not k.startswith("curve_")}
+    def to_dict(self) -> Step1Record:
+        """sync.json's ``step1`` (the stage turns a NaN figure into None)."""
+        return Step1Record(
+            offset=self.offset,
+            estimated=self.estimated,
+            used=self.used,
+            reason=self.reason,
+            status=self.status,
+            std=self.std,
+            peak_corr=self.peak_corr,
+            peak_ratio=self.peak_ratio,
+            beyond_window_corr=self.beyond_window_corr,
+            ref_motion_rad_s=self.ref_motion_rad_s,
+            est_motion_rad_s=self.est_motion_rad_s,
+            dt=self.dt,
+        )
 
 
 class Step1Status(StrEnum):
@@ -248,7 +263,7 @@ def _jackknife_std(
     span_c = (span[0] // q, min(span[1] // q, len(b_c) - 1))
     starts = np.linspace(0, span_c[1] + 1 - span_c[0], blocks + 1).astype(int)[:-1]
     centre, reach_c = int(round(peak_lag / q)), max(3, reach // q)
-    columns: dict[int, np.ndarray] = {}
+    columns: dict[np.integer, np.ndarray] = {}  # keyed by the lags as numpy gives them
     half = min(16, reach_c)
     while True:
         lags = np.arange(centre - half, centre + half + 1)
@@ -423,7 +438,7 @@ def _signals_refused(t_a, t_b, motion: dict, window: float, min_motion: float, l
     return None
 
 
-def _not_used(fallback: float, status: Step1Status, reason: str, **kw) -> OffsetEstimate:
+def _not_used(fallback: float, status: Step1Status, reason: str, /, **kw) -> OffsetEstimate:
     """The fallback offset, with why the estimate (``estimated``, when there is one) is not used."""
     return OffsetEstimate(
         offset=fallback,

@@ -97,8 +97,8 @@ def status_query_problem(status_setting: str | None, init_seconds: int | None) -
     init = init_seconds or PLUGIN_INIT_SECONDS
     rc, out, err = _run(query(name))
     if rc != 0:
-        why = (err or out).strip().splitlines()
-        why = why[-1] if why else f"exit status {rc}"
+        said = (err or out).strip().splitlines()
+        why = said[-1] if said else f"exit status {rc}"
         cmd = shlex.join(query(name)[:1])
         if name == "sacct" and status_setting == "squeue":
             limit = f"<= {min_age // 3}" if min_age else "<= MinJobAge / 3"

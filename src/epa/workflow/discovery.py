@@ -36,7 +36,7 @@ def _timing_side_files(files: list[Path], pattern: str | None) -> set[Path]:
     if not pattern or "/" in pattern or "{run}" not in pattern:
         return set()
     rx = re.compile("^" + re.escape(pattern).replace(re.escape("{run}"), "(.+)") + "$")
-    stems = {}
+    stems: dict[str, list[Path]] = {}
     for p in files:
         stems.setdefault(p.stem if not p.is_dir() else p.name, []).append(p)
     side = set()
@@ -49,7 +49,7 @@ def _timing_side_files(files: list[Path], pattern: str | None) -> set[Path]:
 
 def _trajectory_files(folder: Path, skipped: list[Path], timing: str | None = None):
     # a dangling link is kept: its case then fails with "file not found" instead of vanishing
-    files = []
+    files: list[Path] = []
     for p in sorted(folder.iterdir()):
         if p.name.startswith("."):
             continue  # hidden (.DS_Store, editor swap files): never data
@@ -100,7 +100,7 @@ def discover(
                 path=str(p),
             )
         truth[p.stem] = p
-    cases = []
+    cases: list[Case] = []
     algorithms = []
     for alg in _folders(algorithms_dir, skipped):
         algorithms.append(alg.name)

@@ -25,6 +25,7 @@ import zlib
 from contextlib import contextmanager
 from multiprocessing import context, spawn
 from pathlib import Path
+from typing import Any
 
 from epa.artifacts import files
 from epa.artifacts.case import Case, CaseData, CaseFolder
@@ -72,7 +73,7 @@ class _ThreadFileHandler(logging.Handler):
 _HANDLER = _ThreadFileHandler()
 
 
-_INSIDE = {"n": 0, "saved": None}
+_INSIDE: dict[str, Any] = {"n": 0, "saved": None}  # saved: [(logger, propagate, level)]
 _INSIDE_LOCK = threading.Lock()
 
 
@@ -216,15 +217,15 @@ def _without_main_module(get_preparation_data):
             data.pop("init_main_from_name", None)
         return data
 
-    prepared.epa_without_main = True
-    prepared.epa_original = get_preparation_data
+    # marks of the patch, read back by _unpatch_spawn (through vars: a function's attributes are untyped)
+    vars(prepared).update(epa_without_main=True, epa_original=get_preparation_data)
     return prepared
 
 
 def _unpatch_spawn() -> None:
     """Undo :func:`_context`'s patch of ``multiprocessing.spawn`` (the next pool applies it again)."""
     if getattr(spawn.get_preparation_data, "epa_without_main", False):
-        spawn.get_preparation_data = spawn.get_preparation_data.epa_original
+        spawn.get_preparation_data = vars(spawn.get_preparation_data)["epa_original"]
 
 
 def warm_up() -> None:

@@ -175,7 +175,12 @@ def unpack(archive, into) -> tuple[Path, Path | None, list[str]]:
             members = tar.getmembers()
             if MANIFEST not in {m.name for m in members}:
                 raise EpaError(f"not an epica package: no {MANIFEST} in it", path=str(archive))
-            manifest = json.load(tar.extractfile(MANIFEST))
+            manifest_file = tar.extractfile(MANIFEST)
+            if manifest_file is None:  # a link or folder of that name
+                raise EpaError(
+                    f"not an epica package: its {MANIFEST} is not a file", path=str(archive)
+                )
+            manifest = json.load(manifest_file)
             _check_manifest(manifest, archive)
             for m in members:  # what tarfile's "data" filter refuses, on every Python 3.11
                 parts = Path(m.name).parts

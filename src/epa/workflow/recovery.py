@@ -8,6 +8,8 @@ scale, at three noise levels. Steps 1-2 run with the configuration's settings, e
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from epa import simulate
@@ -28,7 +30,7 @@ def trial(ref: Trajectory, cfg: dict, rng: np.random.Generator, level: str, rate
     """One simulated estimate; what Steps 1-2 found against the truth."""
     rot_noise, pos_noise, rot_walk, pos_walk = NOISE_LEVELS[level]
     scale = float(rng.uniform(0.5, 4.0)) if cfg["calibrate"]["scale"] else 1.0
-    truth = {
+    truth: dict[str, Any] = {
         "offset": float(rng.uniform(-0.5, 0.5) * cfg["sync"]["window"]),
         "rotation": geometry.so3_exp(rng.normal(0, 1.0, 3)),
         "translation": rng.normal(0, 0.06, 3),
@@ -52,7 +54,7 @@ def trial(ref: Trajectory, cfg: dict, rng: np.random.Generator, level: str, rate
             f" give {len(est)} simulated poses at {rate:g} Hz, {need} needed (sync.min_pairs)"
         )
     found = sync.offset_step(ref, est, cfg)
-    out = {
+    out: dict[str, Any] = {
         "level": level,
         "step1_status": found.status,
         "offset_true_s": truth["offset"],
@@ -69,7 +71,7 @@ def trial(ref: Trajectory, cfg: dict, rng: np.random.Generator, level: str, rate
         return {**out, "step2_status": "too little motion", "step2_reason": exc.message}
     matched = est.select(i_est)
     ext = calibrate.extrinsic_step(
-        ref.at(matched.t + offset), matched, cfg, found.std if found.used else 0.0
+        ref.at(matched.t + offset), matched, cfg, (found.std or 0.0) if found.used else 0.0
     )
     out.update(step2_status=ext.status, step2_reason=ext.reason)
     if "rotation_std_deg" in ext.info:
@@ -129,7 +131,7 @@ def report(results: list[dict], ref_name: str, rate: float) -> str:
             f" {_fmt(_worst([r.get('translation_std_m') for r in s2]), 1e3, '.1f'):>13}"
         )
     lines.append("")
-    not_trusted = {}  # (step, status): an example reason
+    not_trusted: dict[tuple[int, str], str | None] = {}  # (step, status): an example reason
     for r in results:
         if r["step1_status"] != "trusted":
             not_trusted.setdefault((1, r["step1_status"]), None)

@@ -193,7 +193,7 @@ MODE_SETTINGS = {"ov_eval": OV_EVAL_SETTINGS, "rpg": RPG_SETTINGS}
 def apply_mode(cfg: dict, given: dict) -> dict:
     """Turn ``mode: ov_eval`` or ``mode: rpg`` into the stage settings it implies; warn where it
     overrides a given one."""
-    implied = MODE_SETTINGS.get(cfg.get("mode"))
+    implied = MODE_SETTINGS.get(cfg.get("mode") or "")
     if implied is None:
         return cfg
     import logging

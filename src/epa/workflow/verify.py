@@ -59,9 +59,11 @@ def _compare_bytes(a: Path, b: Path, name: str, kind: str, rewrites=()) -> contr
         return contract.Comparison(name, kind, contract.Verdict.IDENTICAL)
     la, lb = pa.read_bytes().splitlines(), got.splitlines()
     i = next((k for k, (x, y) in enumerate(zip(la, lb)) if x != y), min(len(la), len(lb)))
-    text = [lines[i].decode("utf-8", "replace") if i < len(lines) else "" for lines in (la, lb)]
+    text_a, text_b = (
+        lines[i].decode("utf-8", "replace") if i < len(lines) else "" for lines in (la, lb)
+    )
     return contract.Comparison(
-        name, kind, contract.Verdict.DIFFERS, contract.Place(f"line {i + 1}", *text)
+        name, kind, contract.Verdict.DIFFERS, contract.Place(f"line {i + 1}", text_a, text_b)
     )
 
 
@@ -256,7 +258,8 @@ def verify(
 
 
 def _verify(source, tmp, cores, snakefile, keep, force, exact, data, json_path, log) -> int:
-    results, damaged = source, []
+    results = source
+    damaged: list[str] = []
     if package.is_package(source):
         results, inputs, damaged = package.unpack(source, tmp / "package")
         print(
@@ -270,7 +273,8 @@ def _verify(source, tmp, cores, snakefile, keep, force, exact, data, json_path, 
         raise EpaError("no Snakefile beside this epica (not a checkout): give --snakefile")
     into = Path(keep) if keep else tmp / "again"
     into.mkdir(parents=True, exist_ok=True)
-    folders, rewrites, workdir = None, [], _workdir(doc, snakefile)
+    folders, workdir = None, _workdir(doc, snakefile)
+    rewrites: list[tuple[str, str]] = []  # (new text, recorded text)
     if data:
         located = _inputs_found(doc, data, log)
         if located is None:

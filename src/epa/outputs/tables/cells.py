@@ -1,6 +1,6 @@
 """Table cells and how each is aggregated over runs.
 
-An ATE cell is the mean over runs of each run's RMSE; an RPE / drift-rate / 1 s RPE cell is the mean
+An ATE cell is the mean over runs of each run's RMSE; an RPE / drift-rate / time-RPE cell is the mean
 of the errors pooled over runs (and, for the per-algorithm segment tables, over datasets); a
 success-rate cell is the mean over runs; the Average column is the mean over the datasets that have a
 number; a cell with no successful run prints ``- / -``.

@@ -25,7 +25,7 @@ def comparisons(grid: list[CaseResult], segments) -> list[tuple[str, str, dict]]
     algs = sorted({c.algorithm for c in grid})
 
     def by_dataset(alg, of):
-        out = {}
+        out: dict[str, list[float]] = {}
         for c in ok_runs(grid, alg):
             v = num(of(c))
             if np.isfinite(v):

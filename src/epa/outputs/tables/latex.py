@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from epa.metrics.accuracy import segment_key
+from epa.metrics import accuracy
+from epa.metrics.accuracy import segment_key, time_rpe_key, time_rpe_name
 from epa.outputs.tables.cells import (
     Cell,
     ate_cell,
@@ -65,19 +66,27 @@ def build_tables(
     metrics=(),
     spread: str = "none",
     text: bool = False,
+    *,
+    time_delta: float,
 ) -> list[tuple[str, str, list[str], int]]:
     """(file name, title, latex row lines, number of columns) for every table, in report order: the
     base tables, each registered metric's (``metrics``: the enabled ones) after the base table it
     names or at the end. With ``spread`` (std / ci) each cell with runs also shows its spread over
-    them and their number. ``text``: only the tables error_comparison.txt shows."""
+    them and their number. ``text``: only the tables error_comparison.txt shows. ``time_delta``:
+    ``metrics.time_delta``, which names the time RPE's tables."""
     layout = _Layout.of(grid, decimals, spread)
-    out = _base_tables(layout, segments)
+    out = _base_tables(layout, segments, time_delta)
+    # a Table.after names a base table as BASE_TABLES spells it: the time RPE's under the default
+    named = dict(zip(accuracy.BASE_TABLES, accuracy.base_tables(time_delta)))
     for metric in metrics:
         for spec in metric.tables:
             if text and not spec.in_text:
                 continue
             table = _metric_table(layout, metric, spec)
-            at = next((k + 1 for k, t in enumerate(out) if t[0] == spec.after), len(out))
+            at = next(
+                (k + 1 for k, t in enumerate(out) if t[0] == named.get(spec.after, spec.after)),
+                len(out),
+            )
             out.insert(at, table)
     return out
 
@@ -140,7 +149,9 @@ def _per_segment(layout: _Layout, segments, name: str, title: str, fn):
     )
 
 
-def _base_tables(layout: _Layout, segments) -> list[tuple[str, str, list[str], int]]:
+def _base_tables(
+    layout: _Layout, segments, time_delta: float
+) -> list[tuple[str, str, list[str], int]]:
     """The tables every report has: success rates, then ATE and RPE of the full trajectories and
     of their drift-valid parts."""
 
@@ -198,8 +209,8 @@ def _base_tables(layout: _Layout, segments) -> list[tuple[str, str, list[str], i
         )
         out.append(
             per_dataset(
-                prefix + "rpe_time_1s",
-                f"{tag} 1S TIME RPE LATEX TABLE (ROT DEG / TRANS M)",
+                prefix + time_rpe_key(time_delta),
+                f"{tag} {time_rpe_name(time_delta).upper()} TIME RPE LATEX TABLE (ROT DEG / TRANS M)",
                 lambda r, valid=valid: mean_pair_cell(r, "time", valid),
             )
         )

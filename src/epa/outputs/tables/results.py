@@ -65,11 +65,12 @@ def _collect(keys: list[str], results_dir) -> list[CaseResult]:
     out = []
     for key in keys:
         try:
-            folder = CaseFolder.of(results_dir, Case.from_key(key))
+            case = Case.from_key(key)
+            folder = CaseFolder.of(results_dir, case)
         except EpaError as exc:  # no folder was ever written for it: marked failed under its name
             out.append(CaseResult(Case.unchecked(key), status="failed: " + exc.one_line()))
             continue
-        res = CaseResult(folder.case)
+        res = CaseResult(case)
         load, load_failed = folder.record_or_failure("load", "load.json")
         if load_failed is None:
             res.load = load

@@ -8,7 +8,7 @@ import io as _io
 import numpy as np
 
 from epa.metrics import registry
-from epa.metrics.accuracy import segment_key
+from epa.metrics.accuracy import segment_key, time_rpe_key, time_rpe_name
 from epa.metrics.drift import CURVE_FACTORS
 from epa.outputs.tables.cells import num, ok_runs, position_only, stat
 from epa.outputs.tables.results import CaseResult
@@ -24,7 +24,7 @@ BASE_COLUMNS = [
     "n_matched",
     "ate_trans_rmse_m",
     "ate_rot_rmse_deg",
-    "time_rpe_1s_trans_mean_m",
+    "time_rpe_1s_trans_mean_m",  # named after metrics.time_delta: time_rpe_columns
     "time_rpe_1s_rot_mean_deg",
     "time_offset_s",
     "time_offset_std_s",
@@ -44,10 +44,18 @@ BASE_COLUMNS = [
 ]
 
 
-def columns(segments, metrics=None) -> list[str]:
+def time_rpe_columns(time_delta: float) -> tuple[str, str]:
+    """summary.csv's time-RPE columns (mean translation, mean rotation) under ``metrics.time_delta``."""
+    name = time_rpe_name(time_delta)
+    return f"time_rpe_{name}_trans_mean_m", f"time_rpe_{name}_rot_mean_deg"
+
+
+def columns(segments, time_delta: float, metrics=None) -> list[str]:
     """summary.csv's columns: the base ones, each registered metric's (a scoring protocol's only
     when it is among ``metrics``, the enabled ones; None: every metric), notes, then per segment
     length."""
+    renamed = dict(zip(time_rpe_columns(1.0), time_rpe_columns(time_delta)))
+    base = [renamed.get(c, c) for c in BASE_COLUMNS]
     metric_cols = [
         col
         for metric in registry.REGISTRY
@@ -58,7 +66,7 @@ def columns(segments, metrics=None) -> list[str]:
     for s in segments:
         L = segment_key(s)
         seg_cols += [f"rpe_{L}m_trans_mean_m", f"rpe_{L}m_rot_mean_deg", f"drift_rate_{L}m_pct"]
-    return BASE_COLUMNS + metric_cols + ["notes"] + seg_cols
+    return base + metric_cols + ["notes"] + seg_cols
 
 
 def _largest(values):
@@ -79,7 +87,10 @@ def _confidence(m: dict) -> dict:
     }
 
 
-def summary_rows(grid: list[CaseResult], segments, metrics=None) -> tuple[list[str], list[dict]]:
+def summary_rows(
+    grid: list[CaseResult], segments, time_delta: float, metrics=None
+) -> tuple[list[str], list[dict]]:
+    time_key, (time_trans, time_rot) = time_rpe_key(time_delta), time_rpe_columns(time_delta)
     rows = []
     for c in grid:
         m, d = c.metrics, c.drift
@@ -90,8 +101,10 @@ def summary_rows(grid: list[CaseResult], segments, metrics=None) -> tuple[list[s
                 n_matched=m.get("n_matched"),
                 ate_trans_rmse_m=stat(m, "ate", "trans_m", "rmse"),
                 ate_rot_rmse_deg=stat(m, "ate", "rot_deg", "rmse"),
-                time_rpe_1s_trans_mean_m=stat(m, "rpe_time_1s", "trans_m", "mean"),
-                time_rpe_1s_rot_mean_deg=stat(m, "rpe_time_1s", "rot_deg", "mean"),
+                **{
+                    time_trans: stat(m, time_key, "trans_m", "mean"),
+                    time_rot: stat(m, time_key, "rot_deg", "mean"),
+                },
                 time_offset_s=m.get("time_offset_s"),
                 extrinsic_rot_deg=m.get("extrinsic_rot_deg"),
                 extrinsic_trans_m=m.get("extrinsic_trans_m"),
@@ -117,7 +130,7 @@ def summary_rows(grid: list[CaseResult], segments, metrics=None) -> tuple[list[s
                 row[f"rpe_{L}m_rot_mean_deg"] = stat(m, "rpe_distance", L, "rot_deg", "mean")
                 row[f"drift_rate_{L}m_pct"] = stat(m, "drift_rate_pct", L)
         rows.append(row)
-    return columns(segments, metrics), rows
+    return columns(segments, time_delta, metrics), rows
 
 
 def records_csv(cols: list[str], rows: list[dict]) -> str:
@@ -137,8 +150,8 @@ def records_csv(cols: list[str], rows: list[dict]) -> str:
     return buf.getvalue()
 
 
-def summary_csv(grid, segments, metrics=None) -> str:
-    return records_csv(*summary_rows(grid, segments, metrics))
+def summary_csv(grid, segments, time_delta: float, metrics=None) -> str:
+    return records_csv(*summary_rows(grid, segments, time_delta, metrics))
 
 
 SUCCESS_CURVE_COLUMNS = [

@@ -21,9 +21,16 @@ def _sources(counts: dict) -> str:
 
 
 def report_text(
-    grid: list[CaseResult], segments, decimals: int = 3, spread: str = "none", metrics=()
+    grid: list[CaseResult],
+    segments,
+    decimals: int = 3,
+    spread: str = "none",
+    metrics=(),
+    *,
+    time_delta: float,
 ) -> str:
-    """error_comparison.txt (mode epa): per dataset and algorithm, then every table."""
+    """error_comparison.txt (mode epa): per dataset and algorithm, then every table (the time RPE's
+    named after ``time_delta``)."""
     lines = []
     datasets = sorted({c.dataset for c in grid})
     for ds in datasets:
@@ -89,7 +96,9 @@ def report_text(
         f"TOOL SOURCE: {_sources(sources)}",
         RULE_LONG,
     ]
-    for _, title, rows, _ in build_tables(grid, segments, decimals, metrics, spread, text=True):
+    for _, title, rows, _ in build_tables(
+        grid, segments, decimals, metrics, spread, text=True, time_delta=time_delta
+    ):
         lines += [
             RULE_LONG,
             title,

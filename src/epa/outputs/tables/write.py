@@ -27,9 +27,6 @@ from epa.outputs.tables.text import report_text
 log = logging.getLogger("epa")
 
 
-BASE_TABLES = accuracy.BASE_TABLES  # the metrics' tables follow these (their Table.after)
-
-
 def enabled_metrics(cfg: dict) -> tuple:
     return tuple(m for m in registry.REGISTRY if m.enabled(cfg))
 
@@ -37,7 +34,7 @@ def enabled_metrics(cfg: dict) -> tuple:
 def table_names(cfg: dict) -> tuple[str, ...]:
     """The .tex files the tables rule writes under these settings."""
     return (
-        BASE_TABLES
+        accuracy.base_tables(cfg["metrics"]["time_delta"])
         + tuple(t.name for m in enabled_metrics(cfg) for t in m.tables)
         + mode_tables(cfg)
     )
@@ -62,15 +59,21 @@ def write_all(
     decimals = cfg["tables"]["decimals"]
     spread = cfg["tables"]["spread"]
     style = cfg["tables"].get("style", "hline")
+    time_delta = cfg["metrics"]["time_delta"]  # names the time RPE's tables and columns
     text = (
         ov_eval_text(grid, segments, idle_truths)
         if cfg.get("mode") == "ov_eval"
-        else report_text(grid, segments, decimals, spread, enabled_metrics(cfg))
+        else report_text(
+            grid, segments, decimals, spread, enabled_metrics(cfg), time_delta=time_delta
+        )
     )
     files.write_text(results_dir / "error_comparison.txt", text)
-    files.write_text(results_dir / "summary.csv", summary_csv(grid, segments, enabled_metrics(cfg)))
+    files.write_text(
+        results_dir / "summary.csv",
+        summary_csv(grid, segments, time_delta, enabled_metrics(cfg)),
+    )
     for name, title, rows, n in build_tables(
-        grid, segments, decimals, metrics=enabled_metrics(cfg), spread=spread
+        grid, segments, decimals, metrics=enabled_metrics(cfg), spread=spread, time_delta=time_delta
     ):
         files.write_text(
             results_dir / "tables" / f"{name}.tex", restyle(tex_document(title, rows, n), style)

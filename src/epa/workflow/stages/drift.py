@@ -28,7 +28,13 @@ def compute(tables: dict, cfg: dict):
         cfg["drift"],
     )
     valid, seg_valid, time_valid, notes = drift.valid_metrics(
-        det, ape["trans_m"], ape["rot_deg"], seg, tp, cfg["metrics"]["segments"]
+        det,
+        ape["trans_m"],
+        ape["rot_deg"],
+        seg,
+        tp,
+        cfg["metrics"]["segments"],
+        time_delta=cfg["metrics"]["time_delta"],
     )
     fs = det["fail_segments"]
     curve = drift.success_curve(

@@ -50,7 +50,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
             " drift rate and success rate are undefined"
         )
     which = position_only(ref, est)  # a side without orientation: every rotation error null
-    summary, tables = (accuracy.evaluate_positions if which else accuracy.evaluate)(
+    evaluated, tables = (accuracy.evaluate_positions if which else accuracy.evaluate)(
         ref,
         est,
         segments=c["segments"],
@@ -59,6 +59,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
         time_tol=c["time_tol"],
         rpe=c["rpe"],
     )
+    summary: dict = dict(evaluated)  # metrics.json grows from here (records.MetricsRecord)
     summary["est_length_m"] = est.length()  # the aligned estimate's matched path (EA-Drift's L)
     # an empty segment length is shown as empty, never as a number; say why once, here
     summary["notes"] = [
@@ -95,7 +96,7 @@ def empty_relative_notes(summary: dict, c: dict) -> list[str]:
     """Why the 1 s RPE and each evo-style RPE without a pair of poses are empty (their statistics
     are None): one note each, as for a segment length that does not fit."""
     notes = []
-    if summary["rpe_time_1s"]["trans_m"]["n"] == 0:
+    if summary[accuracy.time_rpe_key(c["time_delta"])]["trans_m"]["n"] == 0:
         delta = c["time_delta"]
         notes.append(
             f"no two matched poses are {delta:g} s (±{100 * c['time_tol']:g} %) apart in"
