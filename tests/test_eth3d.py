@@ -359,7 +359,9 @@ def test_a_grid_with_eth3d_on_has_its_table_and_columns(data, tmp_path):
 
 
 def test_no_eth3d_columns_where_it_is_off(tmp_path):
+    from epa.metrics import eth3d
     from epa.outputs.tables import summary
 
-    assert not any(c.startswith("eth3d_") for c in summary.columns([8], summary.shown([])))
-    assert any(c.startswith("eth3d_") for c in summary.columns([8]))
+    assert not any(c.startswith("eth3d_") for c in summary.columns([8], 1.0, metrics=()))
+    on = summary.columns([8], 1.0, metrics=(eth3d.METRIC,))
+    assert [c for c in on if c.startswith("eth3d_")] == list(eth3d.METRIC.summary_columns)

@@ -161,8 +161,8 @@ def test_tum_is_a_protocol_of_the_registry_and_off_by_default():
     assert "tum" in registry.protocols()
     cfg = settings.resolve({"truth_dir": ".", "algorithms_dir": "."})
     assert cfg["metrics"]["tum"]["enabled"] is False
-    assert "tum_ate_rmse_m" not in summary.columns([8.0], metrics=())
-    assert "tum_ate_rmse_m" in summary.columns([8.0], metrics=(tum.METRIC,))
+    assert "tum_ate_rmse_m" not in summary.columns([8.0], 1.0, metrics=())
+    assert "tum_ate_rmse_m" in summary.columns([8.0], 1.0, metrics=(tum.METRIC,))
 
 
 def _associate_by_the_script(first, second, offset, max_difference):

@@ -463,7 +463,7 @@ def _eval_config(args) -> dict:
     cfg: dict = {"truth_dir": ".", "algorithms_dir": "."}
     if args.config:
         cfg.update(settings.load_yaml(args.config))
-    overrides = {
+    overrides: dict[tuple[str, ...], object] = {
         ("mode",): args.mode,
         ("align", "method"): args.align,
         ("align", "first_n"): args.first_n,

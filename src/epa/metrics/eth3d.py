@@ -288,19 +288,20 @@ def score(g_p, e_p, e_q, refs: list[dict], mode: str) -> tuple[dict, dict]:
     a_p = e_p @ m.T + fit.t
     a_q = _product(_matrix_quaternion(m), e_q)
     sq = np.sum((g_p - a_p) ** 2, axis=1)
+    per_distance: list[dict] = []
     record = {
         "mode": mode,
         "scale": fit.s,
         "ate_rmse_cm": 100.0 * math.sqrt(_sequential_sum(sq) / len(sq)),
-        "relative": [],
+        "relative": per_distance,
     }
-    errors = {
+    errors: dict[str, list] = {
         k: [] for k in ("sim3", "distance_m", "image", "translation_pct", "rotation_deg_per_m")
     }
     for ref in refs:
         trans, rot = relative(ref, a_p, a_q)
         n = len(trans)
-        record["relative"].append(
+        per_distance.append(
             {
                 "distance_m": ref["distance"],
                 "n_pairs": n,
@@ -377,7 +378,8 @@ def evaluate(
     held = (kept < estimate.t[0]) | (kept > estimate.t[-1])
     d = path_from_start(g_p)
     refs = reference_pairs(g_p, g_q, d)
-    modes, tables = [], {}
+    modes: list[dict] = []
+    tables: dict = {}
     for mode in MODES[1:] if sim3 else MODES:
         record, errors = score(g_p, e_p, e_q, refs, mode)
         modes.append(record)

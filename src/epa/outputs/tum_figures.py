@@ -34,7 +34,7 @@ def ate(path, ref_t, ref_p, est_t, est_p_aligned, matched_ref_p, matched_est_p) 
         for k, piece in enumerate(_pieces(t)):
             ax.plot(p[piece, 0], p[piece, 1], "-", color=color, label=label if k == 0 else "")
     segments = np.stack([matched_ref_p[:, :2], matched_est_p[:, :2]], axis=1)
-    ax.add_collection(LineCollection(segments, colors="red", label="difference"))
+    ax.add_collection(LineCollection(list(segments), colors="red", label="difference"))
     ax.legend()
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
