@@ -5,16 +5,14 @@ rpg_trajectory_evaluation's (``align.method`` and ``align.first_n`` are its ``al
 
 from __future__ import annotations
 
-from epa.artifacts.case import CaseData
+from epa.artifacts.case import CaseData, Record
+from epa.artifacts.stage import Stage, Value
 from epa.core.trajectory import Trajectory
 from epa.steps import align as alignment
 from epa.steps import rpg
 from epa.steps.plan import alignment_of
 
 NAME = "align"
-SETTINGS = ("mode", "align")
-RECORDS = ("transform.json",)
-ARRAYS = ("aligned.tum",)
 
 
 def compute(ref: Trajectory, est: Trajectory, cfg: dict, calib_info: dict):
@@ -40,3 +38,17 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     data.folder.write_record(NAME, "transform.json", info)
     if write_arrays:
         data.folder.write_tum(NAME, "aligned.tum", aligned)
+
+
+STAGE = Stage(
+    name=NAME,
+    run=run,
+    settings=("mode", "align"),
+    records=("transform.json",),
+    arrays=("aligned.tum",),
+    reads=("calibrated", "calibrate_record"),
+    values=(
+        Value("transform", Record, lambda s: s.f.record(NAME, "transform.json")),
+        Value("aligned", Trajectory, lambda s: s.f.tum(NAME, "aligned.tum")),
+    ),
+)
