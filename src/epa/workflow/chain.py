@@ -1,6 +1,6 @@
-"""The stage chain, defined once: the stage modules in the order they run.
+"""The stage chain: what the stage declarations give.
 
-The list is :data:`epa.artifacts.stage.ORDER`; each stage module declares itself
+The stage list is :data:`epa.artifacts.stage.ORDER`; each stage module declares itself
 (``STAGE``, :class:`epa.artifacts.stage.Stage`) and everything else is derived here
 (:func:`derive`): ``STAGES``, ``NAMES``, ``BY_NAME``, ``LAST_READER``, ``CaseData``.
 
@@ -22,7 +22,7 @@ from pathlib import Path
 from epa.artifacts import case as case_module
 from epa.artifacts import stage as stage_list
 from epa.artifacts.case import Case, CaseFolder
-from epa.artifacts.stage import Stage
+from epa.artifacts.stage import Stage, Value
 from epa.core.errors import EpaError
 from epa.metrics import registry
 
@@ -35,14 +35,14 @@ class Derived:
     by_name: dict[str, Stage]
     names: tuple[str, ...]
     # name -> its Value; each stage's readable values (its reads, what reading them reads, its own)
-    values: dict
+    values: dict[str, Value]
     readable: dict[str, frozenset[str]]
     # value -> the stage after which run_case lets it go: the last that reads it, else its own
     last_reader: dict[str, str]
     data_class: type[case_module.CaseData]
 
 
-def _closure(names, values: dict) -> set[str]:
+def _closure(names, values: dict[str, Value]) -> set[str]:
     """``names`` and every value reading them may read (:attr:`~epa.artifacts.stage.Value.needs`)."""
     found: set[str] = set()
     todo = list(names)
@@ -60,8 +60,9 @@ def _closure(names, values: dict) -> set[str]:
 def derive(stages: tuple[Stage, ...]) -> Derived:
     """Everything the chain derives from the stage declarations (a stage reading a value no earlier
     stage hands on is an error here)."""
-    values: dict = {}
-    readable, last_reader = {}, {}
+    values: dict[str, Value] = {}
+    readable: dict[str, frozenset[str]] = {}
+    last_reader: dict[str, str] = {}
     for st in stages:
         for value in st.values:
             values.setdefault(value.name, value)
@@ -116,7 +117,7 @@ def __getattr__(name: str):
 
 
 def sections_for(stage: str) -> tuple[str, ...]:
-    """The config sections one stage reads: its ``SETTINGS``, then those its registered metrics
+    """The config sections one stage reads: its declared ``settings``, then those its registered metrics
     declare (:attr:`epa.metrics.spec.Metric.settings`)."""
     return tuple(dict.fromkeys(declared().by_name[stage].settings + registry.sections(stage)))
 
