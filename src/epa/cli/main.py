@@ -44,7 +44,8 @@ def _add_eval(sub) -> None:
     e.add_argument(
         "--out",
         required=True,
-        help="output folder, laid out as a workflow case folder (06_metrics/metrics.json, 07_drift/drift.json, ...),"
+        help="output folder, laid out as a workflow case folder"
+        f" ({folder('metrics')}/metrics.json, {folder('drift')}/drift.json, ...),"
         " with metrics.json: every stage's record in one document, as the per-case report's",
     )
     e.add_argument(
