@@ -149,7 +149,7 @@ STAGE = Stage(
     values=(
         Value("calibrate_record", Record, lambda s: s.f.record(NAME, "calibrate.json")),
         Value("calibrate_pairs", Indices, lambda s: s.f.pairs(NAME)),
-        matched_by(NAME, "calibrate_pairs"),
+        matched_by("matched", "calibrate_pairs"),
         Value("calibrated", Both, _calibrated, needs=("matched", "calibrate_record")),
     ),
 )

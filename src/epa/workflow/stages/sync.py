@@ -114,16 +114,15 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         folder.write_table(NAME, "xcorr.csv", curve or {"lag_s": [], "corr": []})
 
 
-def matched_by(stage: str, pairs: str) -> Value:
-    """The value ``<stage>_matched`` (calibrate's: ``matched``): (ref, est) of the cropped
-    trajectories at the indices ``pairs`` (``<stage>/pairs.csv``)."""
+def matched_by(name: str, pairs: str) -> Value:
+    """The value ``name``: (ref, est) of the cropped trajectories at the indices of the value
+    ``pairs`` (a stage's ``pairs.csv``)."""
 
     def read(data: CaseData) -> Both:
         ref, est = data.cropped
         i_ref, i_est = getattr(data, pairs)
         return ref.select(i_ref), est.select(i_est)
 
-    name = "matched" if stage == "calibrate" else f"{stage}_matched"
     return Value(name, Both, read, needs=("cropped", pairs))
 
 
@@ -137,6 +136,6 @@ STAGE = Stage(
     values=(
         Value("sync_record", Record, lambda s: s.f.record(NAME, "sync.json")),
         Value("sync_pairs", Indices, lambda s: s.f.pairs(NAME)),
-        matched_by(NAME, "sync_pairs"),
+        matched_by("sync_matched", "sync_pairs"),
     ),
 )
