@@ -88,8 +88,9 @@ def run_example(cwd: Path, per_case: bool) -> tuple[float, dict[str, float]]:
 
 
 def in_process(results: Path) -> dict:
-    from epa.artifacts.case import CaseData, CaseFolder
+    from epa.artifacts.case import CaseFolder
     from epa.outputs import figures, report
+    from epa.workflow.chain import CaseData
 
     figures._setup("paper")  # import matplotlib outside the timings
     build, draw, size = [], defaultdict(list), []

@@ -159,7 +159,7 @@ def bench_euroc(tmp: Path, skip_evo: bool) -> dict:
 
 def in_process(grid_dir: Path, results_dir: Path) -> tuple[float, dict, list[str]]:
     """Every stage of every case, case by case in this process; seconds, config, case keys."""
-    from epa.artifacts.case import CaseData, CaseFolder
+    from epa.artifacts.case import CaseFolder
     from epa.workflow import chain, settings
     from epa.workflow import discovery as epa_cases
 
@@ -169,7 +169,7 @@ def in_process(grid_dir: Path, results_dir: Path) -> tuple[float, dict, list[str
     _, cases = epa_cases.discover(grid_dir / "truth", grid_dir / "algorithms")
     t0 = time.perf_counter()
     for c in cases:
-        data = CaseData(CaseFolder.of(results_dir, c))
+        data = chain.CaseData(CaseFolder.of(results_dir, c))
         for name in chain.NAMES:
             chain.run_stage(name, data, cfg)
     return time.perf_counter() - t0, cfg, sorted(c.key for c in cases)

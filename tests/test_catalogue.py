@@ -329,8 +329,8 @@ def run_grid(truth: Path, algs: Path, results: Path, config: dict | None = None)
     ]
     upstream = None
     for st in chain.STAGES:
-        manifest = results / "batches" / "all" / f"{st.NAME}.json"
-        grid.run_job(st.NAME, batch, results, cfg, manifest, upstream)
+        manifest = results / "batches" / "all" / f"{st.name}.json"
+        grid.run_job(st.name, batch, results, cfg, manifest, upstream)
         upstream = manifest
     tables.make([c.key for c in found], results, cfg)
     with open(results / "summary.csv", encoding="utf-8") as fh:

@@ -347,7 +347,7 @@ def test_figures_are_drawn_for_flagged_cases_and_one_command_draws_the_rest(tmp_
     it; a Step 2 fallback is flagged, not drawn; every case keeps its bundles, and its report names
     the command that draws the rest: `epa fig --case` then gives the figures `report.figures: all`
     gives."""
-    from epa.artifacts.case import CaseData, CaseFolder
+    from epa.artifacts.case import CaseFolder
     from epa.outputs import report as report_module
     from epa.workflow import chain
     from epa.workflow import settings as settings_module
@@ -367,7 +367,7 @@ def test_figures_are_drawn_for_flagged_cases_and_one_command_draws_the_rest(tmp_
         chain.run_case(tmp_path / f"sim/truth/{ds}.txt", est, out, base, write_arrays=True)
         folders[label] = out
     for label, out in folders.items():
-        done = report_module.write_case_report(CaseData(CaseFolder(out)), label, base)
+        done = report_module.write_case_report(chain.CaseData(CaseFolder(out)), label, base)
         assert bool(done["flags"]) == (label != "clean"), done["flags"]
         md = (out / "10_report/report_en.md").read_text()
         drawn = {p.stem for p in (out / "10_report/figures").glob("*.png")}
@@ -381,7 +381,7 @@ def test_figures_are_drawn_for_flagged_cases_and_one_command_draws_the_rest(tmp_
     assert cli.main(["fig", "--case", str(clean)]) == 0
     by_command = {p.name: p.read_bytes() for p in (clean / "10_report/figures").glob("*.png")}
     everything = {**base, "report": {**base["report"], "figures": "all"}}
-    report_module.write_case_report(CaseData(CaseFolder(clean)), "clean", everything)
+    report_module.write_case_report(chain.CaseData(CaseFolder(clean)), "clean", everything)
     assert {
         p.name: p.read_bytes() for p in (clean / "10_report/figures").glob("*.png")
     } == by_command

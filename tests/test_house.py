@@ -1,6 +1,7 @@
 """The house: one stage in one module, the stage list defined once, a metric added in one module, a
 stage run alone (``epa stage``) and the once-per-grid scripts run alone."""
 
+import importlib
 import json
 import shutil
 import subprocess
@@ -12,6 +13,7 @@ from conftest import run_stages
 
 from epa import simulate
 from epa.artifacts import case as case_module
+from epa.artifacts import stage as stage_list
 from epa.cli import main as cli
 from epa.metrics import registry
 from epa.metrics.spec import Metric, Table
@@ -49,15 +51,16 @@ def small_grid(tmp_path_factory):
 
 
 def test_the_stage_list_is_the_case_folder_layout_and_each_module_says_what_it_writes():
-    assert chain.NAMES == tuple(case_module.FOLDERS)
+    assert chain.NAMES == stage_list.ORDER
     for stage in chain.STAGES:
-        assert stage.__name__ == f"epa.workflow.stages.{stage.NAME}"
-        assert stage.RECORDS and all(n.endswith(".json") for n in stage.RECORDS)
-        assert set(stage.SETTINGS) <= set(settings.defaults()) | {"mode", *settings.GRID_FOLDERS}
+        module = importlib.import_module(f"epa.workflow.stages.{stage.name}")
+        assert module.STAGE is stage and module.NAME == stage.name
+        assert stage.records and all(n.endswith(".json") for n in stage.records)
+        assert set(stage.settings) <= set(settings.defaults()) | {"mode", *settings.GRID_FOLDERS}
         assert callable(stage.run)
     # the metrics stage writes the arrays of the registered metrics it computes
     for metric in registry.computed_in("metrics"):
-        assert set(metric.arrays) <= set(chain.BY_NAME["metrics"].ARRAYS)
+        assert set(metric.arrays) <= set(chain.BY_NAME["metrics"].arrays)
 
 
 def test_every_registered_metric_declares_the_interface():
@@ -95,7 +98,7 @@ def test_a_new_metric_is_one_module(small_grid, monkeypatch, tmp_path):
     out = tmp_path / "results"
     shutil.copytree(cwd / "results", out)
     for key in keys:  # metrics onward, from the copied artifacts
-        data = case_module.CaseData(case_module.CaseFolder(out / "cases" / key))
+        data = chain.CaseData(case_module.CaseFolder(out / "cases" / key))
         for stage in ("metrics", "drift", "consistency", "efficiency"):
             chain.run_stage(stage, data, cfg)
         record = json.loads((out / "cases" / key / "06_metrics/metrics.json").read_text())

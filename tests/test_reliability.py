@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from epa.artifacts import files
-from epa.artifacts.case import FOLDERS, CaseFolder
+from epa.artifacts.case import CaseFolder
+from epa.artifacts.stage import folder
 from epa.core.errors import EpaError
 from epa.metrics import accuracy
 from epa.workflow import chain, settings
@@ -300,7 +301,7 @@ def test_a_sigkilled_write_leaves_only_a_temporary_which_the_cleanup_removes(tmp
     proc.wait()
     left = [p.name for p in folder.glob(".xcorr.csv.*")]
     assert len(left) == 1 and (folder / "xcorr.csv").read_text() == ""  # the old one stands
-    removed = CaseFolder(tmp_path).remove_temporaries("sync", sync.RECORDS + sync.ARRAYS)
+    removed = CaseFolder(tmp_path).remove_temporaries("sync", sync.STAGE.artifacts)
     assert removed == left
     assert sorted(p.name for p in folder.iterdir()) == ["sync.json", "xcorr.csv"]
 
@@ -353,8 +354,8 @@ def test_the_next_job_removes_a_killed_runs_temporaries_and_keeps_the_artifacts(
     def run_all():
         upstream = None
         for st in chain.STAGES:
-            manifest = results / "batches" / "all" / f"{st.NAME}.json"
-            assert grid.run_job(st.NAME, batch, results, cfg, manifest, upstream) == {
+            manifest = results / "batches" / "all" / f"{st.name}.json"
+            assert grid.run_job(st.name, batch, results, cfg, manifest, upstream) == {
                 "a/seq/run1": {"status": "ok"}
             }
             upstream = manifest
@@ -364,8 +365,8 @@ def test_the_next_job_removes_a_killed_runs_temporaries_and_keeps_the_artifacts(
     before = {p: p.read_bytes() for p in case.rglob("*") if p.is_file() and "logs" not in p.parts}
     stale = []
     for st in chain.STAGES:
-        for name in chain.artifacts(st):
-            stale.append(case / FOLDERS[st.NAME] / f".{name}.x7_q2k9z")
+        for name in st.artifacts:
+            stale.append(case / folder(st.name) / f".{name}.x7_q2k9z")
     stale.append(results / "batches/all/.sync.json.abc_1234")
     for p in stale:
         p.parent.mkdir(parents=True, exist_ok=True)

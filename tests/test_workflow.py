@@ -275,13 +275,13 @@ def test_a_bug_in_one_case_is_only_that_cases_failure(grid):
     wrapper.write_text(
         f"include: {str(ROOT / 'Snakefile')!r}\n"
         + """
-import epa.workflow.chain as _chain
-_sync = _chain.BY_NAME["sync"].run
-def _buggy(data, *args):
+import dataclasses
+import epa.workflow.stages.sync as _sync
+def _buggy(data, *args, _run=_sync.STAGE.run):
     if "vio_body/handheld_office/run2" in str(data.folder.root):
         raise ZeroDivisionError("injected bug")
-    return _sync(data, *args)
-_chain.BY_NAME["sync"].run = _buggy
+    return _run(data, *args)
+_sync.STAGE = dataclasses.replace(_sync.STAGE, run=_buggy)
 """
     )
     (grid / "bug.yaml").write_text(

@@ -11,28 +11,27 @@ from __future__ import annotations
 
 import os
 from collections import OrderedDict
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
 
 from epa.artifacts import files
+from epa.artifacts.stage import Value
+from epa.artifacts.stage import folder as stage_folder
 from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 
-# The folder of each stage, in the order the stages run (the stage modules say what each writes).
-FOLDERS = {
-    "load": "01_load",
-    "crop": "02_crop",
-    "sync": "03_sync",
-    "calibrate": "04_calibrate",
-    "align": "05_align",
-    "metrics": "06_metrics",
-    "drift": "07_drift",
-    "consistency": "08_consistency",
-    "efficiency": "09_efficiency",
-    "report": "10_report",
-}
 FAILED_PREFIX = "# epa-failed: "
+
+# The types of the values the stages hand on
+Record = dict[str, Any]  # a stage's JSON record
+Columns = dict[str, np.ndarray]  # a CSV table's columns
+Both = tuple[Trajectory, Trajectory]  # (reference, estimate)
+Indices = tuple[np.ndarray, np.ndarray]  # (i_ref, i_est) of matched poses
 
 
 @dataclass(frozen=True)
@@ -153,7 +152,7 @@ class CaseFolder:
         return cls(Path(results_dir) / "cases" / case.key, case)
 
     def path(self, stage: str, name: str) -> Path:
-        return self.root / FOLDERS[stage] / name
+        return self.root / stage_folder(stage) / name
 
     def log(self, stage: str) -> Path:
         return self.root / "logs" / f"{stage}.log"
@@ -231,7 +230,7 @@ class CaseFolder:
     def remove_temporaries(self, stage: str, names) -> list[str]:
         """Remove the temporaries of the artifacts ``names`` a killed write left in the stage's
         folder (:func:`epa.artifacts.files.remove_temporaries`); returns their names."""
-        return files.remove_temporaries(self.root / FOLDERS[stage], names)
+        return files.remove_temporaries(self.root / stage_folder(stage), names)
 
     def write_failure(self, stage: str, names, reason: str) -> None:
         for name in names:
@@ -242,105 +241,72 @@ class CaseFolder:
 
 
 # ----------------------------------------------------------------------------- the typed view
-def _slot(name: str, read):
-    """A property holding a stage's value: the one a stage set in this process, else ``read(self)``
-    from the case folder (once)."""
-    attr = "_" + name
-
-    def get(self):
-        if attr not in self.__dict__:
-            self.__dict__[attr] = read(self)
-        return self.__dict__[attr]
-
-    def set_(self, value):
-        self.__dict__[attr] = value
-
-    return property(get, set_, doc=read.__doc__)
-
-
-def _matched(stage):
-    def read(self):
-        ref, est = self.cropped
-        i_ref, i_est = self.sync_pairs if stage == "sync" else self.calibrate_pairs
-        return ref.select(i_ref), est.select(i_est)
-
-    read.__doc__ = f"(ref, est) of the cropped trajectories matched by {stage}/pairs.csv"
-    return read
-
-
 class CaseData:
-    """What each stage produced for one case, typed. ``epa eval`` runs every stage in one process
-    and the values pass in memory; a workflow job runs one stage and the values it needs are read
-    from the previous stages' artifacts, each at most once."""
+    """What each stage produced for one case: the values the stages hand on
+    (:class:`epa.artifacts.stage.Value`). ``epa eval`` runs every stage in one process and the
+    values pass in memory; a workflow job runs one stage and the values it reads are read from the
+    previous stages' artifacts, each at most once.
+
+    The fields are those the stages declare: :func:`data_class` makes the class with them (the
+    chain's is :data:`epa.workflow.chain.CaseData`), each annotated with its value's type. Reading
+    or setting a name no stage declares is an AttributeError; so is reading, while
+    :meth:`readable` limits it, a value the running stage does not declare it reads."""
+
+    VALUES: ClassVar[dict[str, Value]] = {}
 
     def __init__(self, folder: CaseFolder):
-        self.folder = folder
+        object.__setattr__(self, "folder", folder)
+        object.__setattr__(self, "_store", {})
+        object.__setattr__(self, "_readable", None)
 
-    f = property(lambda self: self.folder)
+    folder: CaseFolder
+
+    @property
+    def f(self) -> CaseFolder:
+        return self.folder
+
+    def __getattr__(self, name: str) -> Any:  # only names not found otherwise: the values
+        value = type(self).VALUES.get(name)
+        if value is None or name.startswith("_"):
+            raise AttributeError(f"no stage hands on a value {name!r}")
+        readable = self.__dict__["_readable"]
+        if readable is not None and name not in readable:
+            raise AttributeError(f"{name!r} is not among the values this stage declares it reads")
+        store = self.__dict__["_store"]
+        if name not in store:
+            store[name] = value.read(self)
+        return store[name]
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name not in type(self).VALUES:
+            raise AttributeError(f"no stage hands on a value {name!r}")
+        self.__dict__["_store"][name] = value
+
+    def readable(self, names: frozenset[str] | None) -> None:
+        """Let only ``names`` be read from now on (None: any value)."""
+        self.__dict__["_readable"] = names
 
     def known(self, name: str) -> bool:
         """Whether ``name`` is already in memory (set by a stage or read before)."""
-        return "_" + name in self.__dict__
+        return name in self.__dict__["_store"]
 
     def forget(self, *names: str) -> None:
         """Let values go that no later stage reads (read again from the case folder if one did)."""
         for name in names:
-            self.__dict__.pop("_" + name, None)
+            self.__dict__["_store"].pop(name, None)
 
-    # load
-    loaded = _slot("loaded", lambda s: (s.f.tum("load", "ref.tum"), s.f.tum("load", "est.tum")))
-    load_record = _slot("load_record", lambda s: s.f.record("load", "load.json"))
 
-    def _timing(self):
-        """{t, frame_ms} of the run's timing file as load read it, or None without one"""
-        return self.f.table("load", "timing.csv") if self.f.has("load", "timing.csv") else None
-
-    timing = _slot("timing", _timing)
-    # crop
-    cropped = _slot("cropped", lambda s: (s.f.tum("crop", "ref.tum"), s.f.tum("crop", "est.tum")))
-    crop_record = _slot("crop_record", lambda s: s.f.record("crop", "crop.json"))
-    # sync
-    sync_record = _slot("sync_record", lambda s: s.f.record("sync", "sync.json"))
-    sync_pairs = _slot("sync_pairs", lambda s: s.f.pairs("sync"))
-    sync_matched = _slot("sync_matched", _matched("sync"))
-    # calibrate
-    calibrate_record = _slot(
-        "calibrate_record", lambda s: s.f.record("calibrate", "calibrate.json")
-    )
-    calibrate_pairs = _slot("calibrate_pairs", lambda s: s.f.pairs("calibrate"))
-    matched = _slot("matched", _matched("calibrate"))
-
-    def _calibrated(self):
-        """(ref, est) matched, the estimate with Step 2's extrinsic applied when the plan applies it"""
-        ref, est = self.matched
-        if self.calibrate_record["plan"]["apply_extrinsic"]:
-            est = self.f.tum("calibrate", "est.tum")
-        return ref, est
-
-    calibrated = _slot("calibrated", _calibrated)
-    # align
-    transform = _slot("transform", lambda s: s.f.record("align", "transform.json"))
-    aligned = _slot("aligned", lambda s: s.f.tum("align", "aligned.tum"))
-    # metrics
-    metrics_record = _slot("metrics_record", lambda s: s.f.record("metrics", "metrics.json"))
-    ape = _slot("ape", lambda s: s.f.table("metrics", "ape.csv"))
-    rpe_segments = _slot("rpe_segments", lambda s: s.f.table("metrics", "rpe_segments.csv"))
-    rpe_time = _slot("rpe_time", lambda s: s.f.table("metrics", "rpe_time.csv"))
-    # drift
-    drift_record = _slot("drift_record", lambda s: s.f.record("drift", "drift.json"))
-    fail_segments = _slot("fail_segments", lambda s: s.f.table("drift", "fail_segments.csv"))
-    # consistency, efficiency
-    consistency_record = _slot(
-        "consistency_record", lambda s: s.f.record("consistency", "consistency.json")
-    )
-    efficiency_record = _slot(
-        "efficiency_record", lambda s: s.f.record("efficiency", "efficiency.json")
-    )
-
-    def _nees(self):
-        """08_consistency/nees.csv, or {} without covariance"""
-        return (
-            self.f.table("consistency", "nees.csv") if self.f.has("consistency", "nees.csv") else {}
-        )
-
-    nees = _slot("nees", _nees)
+def data_class(values: Iterable[Value]) -> type[CaseData]:
+    """A :class:`CaseData` whose fields are ``values``, each annotated with its type."""
+    table: dict[str, Value] = {}
+    for value in values:
+        if value.name in table or value.name == "folder" or hasattr(CaseData, value.name):
+            raise ValueError(f"value {value.name!r}: handed on twice, or a name CaseData uses")
+        table[value.name] = value
+    namespace = {
+        "VALUES": table,
+        "__annotations__": {name: v.type for name, v in table.items()},
+        "__doc__": CaseData.__doc__,
+        "__module__": __name__,
+    }
+    return type("CaseData", (CaseData,), namespace)

@@ -15,7 +15,10 @@ from pathlib import Path
 from typing import Any
 
 from epa import __version__
+from epa.artifacts.stage import folder
 from epa.core.errors import EpaError
+
+REPORT = folder("report")  # the report stage's folder in a case folder
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -44,7 +47,8 @@ def _add_eval(sub) -> None:
     e.add_argument(
         "--out",
         required=True,
-        help="output folder, laid out as a workflow case folder (06_metrics/metrics.json, 07_drift/drift.json, ...),"
+        help="output folder, laid out as a workflow case folder"
+        f" ({folder('metrics')}/metrics.json, {folder('drift')}/drift.json, ...),"
         " with metrics.json: every stage's record in one document, as the per-case report's",
     )
     e.add_argument(
@@ -82,12 +86,12 @@ def _add_eval(sub) -> None:
     e.add_argument(
         "--report",
         action="store_true",
-        help="also write 10_report/ (reports, figures; implies --artifacts, imports matplotlib)",
+        help=f"also write {REPORT}/ (reports, figures; implies --artifacts, imports matplotlib)",
     )
     e.add_argument(
         "--rerun",
         action="store_true",
-        help='also write a Rerun recording 10_report/<name>.rrd (implies --report; pip install "epica[rerun]")',
+        help=f'also write a Rerun recording {REPORT}/<name>.rrd (implies --report; pip install "epica[rerun]")',
     )
     e.add_argument(
         "--timing",
@@ -153,13 +157,13 @@ def _add_fig(sub) -> None:
     )
     f.set_defaults(func=_fig)
     f.add_argument(
-        "bundle", nargs="?", help="a bundle .json (10_report/bundles/, results/figures/bundles/)"
+        "bundle", nargs="?", help=f"a bundle .json ({REPORT}/bundles/, results/figures/bundles/)"
     )
     f.add_argument("--out", help="output path without extension")
     f.add_argument(
         "--case",
         help="a case folder (results/cases/<algorithm>/<dataset>/<run>): draw every figure of its"
-        " report (10_report/figures/) from its bundles",
+        f" report ({REPORT}/figures/) from its bundles",
     )
     f.add_argument("--style", default="paper", help="paper (3.5 in column), wide (7 in), slide")
     f.add_argument(
@@ -647,11 +651,11 @@ def _fig(args) -> None:
     if args.bundle:
         jobs = [(Path(args.bundle), Path(args.out))]
     else:
-        report = Path(args.case) / "10_report"
+        report = Path(args.case) / REPORT
         jobs = [(b, report / "figures" / b.stem) for b in sorted(report.glob("bundles/*.json"))]
         if not jobs:
             raise EpaError(
-                "no plot bundles in 10_report/bundles (has the report stage run?)", path=args.case
+                f"no plot bundles in {REPORT}/bundles (has the report stage run?)", path=args.case
             )
     written = []
     for bundle, out in jobs:

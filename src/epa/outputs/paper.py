@@ -10,6 +10,7 @@ import shutil
 from pathlib import Path
 
 from epa.artifacts import files
+from epa.artifacts.stage import folder
 from epa.outputs.tables.latex import latex_escape
 
 FOLDER = "paper"
@@ -103,7 +104,11 @@ def where_lines(results_dir, per_case: bool = True, report_html: str = "report.h
             f"  tables:     {r}/error_comparison.txt, {r}/tables/*.tex, {r}/summary.csv",
             f"  comparison: {r}/comparison.txt",
             f"  figures:    {r}/figures/ (PNG, PDF)"
-            + (f"; per case: {r}/cases/<alg>/<dataset>/<run>/10_report/" if per_case else ""),
+            + (
+                f"; per case: {r}/cases/<alg>/<dataset>/<run>/{folder('report')}/"
+                if per_case
+                else ""
+            ),
             f"  paper:      {r}/{FOLDER}/paper.tex (cd {r}/{FOLDER} && pdflatex paper.tex)",
             f"  report:     snakemake --report {r}/{report_html}",
         ]

@@ -1,5 +1,6 @@
-"""Running the stages: one module per stage (``stages/``), the chain that orders them and the
-per-case cache (``chain``), batches and jobs (``jobs``), discovery of cases (``discovery``), the
-schema-validated settings (``settings``) and the recovery check of Steps 1-2 (``recovery``)."""
+"""Running the stages: one module per stage (``stages/``, each declaring itself), the chain that
+derives the rest from the declarations (``chain``), batches and jobs (``jobs``), discovery of cases
+(``discovery``), the schema-validated settings (``settings``) and the recovery check of Steps 1-2
+(``recovery``)."""
 
 __all__ = ["chain", "discovery", "jobs", "recovery", "settings"]

@@ -1,4 +1,8 @@
-"""The stage chain, defined once: the stage modules in the order they run.
+"""The stage chain: what the stage declarations give.
+
+The stage list is :data:`epa.artifacts.stage.ORDER`; each stage module declares itself
+(``STAGE``, :class:`epa.artifacts.stage.Stage`) and everything else is derived here
+(:func:`derive`): ``STAGES``, ``NAMES``, ``BY_NAME``, ``LAST_READER``, ``CaseData``.
 
 ``epa eval`` runs :func:`run_case` (every stage in one process, values passed in memory through one
 :class:`~epa.artifacts.case.CaseData`); a workflow job runs one stage for a batch of cases
@@ -9,41 +13,113 @@ Both call the same stage modules, so the command line and the workflow write the
 
 from __future__ import annotations
 
+import functools
+import importlib
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
-from epa.artifacts.case import Case, CaseData, CaseFolder
+from epa.artifacts import case as case_module
+from epa.artifacts import stage as stage_list
+from epa.artifacts.case import Case, CaseFolder
+from epa.artifacts.stage import Stage, Value
 from epa.core.errors import EpaError
 from epa.metrics import registry
-from epa.workflow.stages import (
-    align,
-    calibrate,
-    consistency,
-    crop,
-    drift,
-    efficiency,
-    load,
-    metrics,
-    report,
-    sync,
-)
-
-STAGES = (load, crop, sync, calibrate, align, metrics, drift, consistency, efficiency, report)
-BY_NAME = {stage.NAME: stage for stage in STAGES}
-NAMES = tuple(BY_NAME)
-# run_case keeps every stage's values in memory; these trajectories are let go once the last stage
-# that reads them has run (a million poses with covariance: about 0.7 GB less at the peak).
-LAST_READER = {"loaded": "crop", "sync_matched": "calibrate", "calibrated": "metrics"}
 
 
-def artifacts(stage) -> tuple[str, ...]:
-    return stage.RECORDS + stage.ARRAYS
+@dataclass(frozen=True)
+class Derived:
+    """What the stage declarations give, in the order of :data:`epa.artifacts.stage.ORDER`."""
+
+    stages: tuple[Stage, ...]
+    by_name: dict[str, Stage]
+    names: tuple[str, ...]
+    # name -> its Value; each stage's readable values (its reads, what reading them reads, its own)
+    values: dict[str, Value]
+    readable: dict[str, frozenset[str]]
+    # value -> the stage after which run_case lets it go: the last that reads it, else its own
+    last_reader: dict[str, str]
+    data_class: type[case_module.CaseData]
+
+
+def _closure(names, values: dict[str, Value]) -> set[str]:
+    """``names`` and every value reading them may read (:attr:`~epa.artifacts.stage.Value.needs`)."""
+    found: set[str] = set()
+    todo = list(names)
+    while todo:
+        name = todo.pop()
+        if name not in found:
+            if name not in values:
+                raise ValueError(f"no stage hands on a value {name!r}")
+            found.add(name)
+            todo += values[name].needs
+    return found
+
+
+@functools.lru_cache(maxsize=8)
+def derive(stages: tuple[Stage, ...]) -> Derived:
+    """Everything the chain derives from the stage declarations (a stage reading a value no earlier
+    stage hands on is an error here)."""
+    values: dict[str, Value] = {}
+    readable: dict[str, frozenset[str]] = {}
+    last_reader: dict[str, str] = {}
+    for st in stages:
+        for value in st.values:
+            values.setdefault(value.name, value)
+            last_reader[value.name] = st.name
+        try:
+            readable[st.name] = frozenset(
+                _closure((*st.reads, *(v.name for v in st.values)), values)
+            )
+        except ValueError as exc:
+            raise ValueError(f"stage {st.name}: {exc} before it") from None
+        for name in _closure(st.reads, values):
+            last_reader[name] = st.name
+    return Derived(
+        stages=stages,
+        by_name={st.name: st for st in stages},
+        names=tuple(st.name for st in stages),
+        values=values,
+        readable=readable,
+        last_reader=last_reader,
+        data_class=case_module.data_class(v for st in stages for v in st.values),
+    )
+
+
+def declared() -> Derived:
+    """The chain of the stage list as it is now (each stage module's ``STAGE``)."""
+    modules = (importlib.import_module(f"{__package__}.stages.{name}") for name in stage_list.ORDER)
+    return derive(tuple(module.STAGE for module in modules))
+
+
+# Derived from the stage list on each use (module __getattr__ below), so that a stage added to it, as
+# tests/test_stage_contract.py adds one, reaches every use.
+STAGES: tuple[Stage, ...]  # the declarations, in order
+BY_NAME: dict[str, Stage]
+NAMES: tuple[str, ...]
+# run_case keeps every stage's values in memory and lets each go after the last stage that reads it
+# (a million poses with covariance: about 0.7 GB less at the peak); the records it returns stay.
+LAST_READER: dict[str, str]
+CaseData: type[case_module.CaseData]  # with a field for each value a stage hands on
+_DERIVED = {
+    "STAGES": "stages",
+    "BY_NAME": "by_name",
+    "NAMES": "names",
+    "LAST_READER": "last_reader",
+    "CaseData": "data_class",
+}
+
+
+def __getattr__(name: str):
+    if name in _DERIVED:
+        return getattr(declared(), _DERIVED[name])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def sections_for(stage: str) -> tuple[str, ...]:
-    """The config sections one stage reads: its ``SETTINGS``, then those its registered metrics
+    """The config sections one stage reads: its declared ``settings``, then those its registered metrics
     declare (:attr:`epa.metrics.spec.Metric.settings`)."""
-    return tuple(dict.fromkeys(BY_NAME[stage].SETTINGS + registry.sections(stage)))
+    return tuple(dict.fromkeys(declared().by_name[stage].settings + registry.sections(stage)))
 
 
 def settings_for(stage: str, cfg: dict) -> dict:
@@ -63,19 +139,28 @@ def tables_settings(cfg: dict) -> dict:
 
 
 def previous(stage: str) -> str | None:
-    k = NAMES.index(stage)
-    return NAMES[k - 1] if k else None
+    names = declared().names
+    k = names.index(stage)
+    return names[k - 1] if k else None
 
 
 def write_failure(folder: CaseFolder, stage: str, reason: str, *, arrays: bool = True) -> None:
     """Failure markers in each of a stage's artifacts (only its records where arrays are not written)."""
-    st = BY_NAME[stage]
-    folder.write_failure(stage, artifacts(st) if arrays else st.RECORDS, reason)
+    st = declared().by_name[stage]
+    folder.write_failure(stage, st.artifacts if arrays else st.records, reason)
 
 
-def run_stage(stage: str, data: CaseData, cfg: dict, *, write_arrays: bool = True) -> None:
-    """One stage for one case. Raises EpaError for a user mistake; any other exception is a bug."""
-    BY_NAME[stage].run(data, settings_for(stage, cfg), write_arrays)
+def run_stage(
+    stage: str, data: case_module.CaseData, cfg: dict, *, write_arrays: bool = True
+) -> None:
+    """One stage for one case. Raises EpaError for a user mistake; any other exception is a bug
+    (reading a value the stage does not declare it reads is one)."""
+    chain = declared()
+    data.readable(chain.readable[stage])
+    try:
+        chain.by_name[stage].run(data, settings_for(stage, cfg), write_arrays)
+    finally:
+        data.readable(None)
 
 
 def run_case(
@@ -89,32 +174,31 @@ def run_case(
     ref_source: dict | None = None,
     est_source: dict | None = None,
 ) -> dict:
-    """Every stage for one case in this process (``epa eval``); returns each record that tells the
-    case: metrics, drift, consistency, efficiency. A user mistake raises EpaError after the failed
-    stage's markers are written."""
+    """Every stage for one case in this process (``epa eval``); returns each stage's ``result``
+    (the records that tell the case: metrics, drift, consistency, efficiency), by stage name. A user
+    mistake raises EpaError after the failed stage's markers are written."""
+    chain = declared()
     case = Case("", "", "", Path(ref_path), Path(est_path), ref_source, est_source)
-    data = CaseData(CaseFolder(out_dir, case))
-    for st in STAGES:
+    data = chain.data_class(CaseFolder(out_dir, case))
+    kept = {st.result for st in chain.stages}
+    for st in chain.stages:
         if on_stage is not None:
-            on_stage(st.NAME)
+            on_stage(st.name)
         try:
-            run_stage(st.NAME, data, cfg, write_arrays=write_arrays)
-            data.forget(*(name for name, last in LAST_READER.items() if last == st.NAME))
+            run_stage(st.name, data, cfg, write_arrays=write_arrays)
+            data.forget(
+                *(v for v, last in chain.last_reader.items() if last == st.name and v not in kept)
+            )
         except EpaError as exc:
-            write_failure(data.folder, st.NAME, f"{st.NAME}: {exc.one_line()}", arrays=write_arrays)
+            write_failure(data.folder, st.name, f"{st.name}: {exc.one_line()}", arrays=write_arrays)
             if exc.path is None:  # a stage's finding about the case: name the estimate it is about
-                raise EpaError(f"{st.NAME}: {exc.message}", path=str(est_path)) from None
+                raise EpaError(f"{st.name}: {exc.message}", path=str(est_path)) from None
             raise
-    return {
-        "metrics": data.metrics_record,
-        "drift": data.drift_record,
-        "consistency": data.consistency_record,
-        "efficiency": data.efficiency_record,
-    }
+    return {st.name: getattr(data, st.result) for st in chain.stages if st.result is not None}
 
 
 def clear_arrays(folder: CaseFolder) -> None:
     """Remove array artifacts a previous run left (``epa eval`` without them must not leave stale ones)."""
-    for st in STAGES:
-        for name in st.ARRAYS:
-            folder.remove(st.NAME, name)
+    for st in declared().stages:
+        for name in st.arrays:
+            folder.remove(st.name, name)

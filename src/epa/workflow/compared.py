@@ -6,9 +6,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from epa.artifacts.case import FOLDERS
+from epa.artifacts.stage import folder
 
-REPORT_FOLDER = FOLDERS["report"]
+REPORT_FOLDER = folder("report")
 GRID_FILES = (
     "error_comparison.txt",
     "summary.csv",
@@ -27,7 +27,7 @@ def compared_files(results) -> list[str]:
     results = Path(results)
     names = [n for n in GRID_FILES if (results / n).is_file()]
     names += sorted(str(p.relative_to(results)) for p in (results / "tables").glob("*.tex"))
-    records = [  # every stage's artifacts (10_report/ holds copies for the reader)
+    records = [  # every stage's artifacts (the report's folder holds copies for the reader)
         *results.glob("cases/*/*/*/[0-9][0-9]_*/**/*"),
         *results.glob("consistency/*/*.csv"),
         *results.glob("[0-9][0-9]_*/**/*"),  # a case folder of `epa eval --out`

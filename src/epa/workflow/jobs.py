@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from epa.artifacts import files
-from epa.artifacts.case import Case, CaseData, CaseFolder
+from epa.artifacts.case import Case, CaseFolder
 from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.workflow import chain
@@ -146,7 +146,7 @@ def run_cases(
             continue
         reason = upstream.get(key)
         with case_log(case.log(stage)):
-            stale = case.remove_temporaries(stage, chain.artifacts(chain.BY_NAME[stage]))
+            stale = case.remove_temporaries(stage, chain.BY_NAME[stage].artifacts)
             if stale:
                 log.info("removed what a killed run left: %s", ", ".join(stale))
             if reason is not None:
@@ -155,7 +155,7 @@ def run_cases(
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("always")  # every case logs its own warnings
-                        chain.run_stage(stage, CaseData(case), cfg)
+                        chain.run_stage(stage, chain.CaseData(case), cfg)
                 except EpaError as exc:
                     reason = f"{stage}: {exc.one_line()}"
                     log.error("case failed: %s", reason)

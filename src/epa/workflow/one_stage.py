@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from epa import readers
-from epa.artifacts.case import Case, CaseData, CaseFolder
+from epa.artifacts.case import Case, CaseFolder
 from epa.core.errors import EpaError
 from epa.workflow import chain, discovery, settings
 
@@ -43,11 +43,11 @@ def run(stage: str, case_dir, configfile) -> tuple[float, list[Path]]:
     cfg = settings.from_configfile(configfile)
     folder = CaseFolder(case_dir, grid_case(case_dir, cfg, source))
     before = chain.previous(stage)
-    if before and not folder.has(before, chain.BY_NAME[before].RECORDS[0]):
+    if before and not folder.has(before, chain.BY_NAME[before].records[0]):
         raise EpaError(f"{case_dir}: stage {before} has not run for this case (run it first)")
     t0 = time.perf_counter()
-    chain.run_stage(stage, CaseData(folder), cfg)
+    chain.run_stage(stage, chain.CaseData(folder), cfg)
     elapsed = time.perf_counter() - t0
     st = chain.BY_NAME[stage]
-    written = [folder.path(stage, n) for n in chain.artifacts(st) if folder.has(stage, n)]
+    written = [folder.path(stage, n) for n in st.artifacts if folder.has(stage, n)]
     return elapsed, written

@@ -1,17 +1,9 @@
 """One module per stage, named as the stage: what it reads (from :class:`epa.artifacts.case.CaseData`),
-computes and writes. Each declares ``NAME``, ``SETTINGS`` (the config sections it reads: a change
-re-runs it onward), ``RECORDS`` and ``ARRAYS`` (its files), and ``run(data, cfg, write_arrays)``.
-Their order is :data:`epa.workflow.chain.STAGES`."""
+computes and writes. Each declares itself once, ``STAGE = Stage(...)``
+(:class:`epa.artifacts.stage.Stage`: its settings sections, records, arrays, the values it reads and
+those it hands on, ``run(data, cfg, write_arrays)``). Their order is
+:data:`epa.artifacts.stage.ORDER`; :mod:`epa.workflow.chain` derives the rest."""
 
-__all__ = [
-    "align",
-    "calibrate",
-    "consistency",
-    "crop",
-    "drift",
-    "efficiency",
-    "load",
-    "metrics",
-    "report",
-    "sync",
-]
+from epa.artifacts.stage import ORDER
+
+__all__ = list(ORDER)

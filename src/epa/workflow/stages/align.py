@@ -5,7 +5,8 @@ rpg_trajectory_evaluation's (``align.method`` and ``align.first_n`` are its ``al
 
 from __future__ import annotations
 
-from epa.artifacts.case import CaseData
+from epa.artifacts.case import CaseData, Record
+from epa.artifacts.stage import Stage, Value
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory, position_only
 from epa.steps import align as alignment
@@ -13,9 +14,6 @@ from epa.steps import rpg
 from epa.steps.plan import alignment_of
 
 NAME = "align"
-SETTINGS = ("mode", "align")
-RECORDS = ("transform.json",)
-ARRAYS = ("aligned.tum",)
 
 
 def compute(ref: Trajectory, est: Trajectory, cfg: dict, calib_info: dict):
@@ -52,3 +50,17 @@ def _orientation_needed(ref: Trajectory, est: Trajectory, method: str, first_n: 
             f"align.first_n 1 with {method} in mode rpg aligns on the first pose's orientation, and"
             f" {which} (no orientation); align on 2 or more poses"
         )
+
+
+STAGE = Stage(
+    name=NAME,
+    run=run,
+    settings=("mode", "align"),
+    records=("transform.json",),
+    arrays=("aligned.tum",),
+    reads=("calibrated", "calibrate_record"),
+    values=(
+        Value("transform", Record, lambda s: s.f.record(NAME, "transform.json")),
+        Value("aligned", Trajectory, lambda s: s.f.tum(NAME, "aligned.tum")),
+    ),
+)

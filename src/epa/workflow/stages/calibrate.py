@@ -6,18 +6,16 @@ from __future__ import annotations
 import logging
 import math
 
-from epa.artifacts.case import CaseData
+from epa.artifacts.case import Both, CaseData, Indices, Record
+from epa.artifacts.stage import Stage, Value
 from epa.core.trajectory import Trajectory, position_only
 from epa.steps import calibrate as calibration
 from epa.steps.plan import evaluation_plan
-from epa.workflow.stages.sync import associate
+from epa.workflow.stages.sync import associate, matched_by
 
 log = logging.getLogger("epa")
 
 NAME = "calibrate"
-SETTINGS = ("mode", "sync", "calibrate")
-RECORDS = ("calibrate.json",)
-ARRAYS = ("pairs.csv", "est.tum")
 
 
 def extrinsic_step(
@@ -143,3 +141,27 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
             folder.write_tum(NAME, "est.tum", est)
         else:
             folder.remove(NAME, "est.tum")
+
+
+def _calibrated(data: CaseData) -> Both:
+    """(ref, est) matched, the estimate with Step 2's extrinsic applied when the plan applies it"""
+    ref, est = data.matched
+    if data.calibrate_record["plan"]["apply_extrinsic"]:
+        est = data.f.tum(NAME, "est.tum")
+    return ref, est
+
+
+STAGE = Stage(
+    name=NAME,
+    run=run,
+    settings=("mode", "sync", "calibrate"),
+    records=("calibrate.json",),
+    arrays=("pairs.csv", "est.tum"),
+    reads=("sync_matched", "sync_record", "sync_pairs", "cropped"),
+    values=(
+        Value("calibrate_record", Record, lambda s: s.f.record(NAME, "calibrate.json")),
+        Value("calibrate_pairs", Indices, lambda s: s.f.pairs(NAME)),
+        matched_by("matched", "calibrate_pairs"),
+        Value("calibrated", Both, _calibrated, needs=("matched", "calibrate_record")),
+    ),
+)

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import logging
 
-from epa.artifacts.case import CaseData
+from epa.artifacts.case import CaseData, Columns, Record
+from epa.artifacts.stage import Stage, Value
 from epa.core.trajectory import position_only
 from epa.metrics import consistency
 from epa.steps.align import Similarity
@@ -14,9 +15,6 @@ from epa.steps.calibrate import Extrinsic
 log = logging.getLogger("epa")
 
 NAME = "consistency"
-SETTINGS = ()
-RECORDS = ("consistency.json",)
-ARRAYS = ("nees.csv",)
 
 
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
@@ -39,3 +37,22 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     data.consistency_record, data.nees = summary, table
     data.folder.write_optional_table(NAME, "nees.csv", table if write_arrays else None)
     data.folder.write_record(NAME, "consistency.json", summary)
+
+
+def _nees(data: CaseData) -> Columns:
+    """08_consistency/nees.csv, or {} without covariance"""
+    return data.f.table(NAME, "nees.csv") if data.f.has(NAME, "nees.csv") else {}
+
+
+STAGE = Stage(
+    name=NAME,
+    run=run,
+    records=("consistency.json",),
+    arrays=("nees.csv",),
+    reads=("matched", "calibrate_record", "transform"),
+    values=(
+        Value("consistency_record", Record, lambda s: s.f.record(NAME, "consistency.json")),
+        Value("nees", Columns, _nees),
+    ),
+    result="consistency_record",
+)

@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa.artifacts.case import CaseData
+from epa.artifacts.case import Both, CaseData, Record
+from epa.artifacts.stage import Stage, Value
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 
 NAME = "crop"
-SETTINGS = ("crop",)
-RECORDS = ("crop.json",)
-ARRAYS = ("ref.tum", "est.tum")
 
 
 def compute(ref: Trajectory, est: Trajectory, cfg: dict):
@@ -54,3 +52,17 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         folder.write_tum(NAME, "ref.tum", ref)
         folder.write_tum(NAME, "est.tum", est)
     folder.write_record(NAME, "crop.json", info)
+
+
+STAGE = Stage(
+    name=NAME,
+    run=run,
+    settings=("crop",),
+    records=("crop.json",),
+    arrays=("ref.tum", "est.tum"),
+    reads=("loaded", "load_record"),
+    values=(
+        Value("cropped", Both, lambda s: (s.f.tum(NAME, "ref.tum"), s.f.tum(NAME, "est.tum"))),
+        Value("crop_record", Record, lambda s: s.f.record(NAME, "crop.json")),
+    ),
+)

@@ -5,14 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa.artifacts.case import CaseData
+from epa.artifacts.case import CaseData, Columns, Record
+from epa.artifacts.stage import Stage, Value
 from epa.metrics import drift
 from epa.metrics.accuracy import null_rotation
 
 NAME = "drift"
-SETTINGS = ("drift", "metrics")
-RECORDS = ("drift.json",)
-ARRAYS = ("fail_segments.csv", "pose_valid.csv", "rpe_segments_valid.csv", "rpe_time_valid.csv")
 
 
 def compute(tables: dict, cfg: dict):
@@ -91,6 +89,21 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     summary, artifacts = compute(tables, cfg)
     data.drift_record, data.fail_segments = summary, artifacts["fail_segments"]
     if write_arrays:
-        for name in ARRAYS:
+        for name in STAGE.arrays:
             data.folder.write_table(NAME, name, artifacts[name.removesuffix(".csv")])
     data.folder.write_record(NAME, "drift.json", summary)
+
+
+STAGE = Stage(
+    name=NAME,
+    run=run,
+    settings=("drift", "metrics"),
+    records=("drift.json",),
+    arrays=("fail_segments.csv", "pose_valid.csv", "rpe_segments_valid.csv", "rpe_time_valid.csv"),
+    reads=("ape", "rpe_segments", "rpe_time"),
+    values=(
+        Value("drift_record", Record, lambda s: s.f.record(NAME, "drift.json")),
+        Value("fail_segments", Columns, lambda s: s.f.table(NAME, "fail_segments.csv")),
+    ),
+    result="drift_record",
+)

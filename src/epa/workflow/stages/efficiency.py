@@ -8,16 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from epa.artifacts.case import CaseData
+from epa.artifacts.case import CaseData, Record
+from epa.artifacts.stage import Stage, Value
 from epa.core.errors import EpaError
 from epa.metrics import efficiency
 
 log = logging.getLogger("epa")
 
 NAME = "efficiency"
-SETTINGS = ("efficiency",)
-RECORDS = ("efficiency.json",)
-ARRAYS = ("frames.csv",)
 
 
 def compute(t_est, ape: dict, est_length_m: float, timing, dataset: str, cfg: dict):
@@ -74,3 +72,15 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     data.efficiency_record = summary
     data.folder.write_optional_table(NAME, "frames.csv", table if write_arrays else None)
     data.folder.write_record(NAME, "efficiency.json", summary)
+
+
+STAGE = Stage(
+    name=NAME,
+    run=run,
+    settings=("efficiency",),
+    records=("efficiency.json",),
+    arrays=("frames.csv",),
+    reads=("load_record", "timing", "matched", "metrics_record", "ape"),
+    values=(Value("efficiency_record", Record, lambda s: s.f.record(NAME, "efficiency.json")),),
+    result="efficiency_record",
+)

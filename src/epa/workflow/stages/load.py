@@ -9,7 +9,8 @@ from collections import OrderedDict
 from pathlib import Path
 
 from epa import readers
-from epa.artifacts.case import CaseData, remember
+from epa.artifacts.case import Both, CaseData, Columns, Record, remember
+from epa.artifacts.stage import Stage, Value
 from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
@@ -17,10 +18,6 @@ from epa.readers import bags, text
 from epa.readers import timing as timing_files
 
 NAME = "load"
-# a change re-runs this stage onward (the sources' settings travel with each case)
-SETTINGS = ("load",)
-RECORDS = ("load.json",)
-ARRAYS = ("ref.tum", "est.tum", "timing.csv")
 
 # reference source -> (Trajectory, notes) parsed from the user's file, shared by a dataset's cases
 _LOADED: OrderedDict = runtime.register("workflow.stages.load.loaded", OrderedDict())
@@ -130,3 +127,22 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         folder.write_shared_tum(NAME, "ref.tum", ref, source or None)
         folder.write_tum(NAME, "est.tum", est)
     folder.write_record(NAME, "load.json", info)
+
+
+def _timing(data: CaseData) -> Columns | None:
+    """{t, frame_ms} of the run's timing file as load read it, or None without one"""
+    return data.f.table(NAME, "timing.csv") if data.f.has(NAME, "timing.csv") else None
+
+
+STAGE = Stage(
+    name=NAME,
+    run=run,
+    settings=("load",),  # the sources' settings travel with each case
+    records=("load.json",),
+    arrays=("ref.tum", "est.tum", "timing.csv"),
+    values=(
+        Value("loaded", Both, lambda s: (s.f.tum(NAME, "ref.tum"), s.f.tum(NAME, "est.tum"))),
+        Value("load_record", Record, lambda s: s.f.record(NAME, "load.json")),
+        Value("timing", Columns | None, _timing),
+    ),
+)

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import logging
 
-from epa.artifacts.case import Case, CaseData
+from epa.artifacts.case import Case, CaseData, Columns, Record
+from epa.artifacts.stage import Stage, Value
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory, position_only
 from epa.metrics import accuracy, registry
@@ -15,10 +16,7 @@ from epa.readers.image_stamps import read_image_stamps
 log = logging.getLogger("epa")
 
 NAME = "metrics"
-SETTINGS = ("mode", "metrics")  # and the sections its registered metrics read (chain.settings_for)
-RECORDS = ("metrics.json",)
 BASE_ARRAYS = ("ape.csv", "rpe_segments.csv", "rpe_time.csv")
-ARRAYS = BASE_ARRAYS + tuple(a for m in registry.computed_in(NAME) for a in m.arrays)
 
 # A matched reference shorter than this has no distance metrics (RPE per metre, drift rate,
 # distance success rate would all be 0/0).
@@ -169,7 +167,7 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         tables["rpe_segments"],
         tables["rpe_time"],
     )
-    for name in ARRAYS:
+    for name in STAGE.arrays:
         table = tables.get(name.removesuffix(".csv"))
         if write_arrays and table is not None:
             folder.write_table(NAME, name, table)
@@ -182,3 +180,30 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
                 for name, text in metric.documents(record[metric.key]).items():
                     folder.write_text(NAME, f"{metric.key}/{name}", text)
     folder.write_record(NAME, "metrics.json", record)
+
+
+STAGE = Stage(
+    name=NAME,
+    run=run,
+    # and the sections its registered metrics read (chain.sections_for)
+    settings=("mode", "metrics"),
+    records=("metrics.json",),
+    arrays=BASE_ARRAYS + tuple(a for m in registry.computed_in(NAME) for a in m.arrays),
+    reads=(
+        "matched",
+        "aligned",
+        "calibrated",
+        "transform",
+        "cropped",
+        "load_record",
+        "sync_record",
+        "calibrate_record",
+    ),
+    values=(
+        Value("metrics_record", Record, lambda s: s.f.record(NAME, "metrics.json")),
+        Value("ape", Columns, lambda s: s.f.table(NAME, "ape.csv")),
+        Value("rpe_segments", Columns, lambda s: s.f.table(NAME, "rpe_segments.csv")),
+        Value("rpe_time", Columns, lambda s: s.f.table(NAME, "rpe_time.csv")),
+    ),
+    result="metrics_record",
+)

@@ -4,12 +4,10 @@ matplotlib is imported only here."""
 from __future__ import annotations
 
 from epa.artifacts.case import CaseData
+from epa.artifacts.stage import Stage
 from epa.outputs import report
 
 NAME = "report"
-SETTINGS = ("report", "truth_dir", "load", "sources")  # the inputs in the report's provenance
-RECORDS = ("report.json",)
-ARRAYS = ()
 
 
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
@@ -23,5 +21,13 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         folder = data.folder
         name = "/".join(folder.root.parts[-3:])
         # from the artifacts alone, as the workflow's report job reads them
-        summary = {"available": True, **report.write_case_report(CaseData(folder), name, cfg)}
+        summary = {"available": True, **report.write_case_report(type(data)(folder), name, cfg)}
     data.folder.write_record(NAME, "report.json", summary)
+
+
+STAGE = Stage(
+    name=NAME,
+    run=run,
+    settings=("report", "truth_dir", "load", "sources"),  # the inputs in the report's provenance
+    records=("report.json",),
+)

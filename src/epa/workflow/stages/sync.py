@@ -6,7 +6,8 @@ from __future__ import annotations
 import logging
 import math
 
-from epa.artifacts.case import CaseData
+from epa.artifacts.case import Both, CaseData, Indices, Record
+from epa.artifacts.stage import Stage, Value
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory, position_only
 from epa.steps import sync
@@ -14,9 +15,6 @@ from epa.steps import sync
 log = logging.getLogger("epa")
 
 NAME = "sync"
-SETTINGS = ("mode", "sync")
-RECORDS = ("sync.json",)
-ARRAYS = ("pairs.csv", "xcorr.csv")
 
 
 def compute(ref: Trajectory, est: Trajectory, cfg: dict):
@@ -128,3 +126,30 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     if write_arrays:
         folder.write_pairs(NAME, i_ref, i_est, ref.t, est.t)
         folder.write_table(NAME, "xcorr.csv", curve or {"lag_s": [], "corr": []})
+
+
+def matched_by(name: str, pairs: str) -> Value:
+    """The value ``name``: (ref, est) of the cropped trajectories at the indices of the value
+    ``pairs`` (a stage's ``pairs.csv``)."""
+
+    def read(data: CaseData) -> Both:
+        ref, est = data.cropped
+        i_ref, i_est = getattr(data, pairs)
+        return ref.select(i_ref), est.select(i_est)
+
+    return Value(name, Both, read, needs=("cropped", pairs))
+
+
+STAGE = Stage(
+    name=NAME,
+    run=run,
+    settings=("mode", "sync"),
+    records=("sync.json",),
+    arrays=("pairs.csv", "xcorr.csv"),
+    reads=("cropped",),
+    values=(
+        Value("sync_record", Record, lambda s: s.f.record(NAME, "sync.json")),
+        Value("sync_pairs", Indices, lambda s: s.f.pairs(NAME)),
+        matched_by("sync_matched", "sync_pairs"),
+    ),
+)
