@@ -31,7 +31,13 @@ from epa.workflow.stages import sync
 ROOT = Path(__file__).resolve().parents[1]
 BASE = {"truth_dir": "t", "algorithms_dir": "a"}
 # numbers that may be negative, and why: a time offset has a sign; -1 is first_n's "all"
-SIGNED = {"sync.offset": "a time offset has a sign", "align.first_n": "-1 = all (minimum -1)"}
+SIGNED = {
+    "sync.offset": "a time offset has a sign",
+    "align.first_n": "-1 = all (minimum -1)",
+    "metrics.tum.offset": "a time offset has a sign",
+    "metrics.hilti.lever_arm_m.0": "a lever arm's component has a sign",
+    "metrics.hilti.year": "one of two years (an enum)",
+}
 
 
 def _numeric_keys(sch: dict, root: dict, prefix: str = ""):
