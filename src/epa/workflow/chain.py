@@ -92,6 +92,37 @@ def run_case(
     """Every stage for one case in this process (``epa eval``); returns each record that tells the
     case: metrics, drift, consistency, efficiency. A user mistake raises EpaError after the failed
     stage's markers are written."""
+    data = run_case_data(
+        ref_path,
+        est_path,
+        out_dir,
+        cfg,
+        write_arrays=write_arrays,
+        on_stage=on_stage,
+        ref_source=ref_source,
+        est_source=est_source,
+    )
+    return {
+        "metrics": data.metrics_record,
+        "drift": data.drift_record,
+        "consistency": data.consistency_record,
+        "efficiency": data.efficiency_record,
+    }
+
+
+def run_case_data(
+    ref_path,
+    est_path,
+    out_dir,
+    cfg: dict,
+    *,
+    write_arrays: bool = False,
+    on_stage: Callable[[str], None] | None = None,
+    ref_source: dict | None = None,
+    est_source: dict | None = None,
+) -> CaseData:
+    """:func:`run_case`, returning the whole :class:`CaseData` (every stage's record and, in memory,
+    the per-pose errors): what the Python API (:func:`epa.evaluate`) hands on."""
     case = Case("", "", "", Path(ref_path), Path(est_path), ref_source, est_source)
     data = CaseData(CaseFolder(out_dir, case))
     for st in STAGES:
@@ -105,12 +136,7 @@ def run_case(
             if exc.path is None:  # a stage's finding about the case: name the estimate it is about
                 raise EpaError(f"{st.NAME}: {exc.message}", path=str(est_path)) from None
             raise
-    return {
-        "metrics": data.metrics_record,
-        "drift": data.drift_record,
-        "consistency": data.consistency_record,
-        "efficiency": data.efficiency_record,
-    }
+    return data
 
 
 def clear_arrays(folder: CaseFolder) -> None:
