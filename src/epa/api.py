@@ -127,6 +127,7 @@ def settings(config=None, **given) -> dict:
         cfg = workflow_settings.load_yaml(config)
     else:
         cfg = dict(config or {})
+    cfg.pop("inputs", None)  # a grid's: this is one case
     cfg.update(truth_dir=".", algorithms_dir=".")
     cfg.setdefault("report", {"per_case": False})  # no figures (and no matplotlib) unless asked
     sources = cfg.setdefault("sources", {})

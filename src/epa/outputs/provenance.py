@@ -116,13 +116,15 @@ def case_inputs(truth, estimate, timing=None) -> list[str]:
     return sorted(paths)
 
 
-def run_timing(cfg: dict, estimate, algorithm: str):
-    """A run's timing file under ``cfg`` (None when it has none or its configured one is missing)."""
+def run_timing(cfg: dict, estimate, algorithm: str, source: dict | None = None):
+    """A run's timing file under ``cfg`` or its own source settings ``source`` (a sheet's row);
+    None when it has none or its configured one is missing."""
     from epa import readers
     from epa.core.errors import EpaError
 
     try:
-        return readers.timing_file(estimate, readers.options(cfg, "estimate", algorithm=algorithm))
+        opts = source or readers.options(cfg, "estimate", algorithm=algorithm)
+        return readers.timing_file(estimate, opts)
     except (EpaError, OSError):
         return None
 
@@ -132,7 +134,8 @@ def grid_inputs(cfg: dict, cases, idle_truths: dict | None = None) -> list[str]:
     ov_eval) the references no run uses."""
     paths: set[str] = set()
     for c in cases:
-        paths.update(case_inputs(c.truth, c.estimate, run_timing(cfg, c.estimate, c.algorithm)))
+        timing = run_timing(cfg, c.estimate, c.algorithm, c.estimate_source)
+        paths.update(case_inputs(c.truth, c.estimate, timing))
     paths.update(str(p) for p in (idle_truths or {}).values())
     return sorted(paths)
 
