@@ -39,11 +39,38 @@ if workers() > 1 and (workflow.remote_exec or workflow.nodes is None):
     epa_jobs.warm_up()
 
 
+# epica's own folder (this file's parent's): every internal path starts here, also where epica is
+# another workflow's module (`module epica: snakefile: ...`), where workflow.basedir is that one's.
+EPICA_DIR = os.path.dirname(str(workflow.current_basedir))
+
+
+def in_threads(execute):
+    """The stage rules' jobs run in this process's threads (their work in epica's worker pool),
+    whether or not profiles/default is read: a host workflow using epica as a module does not read
+    it, and a `run:` job would otherwise start a new Snakemake each (docs/performance.md). The
+    execution settings exist only once the run starts, after the parse: set there."""
+
+    def run(*args, **kwargs):
+        if workflow.execution_settings is not None:
+            workflow.execution_settings.use_threads = True
+        return execute(*args, **kwargs)
+
+    return run
+
+
+workflow.execute = in_threads(workflow.execute)
+IS_MODULE = workflow.modifier.is_module
+
 try:  # a mistake in the config or the folders is one line, not a traceback
-    NAMED = epa_settings.check_user_configs(
-        workflow.overwrite_configfiles, workflow.config_settings.overwrite_config
-    )
-    CONFIG_SOURCE = ", ".join(map(str, workflow.configfiles)) or "config"
+    # a module's config is the host's config["epica"], given whole: nothing bundled is merged in
+    if IS_MODULE:
+        NAMED = set(config)
+        CONFIG_SOURCE = "config of module " + workflow.modifier.namespace
+    else:
+        NAMED = epa_settings.check_user_configs(
+            workflow.overwrite_configfiles, workflow.config_settings.overwrite_config
+        )
+        CONFIG_SOURCE = ", ".join(map(str, workflow.configfiles)) or "config"
     EPA = epa_settings.resolve(
         epa_settings.without_bundled_folders(
             epa_settings.coerce_overrides(
