@@ -59,7 +59,7 @@ def in_threads(execute):
 
 
 workflow.execute = in_threads(workflow.execute)
-IS_MODULE = workflow.modifier.is_module
+IS_MODULE = workflow.modifier.namespace is not None  # the main workflow has none
 
 try:  # a mistake in the config or the folders is one line, not a traceback
     # a module's config is the host's config["epica"], given whole: nothing bundled is merged in
