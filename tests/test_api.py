@@ -173,3 +173,12 @@ def test_the_api_page_runs_as_written(grid, tmp_path, monkeypatch):
     assert namespace["best"].loc["drone_figure8", "ate_trans_rmse_m"] > 0
     if DATA.is_dir():
         assert 0.05 < namespace["ov"].ate_rmse_m < 0.2  # OpenVINS on MH_01: about 0.11 m
+
+
+def test_each_sides_source_settings_reach_that_side():
+    with pytest.raises(EpaError) as err:
+        epa.evaluate(TRUTH, RUN1, estimate_source={"topic": "/odom"})
+    assert err.value.one_line().startswith(str(RUN1) + ": a topic is set for this source")
+    with pytest.raises(EpaError) as err:
+        epa.evaluate(TRUTH, RUN1, reference_source={"topic": "/odom"})
+    assert err.value.one_line().startswith(str(TRUTH) + ": a topic is set for this source")

@@ -214,3 +214,55 @@ def test_relative_patterns_start_at_the_working_directory(tmp_path, monkeypatch)
     _, cases = discovery.discover_config(cfg, say=lambda line: None)
     assert [c.key for c in cases][:2] == ["mine/drone_figure8/run1", "mine/drone_figure8/run2"]
     assert len(cases) == 6 and os.fspath(cases[0].estimate).startswith("example/")
+
+
+def test_snakemakes_validate_takes_the_sheet_schema(tmp_path):
+    """The sheet's schema is the one a workflow's `validate(sheet, schema)` takes: a good sheet
+    passes, a value outside it fails there as in epica's own check."""
+    import pandas
+    from snakemake.exceptions import WorkflowError
+    from snakemake.utils import validate
+
+    from epa.workflow import sheet
+
+    path = write_sheet(
+        tmp_path / "runs.tsv", [("a", "seq", "1", "x.txt", "t.txt")], {"format": ["tum"]}
+    )
+    frame = pandas.read_csv(path, sep="\t", dtype=str, keep_default_na=False)
+    validate(frame, str(sheet.SCHEMA_PATH))
+    with pytest.raises(WorkflowError, match="'tum2' is not one of"):
+        validate(frame.assign(format="tum2"), str(sheet.SCHEMA_PATH))
+
+
+def test_wildcards_in_any_order_and_depth_with_a_dataset_map(tmp_path, caplog, capsys):
+    """`{dataset}/run_{run}/{algorithm}.txt` under estimates named by their own dataset names; a
+    folder and a file of a dataset without a reference are skipped, each said with its reason."""
+    truth = EXAMPLE / "truth/drone_figure8.txt"
+    for run in ("0", "1"):
+        for alg in ("vio", "vo"):
+            link = tmp_path / "out/fig8/deep" / f"run_{run}" / f"{alg}.txt"
+            link.parent.mkdir(parents=True, exist_ok=True)
+            link.symlink_to(EXAMPLE / f"algorithms/vio_body/drone_figure8/run{int(run) + 1}.txt")
+    (tmp_path / "out/fig8/deep/run_2/x.txt").mkdir(parents=True)  # a folder, not a bag
+    (tmp_path / "out/office/deep/run_0").mkdir(parents=True)
+    (tmp_path / "out/office/deep/run_0/vio.txt").symlink_to(truth)  # no reference for office
+    cfg = settings.resolve(
+        {
+            "inputs": {
+                "reference": f"{EXAMPLE}/truth/{{dataset}}.txt",
+                "estimate": f"{tmp_path}/out/{{dataset}}/deep/run_{{run}}/{{algorithm}}.txt",
+                "datasets": {"fig8": "drone_figure8"},
+            }
+        }
+    )
+    _, cases = discovery.discover_config(cfg)
+    assert [c.key for c in cases] == [
+        "vio/drone_figure8/0",
+        "vio/drone_figure8/1",
+        "vo/drone_figure8/0",
+        "vo/drone_figure8/1",
+    ]
+    assert cases[0].truth == truth
+    assert "inputs.estimate" in capsys.readouterr().err
+    assert "skipped 1: inputs.estimate: a folder, not a ROS 2 bag" in caplog.text
+    assert "skipped 1: inputs.estimate: no reference for dataset 'office'" in caplog.text
