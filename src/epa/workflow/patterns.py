@@ -15,6 +15,7 @@ matching one file and two files for one case are each a one-line error.
 from __future__ import annotations
 
 import glob
+import os
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -85,16 +86,17 @@ class Pattern:
 
 def patterns(value, key: str) -> list[Pattern]:
     """``inputs.<key>`` as patterns: a string, a list of strings, or {algorithm: pattern}."""
+    home = os.path.expanduser  # `~/data/...` as a shell would read it
     if isinstance(value, str):
-        return [Pattern(f"inputs.{key}", value)]
+        return [Pattern(f"inputs.{key}", home(value))]
     if isinstance(value, list):
-        return [Pattern(f"inputs.{key}.{k}", v) for k, v in enumerate(value)]
+        return [Pattern(f"inputs.{key}.{k}", home(v)) for k, v in enumerate(value)]
     if not value:
         raise EpaError(f"inputs.{key}: an empty mapping names no pattern")
     for alg in value:
         if not plain_name(alg):
             raise EpaError(f"inputs.{key}.{alg}: an algorithm's name is one path component")
-    return [Pattern(f"inputs.{key}.{alg}", v, alg) for alg, v in value.items()]
+    return [Pattern(f"inputs.{key}.{alg}", home(v), alg) for alg, v in value.items()]
 
 
 def _owned(pats: list[Pattern], source: str) -> dict[str, tuple[Pattern, dict]]:
