@@ -139,6 +139,12 @@ def lay_out(doc: dict, cfg: dict, found: dict[str, Path], into: Path) -> tuple[d
     rewrites ``(new text, recorded text)`` that turn a regenerated record's paths into the recorded
     ones (``load.json`` names its estimate's path)."""
     kind = doc.get("kind")
+    named = cfg.get("inputs") or {}
+    if kind != "case" and (named.get("sheet") or named.get("estimate")):
+        raise EpaError(
+            "this grid named its inputs by path patterns or a run sheet (inputs): --data cannot"
+            " lay them out again yet; verify with the inputs where they were (no --data)"
+        )
     roots = provenance.input_roots(kind, cfg, doc.get("case"))
     for rec in _wanted(doc):
         folder, relative = _case_place(rec, doc["case"]) if kind == "case" else _place(rec, roots)
