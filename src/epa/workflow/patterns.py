@@ -23,6 +23,7 @@ from pathlib import Path
 
 from epa.artifacts.case import Case, plain_name
 from epa.core.errors import EpaError
+from epa.workflow.side_files import is_side_file, timing_side_files
 
 WILDCARDS = ("algorithm", "dataset", "run")
 REFERENCE_WILDCARDS = ("dataset",)
@@ -129,8 +130,6 @@ def _kind(path: str, side_file: Callable[[Path], bool]) -> str | None:
 
 def references(cfg: dict, source: str, say, skip) -> dict[str, Path]:
     """The reference of each dataset, by ``inputs.reference``."""
-    from epa.workflow.side_files import is_side_file
-
     pats = patterns(cfg["inputs"]["reference"], "reference")
     for pat in pats:
         pat.check(REFERENCE_WILDCARDS, ("dataset",), source)
@@ -155,8 +154,6 @@ def references(cfg: dict, source: str, say, skip) -> dict[str, Path]:
 
 def discover(cfg: dict, *, source: str, say, skip) -> tuple[dict[str, Path], list[Case]]:
     """The reference per dataset and the cases, by the patterns of ``cfg["inputs"]``."""
-    from epa.workflow.side_files import is_side_file, timing_side_files
-
     truth = references(cfg, source, say, skip)
     names = cfg["inputs"]["datasets"] or {}
     pats = patterns(cfg["inputs"]["estimate"], "estimate")
