@@ -65,7 +65,7 @@ try:  # a mistake in the config or the folders is one line, not a traceback
     # a module's config is the host's config["epica"], given whole: nothing bundled is merged in
     if IS_MODULE:
         NAMED = set(config)
-        CONFIG_SOURCE = "config of module " + workflow.modifier.namespace
+        CONFIG_SOURCE = f"config of module {workflow.modifier.namespace}"
     else:
         NAMED = epa_settings.check_user_configs(
             workflow.overwrite_configfiles, workflow.config_settings.overwrite_config
@@ -82,7 +82,7 @@ try:  # a mistake in the config or the folders is one line, not a traceback
     )
     TRUTH, CASES = epa_discovery.discover_config(EPA, source=CONFIG_SOURCE)
 except EpaError as exc:
-    raise WorkflowError("epa: error: " + exc.one_line()) from None
+    raise WorkflowError(f"epa: error: {exc.one_line()}") from None
 EPA_VERSION = epa.__version__
 # the command line, for provenance.json only (an environment variable, not a rule parameter, so a
 # new command line re-runs nothing)
