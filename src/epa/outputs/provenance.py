@@ -98,7 +98,34 @@ def input_roots(kind: str, cfg: dict, case: dict | None = None) -> dict[str, str
             "estimate": os.path.dirname(str(case["estimate"])) or ".",
             "reference": os.path.dirname(str(case["reference"])) or ".",
         }
+    if (cfg.get("inputs") or {}).get("estimate"):
+        return pattern_roots(cfg["inputs"])
     return {k: str(cfg[k]) for k in ("truth_dir", "algorithms_dir") if cfg.get(k)}
+
+
+def pattern_texts(inputs: dict) -> list[str]:
+    """Every path pattern of an ``inputs`` section (``~`` expanded, as discovery reads them)."""
+    texts = []
+    for key in ("reference", "estimate"):
+        value = inputs.get(key) or []
+        value = [value] if isinstance(value, str) else value
+        texts += list(value.values()) if isinstance(value, dict) else value
+    return [os.path.expanduser(t) for t in texts]
+
+
+def pattern_root(text: str) -> str:
+    """The folder a pattern's first wildcard is in (``.``: the working directory)."""
+    return os.path.normpath(os.path.dirname(text.split("{", 1)[0]) or ".")
+
+
+def pattern_roots(inputs: dict) -> dict[str, str]:
+    """The folders a patterns grid's inputs are relative to: each pattern's root, those inside
+    another dropped, named ``root0``, ``root1``, ... in the order of their paths."""
+    roots: list[str] = []
+    for root in sorted({pattern_root(t) for t in pattern_texts(inputs)}, key=len):
+        if not any(where(root + "/x", {"r": outer}) for outer in roots):
+            roots.append(root)
+    return {f"root{k}": root for k, root in enumerate(sorted(roots))}
 
 
 def case_inputs(truth, estimate, timing=None) -> list[str]:
