@@ -39,22 +39,50 @@ if workers() > 1 and (workflow.remote_exec or workflow.nodes is None):
     epa_jobs.warm_up()
 
 
+# epica's own folder (this file's parent's): every internal path starts here, also where epica is
+# another workflow's module (`module epica: snakefile: ...`), where workflow.basedir is that one's.
+EPICA_DIR = os.path.dirname(str(workflow.current_basedir))
+
+
+def in_threads(execute):
+    """The stage rules' jobs run in this process's threads (their work in epica's worker pool),
+    whether or not profiles/default is read: a host workflow using epica as a module does not read
+    it, and a `run:` job would otherwise start a new Snakemake each (docs/performance.md). The
+    execution settings exist only once the run starts, after the parse: set there."""
+
+    def run(*args, **kwargs):
+        if workflow.execution_settings is not None:
+            workflow.execution_settings.use_threads = True
+        return execute(*args, **kwargs)
+
+    return run
+
+
+workflow.execute = in_threads(workflow.execute)
+IS_MODULE = workflow.modifier.namespace is not None  # the main workflow has none
+
 try:  # a mistake in the config or the folders is one line, not a traceback
-    epa_settings.check_user_configs(
-        workflow.overwrite_configfiles, workflow.config_settings.overwrite_config
-    )
-    CONFIG_SOURCE = ", ".join(map(str, workflow.configfiles)) or "config"
+    # a module's config is the host's config["epica"], given whole: nothing bundled is merged in
+    if IS_MODULE:
+        NAMED = set(config)
+        CONFIG_SOURCE = f"config of module {workflow.modifier.namespace}"
+    else:
+        NAMED = epa_settings.check_user_configs(
+            workflow.overwrite_configfiles, workflow.config_settings.overwrite_config
+        )
+        CONFIG_SOURCE = ", ".join(map(str, workflow.configfiles)) or "config"
     EPA = epa_settings.resolve(
-        epa_settings.coerce_overrides(
-            config, workflow.config_settings.overwrite_config
+        epa_settings.without_bundled_folders(
+            epa_settings.coerce_overrides(
+                config, workflow.config_settings.overwrite_config
+            ),
+            NAMED,
         ),
         source=CONFIG_SOURCE,
     )
-    TRUTH, CASES = epa_discovery.discover(
-        EPA["truth_dir"], EPA["algorithms_dir"], source=CONFIG_SOURCE, cfg=EPA
-    )
+    TRUTH, CASES = epa_discovery.discover_config(EPA, source=CONFIG_SOURCE)
 except EpaError as exc:
-    raise WorkflowError("epa: error: " + exc.one_line()) from None
+    raise WorkflowError(f"epa: error: {exc.one_line()}") from None
 EPA_VERSION = epa.__version__
 # the command line, for provenance.json only (an environment variable, not a rule parameter, so a
 # new command line re-runs nothing)
@@ -132,8 +160,7 @@ def batch_sources(batch):
 def timing_of(c):
     """A run's timing file (an edit re-runs its case); a configured one that is missing is the case's error."""
     try:
-        options = epa_readers.options(EPA, "estimate", algorithm=c.algorithm)
-        path = epa_readers.timing_file(c.estimate, options)
+        path = epa_readers.timing_file(c.estimate, epa_discovery.sources_of(EPA, c)[1])
     except EpaError:
         return None
     return None if path is None else str(path)
@@ -141,12 +168,13 @@ def timing_of(c):
 
 def load_case(c):
     """What the load stage needs of one case: its files and each side's source settings."""
+    truth_source, estimate_source = epa_discovery.sources_of(EPA, c)
     return {
         "key": c.key,
         "truth": str(c.truth),
         "estimate": str(c.estimate),
-        "truth_source": epa_readers.options(EPA, "reference", dataset=c.dataset),
-        "estimate_source": epa_readers.options(EPA, "estimate", algorithm=c.algorithm),
+        "truth_source": truth_source,
+        "estimate_source": estimate_source,
     }
 
 

@@ -30,7 +30,7 @@ rule paper:
         runtime=2,
     params:
         results=lambda wc, input: os.path.dirname(input.comparison_tex),
-        captions=os.path.join(workflow.basedir, "docs", "captions"),
+        captions=os.path.join(EPICA_DIR, "docs", "captions"),
         version=EPA_VERSION,
     script:
         "../scripts/paper.py"

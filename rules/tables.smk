@@ -56,6 +56,6 @@ rule tables:
         # provenance.json: the resolved config, every input file (hashed when the rule runs), the checkout
         resolved=EPA,
         inputs=lambda wc: epa_provenance.grid_inputs(EPA, CASES, idle_truths()),
-        workflow_dir=workflow.basedir,
+        workflow_dir=EPICA_DIR,
     script:
         "../scripts/tables.py"

@@ -34,8 +34,11 @@ this page is written from it by `{command}`, and a test checks that it is curren
 How to pass a config:
 - `snakemake --cores 2` runs the bundled example with [`config/config.yaml`](config.yaml).
 - `snakemake --cores 2 --configfile my.yaml` runs another grid. `my.yaml` must name `truth_dir`,
-  `algorithms_dir` and `results_dir` (a config file that names no folders is an error: the bundled
-  example's would be merged in underneath); every other setting defaults.
+  `algorithms_dir` and `results_dir`, or an `inputs` section (path patterns or a run sheet:
+  [docs/inputs.md](../docs/inputs.md)) and `results_dir` (a config file that names no inputs is an
+  error: the bundled example's would be merged in underneath); every other setting defaults.
+- Another workflow uses epica as a module with its own config section: `module epica: snakefile:
+  ...; config: config["epica"]` (README.md).
 - `snakemake --cores 2 --configfile my.yaml --config key=value` overrides single top-level settings
   on the command line, e.g. `--config mode=ov_eval results_dir=results_ov`.
 - `epa eval REF EST --out DIR --config my.yaml` evaluates one case with the same settings.

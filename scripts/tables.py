@@ -45,9 +45,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         cfg = settings.from_configfile(args.configfile)
-        truth, cases = discovery.discover(
-            cfg["truth_dir"], cfg["algorithms_dir"], source=args.configfile, cfg=cfg
-        )
+        truth, cases = discovery.discover_config(cfg, source=args.configfile)
         used = {c.dataset for c in cases}
         idle = (
             {}

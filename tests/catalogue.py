@@ -89,10 +89,18 @@ class Bad:
     stamps: str | None = None  # content of stamps.txt in the working folder (metrics.eth3d)
     keeps_accuracy: bool = False  # the error is a later stage's: metrics.json stands
     blamed: str | None = None  # command rows: what the error line starts with ({ref}, {est}, {tmp})
+    sheet: str | None = None  # workflow rows: the run sheet runs.tsv beside the config
 
 
 S = GOOD.splitlines(keepends=True)
 ETH3D_STAMPS = "metrics:\n  eth3d:\n    enabled: true\n    image_stamps: stamps.txt\n"
+# the workflow rows of inputs where they lie: truth/seq.txt, algorithms/a/seq/run1.txt and
+# other/a/seq/run1.txt (setup wf-inputs), named by patterns or a sheet
+PATTERNS = "inputs:\n  reference: truth/{{dataset}}.txt\n  estimate: {estimate}\n"
+SHEET = (
+    "algorithm\tdataset\trun\testimate\treference\n"
+    "a\tseq\trun1\talgorithms/a/seq/run1.txt\ttruth/seq.txt\n"
+)
 CATALOGUE: list[Bad] = [
     # ------------------------------------------------------------------ readers: what the file is
     Bad(
@@ -1711,6 +1719,118 @@ CATALOGUE: list[Bad] = [
         est=GOOD,
         config="metrics:\n  hilti: {enabled: true}\n",
         ok=True,
+    ),
+    # ------------------------------------------------------------------ inputs where they lie
+    Bad(
+        "wf-inputs-two-ways",
+        "workflow",
+        "folders and `inputs.sheet` both in a grid config",
+        "truth_dir/algorithms_dir and inputs.sheet both name the inputs: keep one way",
+        config="truth_dir: truth\nalgorithms_dir: algorithms\ninputs: {sheet: runs.tsv}\n",
+        setup="wf-inputs",
+    ),
+    Bad(
+        "wf-patterns-said",
+        "workflow",
+        "path patterns naming files where they lie: what each matched is printed",
+        "epa: inputs.estimate 'algorithms/{algorithm}/{dataset}/{run}.txt': 1 run(s)",
+        config=PATTERNS.format(estimate="algorithms/{algorithm}/{dataset}/{run}.txt"),
+        setup="wf-inputs",
+        ok=True,
+    ),
+    Bad(
+        "wf-sheet-said",
+        "workflow",
+        "a run sheet: what it lists is printed",
+        "epa: inputs.sheet runs.tsv: 1 run(s) of 1 algorithm(s) on 1 dataset(s)",
+        config="inputs: {sheet: runs.tsv}\n",
+        sheet=SHEET,
+        setup="wf-inputs",
+        ok=True,
+    ),
+    Bad(
+        "wf-pattern-wildcard",
+        "workflow",
+        "a path pattern with an unknown wildcard (`{algo}`)",
+        "inputs.estimate: unknown wildcard {algo} in 'algorithms/{algo}/{dataset}/{run}.txt'"
+        " (known here: {algorithm}, {dataset}, {run})",
+        config=PATTERNS.format(estimate="algorithms/{algo}/{dataset}/{run}.txt"),
+        setup="wf-inputs",
+    ),
+    Bad(
+        "wf-pattern-nothing",
+        "workflow",
+        "a path pattern that matches no file",
+        "inputs.estimate: 'results/{algorithm}/{dataset}/{run}.txt' matches no file",
+        config=PATTERNS.format(estimate="results/{algorithm}/{dataset}/{run}.txt"),
+        setup="wf-inputs",
+    ),
+    Bad(
+        "wf-pattern-twice",
+        "workflow",
+        "two estimate patterns matching the same file",
+        "matched by two patterns, inputs.estimate.0 and inputs.estimate.1: make them exclusive",
+        config=PATTERNS.format(
+            estimate='["algorithms/{algorithm}/{dataset}/{run}.txt",'
+            ' "algorithms/{algorithm}/{dataset}/run{run}.txt"]'
+        ),
+        setup="wf-inputs",
+        blamed="algorithms/a/seq/run1.txt: ",
+    ),
+    Bad(
+        "wf-pattern-duplicate-case",
+        "workflow",
+        "two files the patterns give the same case name",
+        "two files for case 'a/seq/run1' (algorithms/a/seq/run1.txt, other/a/seq/run1.txt): give"
+        " the patterns a {run}, or rename one",
+        config=PATTERNS.format(
+            estimate='["algorithms/{algorithm}/{dataset}/{run}.txt",'
+            ' "other/{algorithm}/{dataset}/{run}.txt"]'
+        ),
+        setup="wf-inputs",
+        blamed="other/a/seq/run1.txt: ",
+    ),
+    Bad(
+        "wf-sheet-column",
+        "workflow",
+        "a run sheet without the `reference` column",
+        "no column 'reference' (a sheet needs algorithm dataset run estimate reference, tab-separated)",
+        config="inputs: {sheet: runs.tsv}\n",
+        sheet="algorithm\tdataset\trun\testimate\na\tseq\trun1\talgorithms/a/seq/run1.txt\n",
+        setup="wf-inputs",
+        blamed="runs.tsv:1: ",
+    ),
+    Bad(
+        "wf-sheet-duplicate",
+        "workflow",
+        "a run sheet listing one run twice",
+        "case 'a/seq/run1' is also on line 2: one row per run",
+        config="inputs: {sheet: runs.tsv}\n",
+        sheet=SHEET + SHEET.splitlines(keepends=True)[1],
+        setup="wf-inputs",
+        blamed="runs.tsv:3: ",
+    ),
+    Bad(
+        "wf-sheet-folder",
+        "workflow",
+        "a run sheet's row whose estimate is a folder",
+        "estimate 'algorithms/a/seq' is a folder, not a trajectory file",
+        config="inputs: {sheet: runs.tsv}\n",
+        sheet=SHEET.replace("algorithms/a/seq/run1.txt", "algorithms/a/seq"),
+        setup="wf-inputs",
+        blamed="runs.tsv:2: ",
+    ),
+    Bad(
+        "wf-sheet-value",
+        "workflow",
+        "a run sheet's row with a format the schema does not know",
+        "column format: 'tum2' is not one of",
+        config="inputs: {sheet: runs.tsv}\n",
+        sheet=SHEET.replace("estimate\treference", "estimate\treference\tformat").replace(
+            "truth/seq.txt\n", "truth/seq.txt\ttum2\n"
+        ),
+        setup="wf-inputs",
+        blamed="runs.tsv:2: ",
     ),
 ]
 

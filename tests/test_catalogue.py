@@ -483,9 +483,13 @@ WORKFLOW_ROWS = [b for b in catalogue.CATALOGUE if b.where == "workflow"]
 @pytest.mark.parametrize("b", WORKFLOW_ROWS, ids=[b.id for b in WORKFLOW_ROWS])
 def test_snakemake(tmp_path, b):
     _write(tmp_path / "cfg.yaml", b.config)
-    if b.setup == "wf-folders":
+    if b.setup in ("wf-folders", "wf-inputs"):
         _write(tmp_path / "truth" / "seq.txt", catalogue.GOOD)
         _write(tmp_path / "algorithms" / "a" / "seq" / "run1.txt", catalogue.GOOD)
+    if b.setup == "wf-inputs":
+        _write(tmp_path / "other" / "a" / "seq" / "run1.txt", catalogue.GOOD)
+    if b.sheet is not None:
+        _write(tmp_path / "runs.tsv", b.sheet)
     run = subprocess.run(
         [
             sys.executable,
@@ -511,7 +515,9 @@ def test_snakemake(tmp_path, b):
         return
     assert run.returncode != 0 and "Traceback" not in text and not (tmp_path / "HACKED").exists()
     line = next(line for line in text.splitlines() if b.expect in line)
-    if b.blame != "none":
+    if b.blamed is not None:  # a file the config names: the sheet's line, a matched file
+        assert line.startswith("epa: error: " + b.blamed), line
+    elif b.blame != "none":
         assert line.startswith("epa: error: ") and str(tmp_path / "cfg.yaml") in line
 
 

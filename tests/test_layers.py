@@ -17,6 +17,7 @@ LAYERS = (
     "workflow",
     "evo",
     "rpg",
+    "api",
     "cli",
 )
 

@@ -2,7 +2,21 @@
 
 Layers, each importing only from those before it (``tests/test_layers.py`` enforces it):
 ``core`` -> ``steps`` -> ``metrics`` -> ``readers`` -> ``artifacts`` -> ``simulate`` -> ``outputs``
--> ``workflow`` -> ``evo`` -> ``cli``. Each subpackage's ``__init__`` says what lives there.
+-> ``workflow`` -> ``evo`` -> ``rpg`` -> ``api`` -> ``cli``. Each subpackage's ``__init__`` says what
+lives there.
+
+The Python API (:mod:`epa.api`, docs/api.md) is reached from here lazily, so ``import epa`` stays
+light (no Snakemake, matplotlib or pandas): :func:`evaluate`, :func:`read_results`,
+:func:`read_case`, :class:`Result`.
 """
 
 __version__ = "0.1.0"
+__all__ = ["Result", "evaluate", "read_case", "read_results"]
+
+
+def __getattr__(name: str):
+    if name in __all__:
+        from epa import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'epa' has no attribute {name!r}")

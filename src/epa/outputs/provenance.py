@@ -100,7 +100,34 @@ def input_roots(kind: str | None, cfg: dict, case: dict | None = None) -> dict[s
             "estimate": os.path.dirname(str(case["estimate"])) or ".",
             "reference": os.path.dirname(str(case["reference"])) or ".",
         }
+    if (cfg.get("inputs") or {}).get("estimate"):
+        return pattern_roots(cfg["inputs"])
     return {k: str(cfg[k]) for k in ("truth_dir", "algorithms_dir") if cfg.get(k)}
+
+
+def pattern_texts(inputs: dict) -> list[str]:
+    """Every path pattern of an ``inputs`` section (``~`` expanded, as discovery reads them)."""
+    texts = []
+    for key in ("reference", "estimate"):
+        value = inputs.get(key) or []
+        value = [value] if isinstance(value, str) else value
+        texts += list(value.values()) if isinstance(value, dict) else value
+    return [os.path.expanduser(t) for t in texts]
+
+
+def pattern_root(text: str) -> str:
+    """The folder a pattern's first wildcard is in (``.``: the working directory)."""
+    return os.path.normpath(os.path.dirname(text.split("{", 1)[0]) or ".")
+
+
+def pattern_roots(inputs: dict) -> dict[str, str]:
+    """The folders a patterns grid's inputs are relative to: each pattern's root, those inside
+    another dropped, named ``root0``, ``root1``, ... in the order of their paths."""
+    roots: list[str] = []
+    for root in sorted({pattern_root(t) for t in pattern_texts(inputs)}, key=len):
+        if not any(where(root + "/x", {"r": outer}) for outer in roots):
+            roots.append(root)
+    return {f"root{k}": root for k, root in enumerate(sorted(roots))}
 
 
 def case_inputs(truth, estimate, timing=None) -> list[str]:
@@ -118,13 +145,15 @@ def case_inputs(truth, estimate, timing=None) -> list[str]:
     return sorted(paths)
 
 
-def run_timing(cfg: dict, estimate, algorithm: str | None):
-    """A run's timing file under ``cfg`` (None when it has none or its configured one is missing)."""
+def run_timing(cfg: dict, estimate, algorithm: str | None, source: dict | None = None):
+    """A run's timing file under ``cfg`` or its own source settings ``source`` (a sheet's row);
+    None when it has none or its configured one is missing."""
     from epa import readers
     from epa.core.errors import EpaError
 
     try:
-        return readers.timing_file(estimate, readers.options(cfg, "estimate", algorithm=algorithm))
+        opts = source or readers.options(cfg, "estimate", algorithm=algorithm)
+        return readers.timing_file(estimate, opts)
     except (EpaError, OSError):
         return None
 
@@ -134,7 +163,8 @@ def grid_inputs(cfg: dict, cases, idle_truths: dict | None = None) -> list[str]:
     ov_eval) the references no run uses."""
     paths: set[str] = set()
     for c in cases:
-        paths.update(case_inputs(c.truth, c.estimate, run_timing(cfg, c.estimate, c.algorithm)))
+        timing = run_timing(cfg, c.estimate, c.algorithm, c.estimate_source)
+        paths.update(case_inputs(c.truth, c.estimate, timing))
     paths.update(str(p) for p in (idle_truths or {}).values())
     return sorted(paths)
 

@@ -177,10 +177,38 @@ def run_case(
     """Every stage for one case in this process (``epa eval``); returns each stage's ``result``
     (the records that tell the case: metrics, drift, consistency, efficiency), by stage name. A user
     mistake raises EpaError after the failed stage's markers are written."""
+    data = run_case_data(
+        ref_path,
+        est_path,
+        out_dir,
+        cfg,
+        write_arrays=write_arrays,
+        on_stage=on_stage,
+        ref_source=ref_source,
+        est_source=est_source,
+    )
+    return {st.name: getattr(data, st.result) for st in declared().stages if st.result is not None}
+
+
+def run_case_data(
+    ref_path,
+    est_path,
+    out_dir,
+    cfg: dict,
+    *,
+    write_arrays: bool = False,
+    on_stage: Callable[[str], None] | None = None,
+    ref_source: dict | None = None,
+    est_source: dict | None = None,
+    keep: tuple[str, ...] = (),
+) -> case_module.CaseData:
+    """:func:`run_case`, returning the whole :class:`CaseData`; besides each stage's ``result`` the
+    values named in ``keep`` stay in memory (what the Python API, :func:`epa.evaluate`, hands on:
+    every record and the per-pose errors, which are not on disk without ``write_arrays``)."""
     chain = declared()
     case = Case("", "", "", Path(ref_path), Path(est_path), ref_source, est_source)
     data = chain.data_class(CaseFolder(out_dir, case))
-    kept = {st.result for st in chain.stages}
+    kept = {st.result for st in chain.stages} | set(keep)
     for st in chain.stages:
         if on_stage is not None:
             on_stage(st.name)
@@ -194,7 +222,7 @@ def run_case(
             if exc.path is None:  # a stage's finding about the case: name the estimate it is about
                 raise EpaError(f"{st.name}: {exc.message}", path=str(est_path)) from None
             raise
-    return {st.name: getattr(data, st.result) for st in chain.stages if st.result is not None}
+    return data
 
 
 def clear_arrays(folder: CaseFolder) -> None:

@@ -10,41 +10,70 @@ stamps), ``<run>_timing.*`` (per-frame timing), the files a configured timing pa
 from __future__ import annotations
 
 import logging
-import re
+import sys
 from pathlib import Path
 
 from epa.artifacts.case import Case, plain_name
 from epa.core.errors import EpaError
-
-log = logging.getLogger("epa")
-# not runs
-SIDE_FILES = (
-    "_times.txt",
-    "times.txt",
-    "_timing.txt",
-    "_timing.csv",
-    ".yaml",
-    ".yml",
-    ".md",
-    ".json",
+from epa.workflow.side_files import (  # noqa: F401 - SIDE_FILES: part of this module's rule
+    SIDE_FILES,
+    _timing_pattern,
+    _timing_side_files,
+    is_side_file,
+    timing_side_files,
 )
 
+log = logging.getLogger("epa")
 
-def _timing_side_files(files: list[Path], pattern: str | None) -> set[Path]:
-    """The files a configured timing pattern (``{run}.frames``) names for the runs beside them: side
-    files, not runs. Only a file whose ``{run}`` is the name of another file there counts."""
-    if not pattern or "/" in pattern or "{run}" not in pattern:
-        return set()
-    rx = re.compile("^" + re.escape(pattern).replace(re.escape("{run}"), "(.+)") + "$")
-    stems: dict[str, list[Path]] = {}
-    for p in files:
-        stems.setdefault(p.stem if not p.is_dir() else p.name, []).append(p)
-    side = set()
-    for p in files:
-        m = rx.match(p.name)
-        if m and any(q != p for q in stems.get(m.group(1), [])):
-            side.add(p)
-    return side
+
+def sources_of(cfg: dict, case: Case) -> tuple[dict, dict]:
+    """The reference's and the estimate's source settings of a case: a sheet row's own (discovery
+    put them in the case), else the config's for its dataset and algorithm."""
+    from epa import readers
+
+    return (
+        case.truth_source or readers.options(cfg, "reference", dataset=case.dataset),
+        case.estimate_source or readers.options(cfg, "estimate", algorithm=case.algorithm),
+    )
+
+
+def discover_config(
+    cfg: dict, *, source: str | None = None, say=None
+) -> tuple[dict[str, Path], list[Case]]:
+    """The reference per dataset and the cases of a resolved config, whichever way it names its
+    inputs: ``inputs.sheet`` (:mod:`epa.workflow.sheet`), ``inputs.reference`` / ``inputs.estimate``
+    patterns (:mod:`epa.workflow.patterns`), or the OpenVINS layout of ``truth_dir`` and
+    ``algorithms_dir`` (:func:`discover`). ``say``: where the patterns' and the sheet's account of
+    what they matched goes (default: stderr)."""
+    inputs = cfg.get("inputs") or {}
+    if not inputs.get("sheet") and not inputs.get("estimate"):
+        return discover(cfg["truth_dir"], cfg["algorithms_dir"], source=source, cfg=cfg)
+    say = say or (lambda line: print(f"epa: {line}", file=sys.stderr))
+    skipped: list[tuple[str, str]] = []
+    source = source or "config"
+    if inputs.get("sheet"):
+        from epa.workflow import sheet
+
+        truth, cases = sheet.discover(cfg, source=source, say=say)
+    else:
+        from epa.workflow import patterns
+
+        truth, cases = patterns.discover(
+            cfg, source=source, say=say, skip=lambda p, why: skipped.append((p, why))
+        )
+    by_reason: dict[str, list[str]] = {}
+    for path, why in skipped:
+        by_reason.setdefault(why, []).append(path)
+    for why, paths in by_reason.items():  # one line per reason: a large tree may skip many files
+        more = f" and {len(paths) - SHOWN_SKIPS} more" if len(paths) > SHOWN_SKIPS else ""
+        log.warning("skipped %d: %s: %s%s", len(paths), why, ", ".join(paths[:SHOWN_SKIPS]), more)
+    _unused_sources(cfg, sorted({c.algorithm for c in cases}), sorted(truth))
+    if not cases:
+        raise EpaError("no estimate matches a reference (see the skipped files above)", path=source)
+    return truth, cases
+
+
+SHOWN_SKIPS = 3  # the files named for each reason a pattern's file was skipped
 
 
 def _trajectory_files(folder: Path, skipped: list[Path], timing: str | None = None):
@@ -148,14 +177,6 @@ def discover(
             path=str(algorithms_dir),
         )
     return truth, cases
-
-
-def _timing_pattern(cfg: dict | None, algorithm: str) -> str | None:
-    if not cfg:
-        return None
-    from epa import readers
-
-    return readers.options(cfg, "estimate", algorithm=algorithm).get("timing")
 
 
 def _unused_sources(cfg: dict | None, algorithms: list[str], datasets: list[str]) -> None:

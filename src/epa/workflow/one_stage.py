@@ -8,7 +8,6 @@ import logging
 import time
 from pathlib import Path
 
-from epa import readers
 from epa.artifacts.case import Case, CaseFolder
 from epa.core.errors import EpaError
 from epa.workflow import chain, discovery, settings
@@ -20,7 +19,7 @@ def grid_case(case_dir, cfg: dict, source: str) -> Case:
     """The case a case folder ``<results>/cases/<algorithm>/<dataset>/<run>`` belongs to, with its
     files and each side's source settings as the grid's load job has them."""
     key = "/".join(Path(case_dir).resolve().parts[-3:])
-    _, cases = discovery.discover(cfg["truth_dir"], cfg["algorithms_dir"], source=source, cfg=cfg)
+    _, cases = discovery.discover_config(cfg, source=source)
     found = next((c for c in cases if c.key == key), None)
     if found is None:
         raise EpaError(f"{case_dir}: no case {key!r} in the grid of {source}")
@@ -30,8 +29,7 @@ def grid_case(case_dir, cfg: dict, source: str) -> Case:
         found.run,
         found.truth,
         found.estimate,
-        readers.options(cfg, "reference", dataset=found.dataset),
-        readers.options(cfg, "estimate", algorithm=found.algorithm),
+        *discovery.sources_of(cfg, found),
     )
 
 

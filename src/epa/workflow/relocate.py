@@ -139,6 +139,12 @@ def lay_out(doc: dict, cfg: dict, found: dict[str, Path], into: Path) -> tuple[d
     rewrites ``(new text, recorded text)`` that turn a regenerated record's paths into the recorded
     ones (``load.json`` names its estimate's path)."""
     kind = doc.get("kind")
+    named = cfg.get("inputs") or {}
+    if kind != "case" and named.get("sheet"):
+        raise EpaError(
+            "this grid named its inputs by a run sheet (inputs.sheet): --data cannot lay them out"
+            " again yet; verify with the inputs where they were (no --data)"
+        )
     roots = provenance.input_roots(kind, cfg, doc.get("case"))
     for rec in _wanted(doc):
         folder, relative = _case_place(rec, doc["case"]) if kind == "case" else _place(rec, roots)
@@ -152,4 +158,29 @@ def lay_out(doc: dict, cfg: dict, found: dict[str, Path], into: Path) -> tuple[d
         return new, rewrites
     new = {key: str(into / key) for key in roots}
     rewrites = [(new[key], roots[key]) for key in roots]
+    if named.get("estimate"):  # the patterns, each from its root's new place
+        new = {"inputs": moved_patterns(named, roots, new)}
     return new, sorted(rewrites, key=lambda r: -len(r[0]))
+
+
+def moved_patterns(inputs: dict, roots: dict[str, str], new: dict[str, str]) -> dict:
+    """``inputs`` with each pattern's root replaced by its new place."""
+
+    def move(text: str) -> str:
+        text = os.path.expanduser(text)
+        base = provenance.pattern_root(text)
+        for key, root in roots.items():
+            place = provenance.where(base + "/x", {key: root})
+            if place:
+                inside = os.path.relpath(os.path.normpath(text), root)
+                return os.path.join(new[key], inside)
+        raise EpaError(f"cannot lay out the inputs of pattern {text!r} again")
+
+    def moved(value):
+        if isinstance(value, str):
+            return move(value)
+        if isinstance(value, list):
+            return [move(v) for v in value]
+        return {k: move(v) for k, v in value.items()}
+
+    return {**inputs, **{k: moved(inputs[k]) for k in ("reference", "estimate")}}

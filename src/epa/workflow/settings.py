@@ -78,9 +78,9 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
             )
         raise EpaError(f"{key}: {what}", path=source)
     cfg = apply_mode(_fill(cfg, schema()), given=config or {})
-    first_n = check_first_n(cfg)
-    if first_n:
-        raise EpaError(first_n, path=source)
+    for problem in (check_inputs(cfg), check_first_n(cfg)):
+        if problem:
+            raise EpaError(problem, path=source)
     crop = cfg["crop"]
     if crop["start"] is not None and crop["end"] is not None and crop["end"] <= crop["start"]:
         raise EpaError(
@@ -209,6 +209,35 @@ def apply_mode(cfg: dict, given: dict) -> dict:
     return cfg
 
 
+def check_inputs(cfg: dict) -> str | None:
+    """What is wrong with the way the config names its inputs (None: nothing): the OpenVINS
+    layout's two folders, both patterns, or a sheet; exactly one of them."""
+    inputs = cfg["inputs"]
+    ways = {
+        "truth_dir/algorithms_dir": {k: cfg.get(k) for k in GRID_FOLDERS},
+        "inputs.reference/inputs.estimate": {
+            f"inputs.{k}": inputs.get(k) for k in ("reference", "estimate")
+        },
+        "inputs.sheet": {"inputs.sheet": inputs.get("sheet")},
+    }
+    given = [way for way, keys in ways.items() if any(keys.values())]
+    if len(given) > 1:
+        return f"{given[0]} and {given[1]} both name the inputs: keep one way"
+    if not given:
+        return (
+            "names no inputs: truth_dir and algorithms_dir, inputs.reference and inputs.estimate,"
+            " or inputs.sheet"
+        )
+    keys = ways[given[0]]
+    missing = [k for k, v in keys.items() if not v]
+    if missing:
+        present = next(k for k, v in keys.items() if v)
+        return f"{present} without {missing[0]}: give both"
+    if inputs["datasets"] and "inputs.estimate" not in keys:
+        return "inputs.datasets maps the estimate patterns' {dataset}: it needs inputs.estimate"
+    return None
+
+
 def check_first_n(cfg: dict) -> str | None:
     """What is wrong with ``align.first_n`` under the mode and method (None: nothing). Fewer than 3
     poses determine no rotation, so 1 and 2 are rpg's alone: 1 is its first-pose alignment (se3,
@@ -279,17 +308,27 @@ def from_configfile(path) -> dict:
     return resolve(load_yaml(path), source=str(path))
 
 
-def check_user_configs(configfiles, overrides: dict | None) -> None:
-    """A grid given with ``--configfile`` must name its own folders: the workflow's config/config.yaml
-    (the bundled example) is merged underneath, and its folders must never stand in silently."""
-    if not configfiles:
-        return
+def check_user_configs(configfiles, overrides: dict | None) -> set[str]:
+    """A grid given with ``--configfile`` must name its own inputs (its folders, or an ``inputs``
+    section): the workflow's config/config.yaml (the bundled example) is merged underneath, and its
+    folders must never stand in silently. Returns the top-level keys the user's files name."""
     named = set((overrides or {}).keys())
+    if not configfiles:
+        return named
     for path in configfiles:
         named |= load_yaml(path).keys()
     missing = [k for k in GRID_FOLDERS if k not in named]
-    if missing:
+    if missing and "inputs" not in named:
         raise EpaError(
             f"names no {' or '.join(missing)} (the bundled example's would be used)",
             path=", ".join(map(str, configfiles)),
         )
+    return named
+
+
+def without_bundled_folders(config: dict, named: set[str]) -> dict:
+    """The merged config without the bundled example's folders where the user's config names its
+    inputs by an ``inputs`` section and names no folder (the example's would clash with it)."""
+    if "inputs" not in named or named & set(GRID_FOLDERS):
+        return config
+    return {k: v for k, v in config.items() if k not in GRID_FOLDERS}

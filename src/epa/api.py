@@ -1,0 +1,238 @@
+"""The Python API, for notebooks and scripts: :func:`evaluate` one reference and estimate (the stages
+of ``epa eval``, in this process), :func:`read_results` a grid's results as a table, :func:`read_case`
+one case's records and per-pose errors. ``import epa`` reaches these lazily: it imports neither
+Snakemake nor matplotlib, and pandas only when a table is asked for.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from epa.artifacts.case import Case, CaseData, CaseFolder, read_record
+from epa.core.errors import EpaError
+
+__all__ = ["Result", "evaluate", "read_case", "read_results"]
+
+# the name `epa eval` gives its one estimate in `sources.algorithms` (the same settings apply)
+ESTIMATE = "estimate"
+# the config sections a keyword argument may set (the folders and the grid's own are the workflow's)
+SETTINGS = ("mode", "load", "sources", "crop", "sync", "calibrate", "align", "metrics", "drift")
+SETTINGS += ("efficiency", "report")
+# each stage's record as CaseData names it (align's record is Step 3's transform)
+RECORDS = {
+    "load": "load_record",
+    "crop": "crop_record",
+    "sync": "sync_record",
+    "calibrate": "calibrate_record",
+    "align": "transform",
+    "metrics": "metrics_record",
+    "drift": "drift_record",
+    "consistency": "consistency_record",
+    "efficiency": "efficiency_record",
+}
+# the per-pose and per-pair tables of 06_metrics/ (CaseData's names are the files' stems)
+ARRAYS = ("ape", "rpe_segments", "rpe_time")
+
+
+@dataclass(frozen=True)
+class Result:
+    """One case, evaluated (:func:`evaluate`) or read back (:func:`read_case`).
+
+    ``records``: each stage's record by stage name (``load`` ... ``efficiency``; a failed stage's is
+    ``{"status": "failed", "reason": ...}``). ``errors``: per matched pose, 06_metrics/ape.csv's
+    columns (``t``, ``dist_m``, ``trans_m``, ``rot_deg``, ``yaw_deg``, ``trans_xy_m``) as arrays.
+    ``relative``: the distance and 1 s RPE pairs (``rpe_segments``, ``rpe_time``) as column arrays.
+    Empty where the case folder holds no arrays (a grid run with them off, a failed case).
+    """
+
+    name: str
+    records: dict = field(repr=False)
+    errors: dict = field(repr=False)
+    relative: dict = field(repr=False)
+    folder: Path | None = None
+
+    @property
+    def metrics(self) -> dict:
+        return self.records["metrics"]
+
+    @property
+    def status(self) -> str:
+        reason = self.reason
+        return "ok" if reason is None else "failed"
+
+    @property
+    def reason(self) -> str | None:
+        """Why the case failed: the first failed stage's reason (None: it has a result)."""
+        for record in self.records.values():
+            if record.get("status") == "failed":
+                return record.get("reason", "failed")
+        return None
+
+    @property
+    def ate_rmse_m(self) -> float | None:
+        return _dig(self.metrics, "ate", "trans_m", "rmse")
+
+    @property
+    def ate_rot_rmse_deg(self) -> float | None:
+        return _dig(self.metrics, "ate", "rot_deg", "rmse")
+
+    def headline(self) -> dict:
+        """The numbers summary.csv leads with, under its column names."""
+        m = self.metrics
+        return {
+            "status": self.status,
+            "eval_source": m.get("eval_source"),
+            "n_matched": m.get("n_matched"),
+            "ate_trans_rmse_m": self.ate_rmse_m,
+            "ate_rot_rmse_deg": self.ate_rot_rmse_deg,
+            "time_offset_s": m.get("time_offset_s"),
+        }
+
+    def to_frame(self, table: str = "errors"):
+        """A pandas DataFrame: the per-pose ``errors`` (default) or one ``relative`` table."""
+        import pandas
+
+        columns = self.errors if table == "errors" else self.relative.get(table)
+        if columns is None:
+            known = ", ".join(("errors", *self.relative))
+            raise EpaError(f"to_frame: no table {table!r} (known: {known})")
+        return pandas.DataFrame({k: np.asarray(v) for k, v in columns.items()})
+
+
+def _dig(record: dict, *keys):
+    for k in keys:
+        if not isinstance(record, dict):
+            return None
+        record = record.get(k)
+    return record
+
+
+def settings(config=None, **given) -> dict:
+    """A resolved config from a config file or mapping (``config``) and keyword settings, each a
+    section (``align={"method": "sim3"}``) or ``mode``; ``reference_source`` / ``estimate_source``
+    are the two sides' source settings (``sources.reference``, ``sources.algorithms.estimate``)."""
+    from epa.workflow import settings as workflow_settings
+
+    unknown = sorted(set(given) - set(SETTINGS) - {"reference_source", "estimate_source"})
+    if unknown:
+        raise EpaError(
+            f"epa.evaluate: unknown setting {unknown[0]!r} (settings: {', '.join(SETTINGS)},"
+            " reference_source, estimate_source)"
+        )
+    if isinstance(config, (str, Path)):
+        cfg = workflow_settings.load_yaml(config)
+    else:
+        cfg = dict(config or {})
+    cfg.pop("inputs", None)  # a grid's: this is one case
+    cfg.update(truth_dir=".", algorithms_dir=".")
+    cfg.setdefault("report", {"per_case": False})  # no figures (and no matplotlib) unless asked
+    sources = cfg.setdefault("sources", {})
+    if "reference_source" in given:
+        sources["reference"] = given.pop("reference_source")
+    if "estimate_source" in given:
+        sources.setdefault("algorithms", {})[ESTIMATE] = given.pop("estimate_source")
+    for key, value in given.items():
+        if isinstance(value, dict) and isinstance(cfg.get(key), dict):
+            cfg[key] = {**cfg[key], **value}
+        else:
+            cfg[key] = value
+    return workflow_settings.resolve(cfg, source="epa.evaluate")
+
+
+def evaluate(reference, estimate, *, config=None, out_dir=None, **settings_) -> Result:
+    """Evaluate one estimate against its reference, as ``epa eval`` does (the same stages, the same
+    records). ``settings_``: config sections as keyword arguments (see :func:`settings`).
+    ``out_dir``: keep the case folder there, with every stage's arrays; None: a temporary folder,
+    removed (the result holds the records and per-pose errors in memory). A user mistake raises
+    :class:`epa.core.errors.EpaError` (one line naming the file or the setting)."""
+    from epa import readers
+    from epa.workflow import chain
+
+    cfg = settings(config, **settings_)
+
+    def run(folder) -> Result:
+        data = chain.run_case_data(
+            reference,
+            estimate,
+            folder,
+            cfg,
+            write_arrays=out_dir is not None,
+            ref_source=readers.options(cfg, "reference"),
+            est_source=readers.options(cfg, "estimate", algorithm=ESTIMATE),
+            keep=tuple(RECORDS.values()) + ARRAYS,
+        )
+        return _result(Path(estimate).stem, data, None if out_dir is None else Path(folder))
+
+    if out_dir is not None:
+        return run(out_dir)
+    with tempfile.TemporaryDirectory(prefix="epa-") as tmp:
+        return run(tmp)
+
+
+def _result(name: str, data: CaseData, folder: Path | None) -> Result:
+    records = {stage: getattr(data, attr) for stage, attr in RECORDS.items()}
+    relative = {k: dict(getattr(data, k)) for k in ARRAYS[1:]}
+    return Result(name, records, dict(data.ape), relative, folder)
+
+
+def read_case(results_dir, case: str) -> Result:
+    """One case of a grid's results (``<algorithm>/<dataset>/<run>``), read from its folder: every
+    stage's record (a failed one's marker), and its arrays where the run wrote them."""
+    folder = CaseFolder.of(results_dir, Case.from_key(case))
+    if not folder.root.is_dir():
+        raise EpaError(f"no case {case!r} in {results_dir}", path=str(folder.root))
+    from epa.workflow import chain
+
+    records = {}
+    for stage in RECORDS:
+        name = chain.BY_NAME[stage].RECORDS[0]
+        path = folder.path(stage, name)
+        records[stage] = read_record(path)[0] if path.is_file() else _missing(stage)
+    arrays = {}
+    for name in ARRAYS:
+        path = folder.path("metrics", f"{name}.csv")
+        arrays[name] = folder.table("metrics", f"{name}.csv") if _usable(path) else {}
+    relative = {k: arrays[k] for k in ARRAYS[1:]}
+    return Result(case, records, arrays["ape"], relative, folder.root)
+
+
+def _missing(stage: str) -> dict:
+    return {"status": "failed", "reason": f"{stage}: not run (no record)"}
+
+
+def _usable(path: Path) -> bool:
+    from epa.artifacts.case import failure_of
+
+    return path.is_file() and failure_of(path) is None
+
+
+def read_results(results_dir):
+    """Every case of a grid's results as a pandas DataFrame: ``case`` (its key), ``summary.csv``'s
+    columns (status, headline numbers, notes), and ``folder``. A case folder summary.csv does not
+    list (a run stopped before the tables) is a row with the status its records give. Per-case
+    arrays: :func:`read_case`."""
+    import pandas
+
+    root = Path(results_dir)
+    summary = root / "summary.csv"
+    if not summary.is_file():
+        raise EpaError("no summary.csv: run the workflow (or its tables) first", path=str(root))
+    frame = pandas.read_csv(summary, dtype={"algorithm": str, "dataset": str, "run": str})
+    frame.insert(0, "case", frame["algorithm"] + "/" + frame["dataset"] + "/" + frame["run"])
+    listed = set(frame["case"])
+    extra = []
+    for folder in sorted((root / "cases").glob("*/*/*")):
+        key = "/".join(folder.parts[-3:])
+        if folder.is_dir() and key not in listed:
+            result = read_case(root, key)
+            alg, ds, run = key.split("/")
+            row = {"case": key, "algorithm": alg, "dataset": ds, "run": run}
+            extra.append({**row, **result.headline(), "notes": result.reason})
+    if extra:
+        frame = pandas.concat([frame, pandas.DataFrame(extra)], ignore_index=True)
+    frame["folder"] = [str(root / "cases" / key) for key in frame["case"]]
+    return frame
