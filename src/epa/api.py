@@ -20,8 +20,8 @@ __all__ = ["Result", "evaluate", "read_case", "read_results"]
 # the name `epa eval` gives its one estimate in `sources.algorithms` (the same settings apply)
 ESTIMATE = "estimate"
 # the config sections a keyword argument may set (the folders and the grid's own are the workflow's)
-SETTINGS = ("mode", "load", "sources", "crop", "sync", "calibrate", "align", "metrics", "drift")
-SETTINGS += ("efficiency", "report")
+SETTINGS: tuple[str, ...] = ("mode", "load", "sources", "crop", "sync", "calibrate", "align")
+SETTINGS += ("metrics", "drift", "efficiency", "report")
 # each stage's record as CaseData names it (align's record is Step 3's transform)
 RECORDS = {
     "load": "load_record",
@@ -104,11 +104,12 @@ class Result:
 
 
 def _dig(record: dict, *keys):
+    value: object = record
     for k in keys:
-        if not isinstance(record, dict):
+        if not isinstance(value, dict):
             return None
-        record = record.get(k)
-    return record
+        value = value.get(k)
+    return value
 
 
 def settings(config=None, **given) -> dict:
@@ -189,7 +190,7 @@ def read_case(results_dir, case: str) -> Result:
 
     records = {}
     for stage in RECORDS:
-        name = chain.BY_NAME[stage].RECORDS[0]
+        name = chain.BY_NAME[stage].records[0]
         path = folder.path(stage, name)
         records[stage] = read_record(path)[0] if path.is_file() else _missing(stage)
     arrays = {}

@@ -107,7 +107,7 @@ def input_roots(kind: str | None, cfg: dict, case: dict | None = None) -> dict[s
 
 def pattern_texts(inputs: dict) -> list[str]:
     """Every path pattern of an ``inputs`` section (``~`` expanded, as discovery reads them)."""
-    texts = []
+    texts: list[str] = []
     for key in ("reference", "estimate"):
         value = inputs.get(key) or []
         value = [value] if isinstance(value, str) else value

@@ -156,11 +156,13 @@ def lay_out(doc: dict, cfg: dict, found: dict[str, Path], into: Path) -> tuple[d
         new = {side: str(into / side / Path(case[side]).name) for side in ("reference", "estimate")}
         rewrites = [(new[side], str(case[side])) for side in ("reference", "estimate")]
         return new, rewrites
-    new = {key: str(into / key) for key in roots}
-    rewrites = [(new[key], roots[key]) for key in roots]
+    folders = {key: str(into / key) for key in roots}
+    rewrites = [(folders[key], roots[key]) for key in roots]
     if named.get("estimate"):  # the patterns, each from its root's new place
-        new = {"inputs": moved_patterns(named, roots, new)}
-    return new, sorted(rewrites, key=lambda r: -len(r[0]))
+        return {"inputs": moved_patterns(named, roots, folders)}, sorted(
+            rewrites, key=lambda r: -len(r[0])
+        )
+    return folders, sorted(rewrites, key=lambda r: -len(r[0]))
 
 
 def moved_patterns(inputs: dict, roots: dict[str, str], new: dict[str, str]) -> dict:

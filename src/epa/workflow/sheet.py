@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 from epa.artifacts.case import Case
 from epa.core.errors import EpaError
@@ -108,7 +109,7 @@ def discover(cfg: dict, *, source: str, say) -> tuple[dict[str, Path], list[Case
     truth: dict[str, tuple[Path, int]] = {}
     cases: dict[str, tuple[Case, int]] = {}
     for k, row in read(sheet):
-        where = {"path": str(sheet), "line": k}
+        where: dict[str, Any] = {"path": str(sheet), "line": k}
         _check_row(row, where)
         estimate = _check_path(row["estimate"], "estimate", where)
         reference = _check_path(row["reference"], "reference", where)

@@ -26,7 +26,7 @@ def _timing_side_files(files: list[Path], pattern: str | None) -> set[Path]:
     if not pattern or "/" in pattern or "{run}" not in pattern:
         return set()
     rx = re.compile("^" + re.escape(pattern).replace(re.escape("{run}"), "(.+)") + "$")
-    stems = {}
+    stems: dict[str, list[Path]] = {}
     for p in files:
         stems.setdefault(p.stem if not p.is_dir() else p.name, []).append(p)
     side = set()

@@ -94,9 +94,10 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict, croppe
         ),
     }
     ext = None
-    if plan["eval_source"] == "epa" and c["enabled"] and position_only(ref, est):
+    which = position_only(ref, est)
+    if plan["eval_source"] == "epa" and c["enabled"] and which:
         info["step2_status"] = calibration.Step2Status.DISABLED
-        info["step2_reason"] = position_only_reason(position_only(ref, est))
+        info["step2_reason"] = position_only_reason(which)
     elif plan["eval_source"] == "epa" and c["enabled"]:
         # Step 2 compares each estimate pose with the reference at its very instant: a matched
         # reference pose may be up to max_diff away, which biases the lever arm (1 cm at 8 m/s and a
@@ -119,7 +120,11 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict, croppe
         ref, est, pairs = ref_c.select(i_ref), est_c.select(i_est), (i_ref, i_est)
         info["reassociated"] = assoc
     info.update(eval_source=plan["eval_source"], reason=plan["reason"], plan=plan)
-    return ref, (ext.apply(est) if plan["apply_extrinsic"] else est), info, pairs
+    if plan["apply_extrinsic"]:
+        if ext is None:  # evaluation_plan applies only an extrinsic Step 2 estimated
+            raise TypeError("the plan applies an extrinsic that Step 2 did not estimate")
+        est = ext.apply(est)
+    return ref, est, info, pairs
 
 
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
@@ -135,7 +140,8 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         # unchanged pairs are sync's (linked); re-associated ones, or no links, are written
         if pairs is not None or not folder.link("sync", "pairs.csv", NAME):
             ref_c, est_c = data.cropped
-            folder.write_pairs(NAME, *data.calibrate_pairs, ref_c.t, est_c.t)
+            i_ref, i_est = data.calibrate_pairs
+            folder.write_pairs(NAME, i_ref, i_est, ref_c.t, est_c.t)
         if info["plan"]["apply_extrinsic"]:
             # the matched estimate with the extrinsic applied
             folder.write_tum(NAME, "est.tum", est)

@@ -27,7 +27,8 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     which = position_only(ref, est)
     if est.cov_rot is not None and which:
         reason = f"{which}: the NEES needs the rotation errors"
-        summary, table = {"available": False, "reason": reason}, {}
+        summary: dict = {"available": False, "reason": reason}
+        table: dict = {}
     else:
         summary, table = consistency.evaluate(
             ref, est, Similarity.from_dict(data.transform), extrinsic

@@ -46,7 +46,8 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
             data.crop_record = info
             folder.write_record(NAME, "crop.json", info)
             return
-    ref, est, info = compute(*data.loaded, cfg)
+    loaded_ref, loaded_est = data.loaded
+    ref, est, info = compute(loaded_ref, loaded_est, cfg)
     data.cropped, data.crop_record = (ref, est), info
     if write_arrays:
         folder.write_tum(NAME, "ref.tum", ref)

@@ -100,6 +100,8 @@ def compute(
 
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     case, folder = data.folder.case, data.folder
+    if case is None or case.truth is None or case.estimate is None:
+        raise TypeError("the load stage runs on a case folder that knows its case and both files")
     ref_opts = case.truth_source or readers.options(cfg, "reference")
     est_opts = case.estimate_source or readers.options(cfg, "estimate")
     try:

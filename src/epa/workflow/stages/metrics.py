@@ -66,7 +66,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
         if rpe["trans_m"]["n"] == 0
     ]
     summary["notes"] += empty_relative_notes(summary, c)
-    records = {}
+    records: dict[str, dict | None] = {}
     if which:
         summary["position_only"] = True
         summary["notes"].append(accuracy.position_only_note(which))
@@ -74,8 +74,8 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
         if metric.enabled(cfg) and which and metric.orientation:
             records[metric.key] = None  # never a rotation invented from positions
             summary["notes"].append(f"{metric.key}: null: it needs orientations ({which})")
-        elif metric.enabled(cfg):
-            extra = {k: inputs[k]() for k in metric.inputs}
+        elif metric.enabled(cfg) and metric.compute is not None:  # (Metric requires it here)
+            extra = {k: (inputs or {})[k]() for k in metric.inputs}
             records[metric.key], arrays, notes = metric.compute(ref, est, cfg, **extra)
             for name, columns in arrays.items():
                 tables.setdefault(name, {}).update(columns)

@@ -36,8 +36,8 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict):
             k: None if isinstance(v, float) and math.isnan(v) else v
             for k, v in est_off.to_dict().items()
         }
-        if position_only(ref, est):
-            info["step1"] = linear_record(info["step1"], position_only(ref, est))
+        if which := position_only(ref, est):
+            info["step1"] = linear_record(info["step1"], which)
         offset = est_off.offset
         curve = {"lag_s": est_off.curve_lag, "corr": est_off.curve_corr}
     else:
