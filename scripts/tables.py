@@ -13,12 +13,15 @@ import os
 import sys
 from pathlib import Path
 
-import pandas  # noqa: F401 - then the per-case tables are read by its C parser (epa.artifacts.files)
+import pandas  # noqa: F401 - imported for its C parser, chosen below (runtime.use_pandas_parser)
 
+from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.outputs import provenance, tables
 
 WORKFLOW_DIR = Path(__file__).resolve().parents[1]
+# every case's artifacts are read by pandas' C parser (3-4x loadtxt on large tables, the same doubles)
+runtime.use_pandas_parser()
 
 
 def write(cases, results_dir, settings, idle_truths, log_path, workers=1) -> list[tuple[str, str]]:

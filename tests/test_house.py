@@ -178,3 +178,30 @@ def test_the_tables_and_figures_scripts_run_on_their_own(small_grid, tmp_path):
         and bad.stderr.startswith("epa: error: ")
         and "Traceback" not in bad.stderr
     )
+
+
+def test_no_function_in_src_is_over_80_lines():
+    import ast
+
+    long = [
+        f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({node.end_lineno - node.lineno + 1})"
+        for path in sorted((ROOT / "src").rglob("*.py"))
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+        and node.end_lineno - node.lineno + 1 > 80
+    ]
+    assert not long, f"functions over 80 lines: {long}"
+
+
+def test_the_parser_is_chosen_by_the_process_not_by_what_is_imported():
+    import pandas  # noqa: F401 - imported, but not chosen
+
+    from epa.core import runtime
+    from epa.workflow.stages import load
+
+    runtime.reset()
+    assert load.c_parser_min_bytes() > 0 and not runtime.pandas_parser()
+    runtime.use_pandas_parser()
+    assert load.c_parser_min_bytes() == 0
+    runtime.reset()
+    assert not runtime.pandas_parser()

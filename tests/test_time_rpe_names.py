@@ -71,6 +71,8 @@ def test_tables_and_summary_columns_follow(two_seconds):
     text = (results / "error_comparison.txt").read_text()
     assert "FULL TRAJECTORY 2S TIME RPE LATEX TABLE" in text and "1S TIME RPE" not in text
     assert "DRIFT-VALID ONLY 2S TIME RPE LATEX TABLE" in text
+    # the per-algorithm block names the interval too
+    assert "        RPE time 2s - mean_ori = " in text and "RPE time 1s" not in text
     with open(results / "summary.csv", newline="") as fh:
         (row,) = list(csv.DictReader(fh))
     assert "time_rpe_1s_trans_mean_m" not in row

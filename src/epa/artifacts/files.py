@@ -6,13 +6,13 @@ from __future__ import annotations
 import json
 import os
 import re
-import sys
 import tempfile
 import warnings
 from pathlib import Path
 
 import numpy as np
 
+from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.readers.text import FORMATS, frame_rows, upper_to_full
@@ -294,9 +294,9 @@ PANDAS_FROM_BYTES = 64_000
 
 def _numbers(path, delimiter: str, skip: int) -> np.ndarray:
     """The numbers of an artifact this project wrote (``#`` comments, ``skip`` header lines): by
-    pandas' C parser where pandas is already imported (workflow workers preload it; 3-4x faster
+    pandas' C parser where the process chose it (workflow workers preload pandas; 3-4x faster
     than loadtxt on large files, the same doubles) and the file is not small, else by numpy."""
-    if "pandas" in sys.modules and os.path.getsize(path) >= PANDAS_FROM_BYTES:
+    if runtime.pandas_parser() and os.path.getsize(path) >= PANDAS_FROM_BYTES:
         import pandas as pd
 
         try:

@@ -31,6 +31,25 @@ def register(name: str, cache=None, *, reset: Callable[[], None] | None = None):
     return cache
 
 
+# Whether this process reads every file with pandas' C parser (it has paid pandas' import on
+# purpose: the workflow's workers and the tables script say so) or only files large enough to
+# repay the import. Either parser gives the same doubles; this is the cost, chosen by the caller.
+_PARSER = {"pandas": False}
+
+
+def use_pandas_parser(on: bool = True) -> None:
+    """Read every file with pandas' C parser from now on (the caller has imported pandas)."""
+    _PARSER["pandas"] = on
+
+
+def pandas_parser() -> bool:
+    """Whether :func:`use_pandas_parser` was called in this process (since the last reset)."""
+    return _PARSER["pandas"]
+
+
+register("core.runtime.parser", reset=lambda: use_pandas_parser(False))
+
+
 def names() -> tuple[str, ...]:
     """The registered caches, in registration order."""
     return tuple(_RESETS)

@@ -423,8 +423,19 @@ def compute(
             for d, e in res["rel"].items()
         ],
     }
-    rows = [(d, e) for d, e in res["rel"].items() if len(e["pairs"])]
-    table = {
+    notes += [
+        f"rpg: fewer than 2 pairs {d} m apart in the {length:.2f} m reference: rpg's statistics at"
+        " that distance are its zeros (num_samples 0)"
+        for d, e in res["rel"].items()
+        if not len(e["pairs"])
+    ]
+    return record, {"rpg_relative_errors": _relative_table(res["rel"])}, notes
+
+
+def _relative_table(rel: dict) -> dict:
+    """06_metrics/rpg_relative_errors.csv: every pair's relative errors, distance by distance."""
+    rows = [(d, e) for d, e in rel.items() if len(e["pairs"])]
+    return {
         "distance_m": np.concatenate(
             [np.full(len(e["pairs"]), d) for d, e in rows] or [np.zeros(0)]
         ),
@@ -435,13 +446,6 @@ def compute(
             for m, c in REL_COLUMNS.items()
         },
     }
-    notes += [
-        f"rpg: fewer than 2 pairs {d} m apart in the {length:.2f} m reference: rpg's statistics at"
-        " that distance are its zeros (num_samples 0)"
-        for d, e in res["rel"].items()
-        if not len(e["pairs"])
-    ]
-    return record, {"rpg_relative_errors": table}, notes
 
 
 def summary(record: dict) -> dict:

@@ -189,6 +189,11 @@ _POOL_LOCK = threading.Lock()
 class EpaWorker(context.ForkServerProcess):
     """A pool worker (named EpaWorker-N, which :func:`_without_main_module` recognises)."""
 
+    def run(self):
+        # pandas is preloaded in the forkserver (_context): its C parser reads every file here
+        runtime.use_pandas_parser()
+        super().run()
+
 
 class EpaContext(context.ForkServerContext):
     # forkserver: Snakemake's process has threads, which fork() must not copy
