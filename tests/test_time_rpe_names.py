@@ -110,3 +110,11 @@ def test_a_record_after_the_time_rpe_follows_it_under_any_interval():
     assert registry.anchor(moved, record, [moved]) == "rpe_time_2s"
     assert registry.anchor(moved, {"rpe_time_1s": {}, "rpe": []}, [moved]) == "rpe_time_1s"
     assert registry.anchor(moved, {"rpe": []}, [moved]) is None  # no time RPE: last
+
+
+def test_the_base_tables_a_metric_may_follow_are_the_tables_the_grid_writes():
+    from epa.outputs.tables import latex
+
+    for delta in (1.0, 2.0):  # no metric on: the base tables alone, in order
+        names = [t[0] for t in latex.build_tables([], [8], time_delta=delta)]
+        assert names == list(accuracy.base_tables(delta))

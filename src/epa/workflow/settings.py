@@ -175,19 +175,16 @@ def coerce_overrides(config: dict, overrides: dict | None) -> dict:
 
 # What `mode: ov_eval` and `mode: rpg` mean for the stages, so that no stage has to test the mode
 # for these (the align and metrics stages test mode rpg for rpg's arithmetic and statistics).
-OV_EVAL_SETTINGS = {
-    ("sync", "estimate_offset"): False,
-    ("sync", "policy"): "ov_eval",
-    ("sync", "max_diff"): 0.02,
-    ("calibrate", "enabled"): False,
+# Both tools associate by their own rule within 0.02 s, with no offset estimate and no extrinsic.
+MODE_SETTINGS = {
+    mode: {
+        ("sync", "estimate_offset"): False,
+        ("sync", "policy"): mode,
+        ("sync", "max_diff"): 0.02,
+        ("calibrate", "enabled"): False,
+    }
+    for mode in ("ov_eval", "rpg")
 }
-RPG_SETTINGS = {
-    ("sync", "estimate_offset"): False,
-    ("sync", "policy"): "rpg",
-    ("sync", "max_diff"): 0.02,
-    ("calibrate", "enabled"): False,
-}
-MODE_SETTINGS = {"ov_eval": OV_EVAL_SETTINGS, "rpg": RPG_SETTINGS}
 
 
 def apply_mode(cfg: dict, given: dict) -> dict:
