@@ -58,7 +58,7 @@ def write_all(
     segments = cfg["metrics"]["segments"]
     decimals = cfg["tables"]["decimals"]
     spread = cfg["tables"]["spread"]
-    style = cfg["tables"].get("style", "hline")
+    style = cfg["tables"]["style"]
     time_delta = cfg["metrics"]["time_delta"]  # names the time RPE's tables and columns
     text = (
         ov_eval_text(grid, segments, idle_truths)
