@@ -4,7 +4,6 @@ matplotlib is imported only here."""
 from __future__ import annotations
 
 from epa.artifacts.case import CaseData
-from epa.outputs import report
 
 NAME = "report"
 SETTINGS = ("report", "truth_dir", "load", "sources")  # the inputs in the report's provenance
@@ -20,6 +19,8 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
             "reason": "report.per_case is off" if write_arrays else "no artifacts written",
         }
     else:
+        from epa.outputs import report  # tables and figures: only where a report is written
+
         folder = data.folder
         name = "/".join(folder.root.parts[-3:])
         # from the artifacts alone, as the workflow's report job reads them
