@@ -16,7 +16,6 @@ from pathlib import Path
 from epa import __version__
 from epa.core.errors import EpaError
 
-
 # The commands whose parsers this module builds; the others' (evo, rpg, verify, pack) are built by
 # their modules, whose imports (numpy, yaml, the contract) a run of these commands does not need.
 OWN_COMMANDS = ("eval", "traj", "fig", "config", "selftest", "stage", "simulate")
