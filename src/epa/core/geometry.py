@@ -68,53 +68,30 @@ def rot_to_quat(r: np.ndarray) -> np.ndarray:
     r = np.asarray(r, dtype=float)
     m00, m11, m22 = r[..., 0, 0], r[..., 1, 1], r[..., 2, 2]
     trace = m00 + m11 + m22
-    cands = np.stack([trace, m00, m11, m22], axis=-1)
-    pick = np.argmax(cands, axis=-1)
+    pick = np.argmax(np.stack([trace, m00, m11, m22], axis=-1), axis=-1)
     q = np.empty(r.shape[:-2] + (4,))
-    # w largest
-    s = np.sqrt(np.maximum(1 + trace, 1e-300)) * 2
-    qw = np.stack(
-        [
-            (r[..., 2, 1] - r[..., 1, 2]) / s,
-            (r[..., 0, 2] - r[..., 2, 0]) / s,
-            (r[..., 1, 0] - r[..., 0, 1]) / s,
-            0.25 * s,
-        ],
-        axis=-1,
-    )
-    s = np.sqrt(np.maximum(1 + m00 - m11 - m22, 1e-300)) * 2
-    qx = np.stack(
-        [
-            0.25 * s,
-            (r[..., 0, 1] + r[..., 1, 0]) / s,
-            (r[..., 0, 2] + r[..., 2, 0]) / s,
-            (r[..., 2, 1] - r[..., 1, 2]) / s,
-        ],
-        axis=-1,
-    )
-    s = np.sqrt(np.maximum(1 - m00 + m11 - m22, 1e-300)) * 2
-    qy = np.stack(
-        [
-            (r[..., 0, 1] + r[..., 1, 0]) / s,
-            0.25 * s,
-            (r[..., 1, 2] + r[..., 2, 1]) / s,
-            (r[..., 0, 2] - r[..., 2, 0]) / s,
-        ],
-        axis=-1,
-    )
-    s = np.sqrt(np.maximum(1 - m00 - m11 + m22, 1e-300)) * 2
-    qz = np.stack(
-        [
-            (r[..., 0, 2] + r[..., 2, 0]) / s,
-            (r[..., 1, 2] + r[..., 2, 1]) / s,
-            0.25 * s,
-            (r[..., 1, 0] - r[..., 0, 1]) / s,
-        ],
-        axis=-1,
-    )
-    for k, cand in enumerate((qw, qx, qy, qz)):
+    # each matrix by its own candidate only: the same formulas per element, a quarter of the work
+    for k in range(4):
         sel = pick == k
-        q[sel] = cand[sel]
+        if not sel.any():
+            continue
+        m = r[sel]
+        m00, m11, m22 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
+        a, b = (m[:, 2, 1], m[:, 1, 2]), (m[:, 0, 2], m[:, 2, 0])
+        c = (m[:, 1, 0], m[:, 0, 1])
+        if k == 0:  # w largest
+            s = np.sqrt(np.maximum(1 + (m00 + m11 + m22), 1e-300)) * 2
+            cand = ((a[0] - a[1]) / s, (b[0] - b[1]) / s, (c[0] - c[1]) / s, 0.25 * s)
+        elif k == 1:
+            s = np.sqrt(np.maximum(1 + m00 - m11 - m22, 1e-300)) * 2
+            cand = (0.25 * s, (c[1] + c[0]) / s, (b[0] + b[1]) / s, (a[0] - a[1]) / s)
+        elif k == 2:
+            s = np.sqrt(np.maximum(1 - m00 + m11 - m22, 1e-300)) * 2
+            cand = ((c[1] + c[0]) / s, 0.25 * s, (a[1] + a[0]) / s, (b[0] - b[1]) / s)
+        else:
+            s = np.sqrt(np.maximum(1 - m00 - m11 + m22, 1e-300)) * 2
+            cand = ((b[0] + b[1]) / s, (a[1] + a[0]) / s, 0.25 * s, (c[0] - c[1]) / s)
+        q[sel] = np.stack(cand, axis=-1)
     q = normalize_quat(q)
     return np.where(q[..., 3:4] < 0, -q, q)
 
@@ -160,15 +137,11 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
 def skew(v: np.ndarray) -> np.ndarray:
     """[v]x, the matrix with [v]x w = v x w, for vectors (..., 3)."""
     v = np.asarray(v, dtype=float)
-    z = np.zeros(v.shape[:-1])
-    return np.stack(
-        [
-            np.stack([z, -v[..., 2], v[..., 1]], -1),
-            np.stack([v[..., 2], z, -v[..., 0]], -1),
-            np.stack([-v[..., 1], v[..., 0], z], -1),
-        ],
-        -2,
-    )
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
 
 
 def local_covariance(r: np.ndarray, cov_global: np.ndarray) -> np.ndarray:
