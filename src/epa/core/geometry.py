@@ -59,6 +59,9 @@ def quat_to_rot(q: np.ndarray) -> np.ndarray:
     return r
 
 
+ROT_TO_QUAT_BLOCK = 65536  # matrices per block in rot_to_quat
+
+
 def rot_to_quat(r: np.ndarray) -> np.ndarray:
     """(..., 3, 3) rotation matrices -> (..., 4) unit quaternions (x, y, z, w), w >= 0.
 
@@ -66,6 +69,11 @@ def rot_to_quat(r: np.ndarray) -> np.ndarray:
     ever by a small number (accurate for tiny and for 180-degree rotations alike).
     """
     r = np.asarray(r, dtype=float)
+    if r.ndim == 3 and len(r) > ROT_TO_QUAT_BLOCK:  # in blocks: a few MB of temporaries, not 200
+        q = np.empty((len(r), 4))
+        for start in range(0, len(r), ROT_TO_QUAT_BLOCK):
+            q[start : start + ROT_TO_QUAT_BLOCK] = rot_to_quat(r[start : start + ROT_TO_QUAT_BLOCK])
+        return q
     m00, m11, m22 = r[..., 0, 0], r[..., 1, 1], r[..., 2, 2]
     trace = m00 + m11 + m22
     pick = np.argmax(np.stack([trace, m00, m11, m22], axis=-1), axis=-1)
