@@ -35,6 +35,12 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+def _components(a: np.ndarray) -> np.ndarray:
+    """The columns of an (N, k) array as k contiguous rows: elementwise arithmetic on them runs 2-3x
+    faster than on strided columns, with the same operations and so the same bits."""
+    return np.ascontiguousarray(np.asarray(a, dtype=float).T)
+
+
 def normalize_quat(q: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     return q / norms(q)[..., None]
@@ -165,6 +171,17 @@ def rot_z(yaw: float) -> np.ndarray:
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of (..., 4) quaternions (x, y, z, w): R(a) R(b)."""
+    if a.ndim == 2 and a.shape == b.shape:  # one product per row: on contiguous components
+        (ax, ay, az, aw), (bx, by, bz, bw) = _components(a), _components(b)
+        return np.stack(
+            [
+                aw * bx + bw * ax + (ay * bz - az * by),
+                aw * by + bw * ay + (az * bx - ax * bz),
+                aw * bz + bw * az + (ax * by - ay * bx),
+                aw * bw - (ax * bx + ay * by + az * bz),
+            ],
+            axis=-1,
+        )
     av, aw = a[..., :3], a[..., 3:]
     bv, bw = b[..., :3], b[..., 3:]
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))
@@ -184,6 +201,17 @@ def quat_angle(q: np.ndarray) -> np.ndarray:
 
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """R(q) v for (..., 4) unit quaternions and (..., 3) vectors."""
+    if q.ndim == 2 and v.ndim == 2 and len(q) == len(v):  # on contiguous components
+        (ux, uy, uz, w), (vx, vy, vz) = _components(q), _components(v)
+        cx, cy, cz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx  # u x v
+        return np.stack(
+            [
+                vx + 2 * (w * cx + (uy * cz - uz * cy)),
+                vy + 2 * (w * cy + (uz * cx - ux * cz)),
+                vz + 2 * (w * cz + (ux * cy - uy * cx)),
+            ],
+            axis=-1,
+        )
     u, w = q[..., :3], q[..., 3:]
     uv = cross(u, v)
     return v + 2 * (w * uv + cross(u, uv))
