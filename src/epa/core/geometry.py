@@ -254,6 +254,9 @@ def pose_discrepancy(q_ref: np.ndarray, q_est: np.ndarray) -> np.ndarray:
     return quat_mul(q_ref, quat_conj(q_est))
 
 
+PAIR_BLOCK = 65536  # pose pairs per block in relative_errors
+
+
 def relative_errors(d: np.ndarray, p_ref: np.ndarray, p_est: np.ndarray, i, j):
     """Per-pair relative pose error E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j), as in evo and ov_eval.
 
@@ -263,6 +266,12 @@ def relative_errors(d: np.ndarray, p_ref: np.ndarray, p_est: np.ndarray, i, j):
     """
     if len(i) == 0:
         return np.zeros(0), np.zeros(0)
+    if len(i) > PAIR_BLOCK:  # in blocks: each pair on its own, so the same numbers, in a few MB
+        angle, trans = np.empty(len(i)), np.empty(len(i))
+        for s in range(0, len(i), PAIR_BLOCK):
+            block = slice(s, s + PAIR_BLOCK)
+            angle[block], trans[block] = relative_errors(d, p_ref, p_est, i[block], j[block])
+        return angle, trans
     di = d[i]
     angle = quat_angle(quat_mul(di, quat_conj(d[j])))
     t_err = quat_rotate(di, p_est[j] - p_est[i]) - (p_ref[j] - p_ref[i])
