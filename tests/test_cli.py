@@ -171,3 +171,59 @@ def test_epica_is_the_same_command():
 
     scripts = {e.name: e.value for e in importlib.metadata.entry_points(group="console_scripts")}
     assert scripts["epica"] == scripts["epa"] == "epa.cli.main:main"
+
+
+def test_eval_imports_only_what_its_path_needs(tmp_path):
+    """`epa eval` of two small text files without a report: no matplotlib, pandas (files under the C
+    parser's 12 MB), scipy, rosbags, nor jsonschema (the defaults need no validator), and none of
+    the other commands' modules."""
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[1] / "example"
+    code = (
+        "import sys\n"
+        "from epa.cli import main\n"
+        f"status = main.main(['eval', {str(example / 'truth/drone_figure8.txt')!r},"
+        f" {str(example / 'algorithms/vio_camera/drone_figure8/run1.csv')!r},"
+        f" '--out', {str(tmp_path / 'out')!r}])\n"
+        "heavy = ('matplotlib', 'pandas', 'scipy', 'rosbags', 'jsonschema')\n"
+        "others = ('epa.evo.commands', 'epa.rpg.command', 'epa.workflow.verify')\n"
+        "print(status, sorted({n.split('.')[0] for n in sys.modules if n.split('.')[0] in heavy}),"
+        " sorted(n for n in sys.modules if n in others))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "0 [] []"
+
+
+def test_a_config_at_its_defaults_is_valid_without_the_validator():
+    """settings.resolve skips jsonschema only for what it can tell is valid: every setting at its
+    default (same type), a plain boolean, a grid folder; the rest, valid or not, goes to jsonschema."""
+    import jsonschema
+    import pytest
+
+    from epa.core.errors import EpaError
+    from epa.workflow import settings
+
+    validator = jsonschema.Draft202012Validator(settings.schema())
+    plain = [
+        {"truth_dir": ".", "algorithms_dir": "."},
+        {"truth_dir": "t", "algorithms_dir": "a", "report": {"per_case": False}},
+        {"truth_dir": "t", "algorithms_dir": "a", "sync": {"offset": 0.0}, "mode": "epa"},
+    ]
+    for cfg in plain:
+        assert settings._plainly_valid(cfg, settings.schema()) and validator.is_valid(cfg)
+    told_apart = [
+        {"truth_dir": ".", "algorithms_dir": "", "mode": "epa"},  # an empty folder
+        {"truth_dir": ".", "algorithms_dir": ".", "sync": {"max_diff": -1.0}},  # out of bounds
+        {"truth_dir": ".", "algorithms_dir": ".", "sync": {"max_diff": 0.05}},  # valid, not default
+        {"truth_dir": ".", "algorithms_dir": ".", "grid": {"max_batches": 8.0}},  # float for an int
+        {"truth_dir": ".", "algorithms_dir": ".", "typo": 1},  # an unknown key
+        {"truth_dir": "."},  # a required key missing
+        {"truth_dir": ".", "algorithms_dir": ".", "mode": "ov_eval"},  # valid, not default
+    ]
+    for cfg in told_apart:
+        assert not settings._plainly_valid(cfg, settings.schema())
+    with pytest.raises(EpaError, match="max_diff"):
+        settings.resolve(told_apart[1])
+    with pytest.raises(EpaError, match="typo"):
+        settings.resolve(told_apart[4])

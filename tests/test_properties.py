@@ -271,3 +271,34 @@ def test_step1_recovers_a_random_offset_on_random_smooth_motion(seed, offset):
         assert out.status == "ambiguous" and out.peak_ratio < 1.05, out.reason
         return
     assert abs(out.offset - offset) < 2e-3
+
+
+def test_geometry_fast_paths_give_numpys_bits():
+    """geometry's row-wise helpers and the contiguous-component paths of quat_mul and quat_rotate
+    are written to compute the same operations in the same order as the numpy expressions they
+    replace (issue 34): equal bit for bit, signs of zero included, on random and edge values."""
+    rng = np.random.default_rng(34)
+    n = 20_000
+    v = rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-8, 4, size=(n, 1))
+    v[:3] = [[0.0, -0.0, 0.0], [-0.0, 0.0, -0.0], [1e-300, 0.0, -1e-300]]
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[3], q[4] = [0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, -1.0]
+    p = q[::-1].copy()
+
+    def same(a, b):
+        return (
+            a.shape == b.shape
+            and np.array_equal(a, b)
+            and np.array_equal(np.signbit(a), np.signbit(b))
+        )
+
+    assert same(geometry.norms(v), np.linalg.norm(v, axis=-1))
+    assert same(geometry.norms(q), np.linalg.norm(q, axis=-1))
+    assert same(geometry.dots(q, p), np.sum(q * p, axis=-1))
+    assert same(geometry.cross(v, v[::-1]), np.cross(v, v[::-1]))
+    # the contiguous path (rows matched) against the general path (a broadcast row at a time)
+    assert same(geometry.quat_mul(q, p), geometry.quat_mul(q[:, None, :], p[:, None, :])[:, 0])
+    assert same(
+        geometry.quat_rotate(q, v), geometry.quat_rotate(q[:, None, :], v[:, None, :])[:, 0]
+    )

@@ -20,8 +20,14 @@ from epa.core.errors import EpaError
 
 REPORT = folder("report")  # the report stage's folder in a case folder
 
+# The commands whose parsers this module builds; the others' (evo, rpg, verify, pack) are built by
+# their modules, whose imports (numpy, yaml, the contract) a run of these commands does not need.
+OWN_COMMANDS = ("eval", "traj", "fig", "config", "selftest", "stage", "simulate")
 
-def _parser() -> argparse.ArgumentParser:
+
+def _parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The command line; for one of OWN_COMMANDS only its own parsers (``epa --help`` and the
+    other commands build every one)."""
     p = argparse.ArgumentParser(prog="epa", description="Trajectory evaluation for SLAM/VIO.")
     p.add_argument("--version", action="version", version=f"epica {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
@@ -30,9 +36,10 @@ def _parser() -> argparse.ArgumentParser:
     _add_traj(sub)
     _add_fig(sub)
     _add_config(sub)
-    _add_evo_rpg_verify(sub)
-    _add_tum_ate(sub)
-    _add_tum_rpe(sub)
+    if command not in OWN_COMMANDS:
+        _add_evo_rpg_verify(sub)
+        _add_tum_ate(sub)
+        _add_tum_rpe(sub)
     _add_selftest(sub)
     _add_stage(sub)
     _add_simulate(sub)
@@ -794,7 +801,8 @@ def _simulate(args) -> None:
 
 
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = _parser(argv[0] if argv else None).parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="epa: %(levelname)s: %(message)s")
     try:
         status = args.func(args)  # an exit status (epa verify), or None when the command is done

@@ -57,6 +57,15 @@ class Trajectory:
         return self.r if self.r_printed is None else self.r_printed
 
     def select(self, idx) -> Trajectory:
+        if (
+            isinstance(idx, np.ndarray)
+            and idx.dtype == bool
+            and len(idx) == len(self)
+            and idx.all()
+        ):
+            return (
+                self  # a mask that keeps every pose (a crop without limits): no copy, same arrays
+            )
         return replace(
             self,
             t=self.t[idx],

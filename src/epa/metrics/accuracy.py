@@ -203,7 +203,7 @@ def ape(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-pose translation error (m) and rotation error (deg) of aligned, matched poses."""
     d = geometry.pose_discrepancy(ref.q, est.q) if d is None else d
-    return np.linalg.norm(est.p - ref.p, axis=1), np.degrees(geometry.quat_angle(d))
+    return geometry.norms(est.p - ref.p), np.degrees(geometry.quat_angle(d))
 
 
 def evaluate(

@@ -50,7 +50,7 @@ def _quadratic(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
         good = np.array([_is_pd(c) for c in cov])
         chol = np.linalg.cholesky(np.where(good[:, None, None], cov, np.eye(3)))
     y = np.linalg.solve(chol, e[..., None])[..., 0]
-    out[good] = np.sum(y * y, axis=1)[good]
+    out[good] = geometry.dots(y, y)[good]  # np.sum(y * y, axis=1)'s bits, faster
     return out
 
 

@@ -50,13 +50,15 @@ class Extrinsic:
         p_b = s p_c - R_b t_x moves the position error by s dp + R_b [t_x]x d_body. Only the
         orientation and position blocks are known (no cross-covariance), so the lever arm adds
         R_b [t_x]x Cov_rot [t_x]x^T R_b^T to the position block."""
-        r_b = est.r @ self.R.T
-        p_b = self.scale * est.p - np.einsum("nab,b->na", r_b, self.t)
+        n = len(est)
+        # (N, 3, 3) @ (3, 3) as one (3N, 3) BLAS product: each row of R_C times R^T
+        r_b = (est.r.reshape(-1, 3) @ self.R.T).reshape(n, 3, 3)
+        p_b = self.scale * est.p - (r_b.reshape(-1, 3) @ self.t).reshape(n, 3)
         # printed rotation blocks (KITTI) take the same right factor: what the devkit's raw matrices would
         extra = {} if est.r_printed is None else {"r_printed": est.r_printed @ self.R.T}
         if est.cov_rot is not None and est.cov_pos is not None:
             cov_rot = self.R @ est.cov_rot @ self.R.T
-            lever = np.einsum("nab,bc->nac", r_b, geometry.skew(self.t))
+            lever = (r_b.reshape(-1, 3) @ geometry.skew(self.t)).reshape(n, 3, 3)
             cov_pos = self.scale**2 * est.cov_pos + lever @ cov_rot @ lever.transpose(0, 2, 1)
             extra.update(cov_rot=cov_rot, cov_pos=cov_pos)
         return Trajectory.from_rp(est.t, r_b, p_b, **extra)
@@ -94,9 +96,9 @@ class Extrinsic:
         return cast(ExtrinsicRecord, record)
 
 
-def _kabsch(beta: np.ndarray, alpha: np.ndarray):
-    """R minimising sum |alpha - R beta|^2, and the singular values of the cross-covariance."""
-    h = beta.T @ alpha
+def _kabsch(h: np.ndarray):
+    """R minimising sum |alpha - R beta|^2 from the cross-covariance h = sum beta alpha^T, and h's
+    singular values."""
     u, s, vt = np.linalg.svd(h)
     d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
     return vt.T @ np.diag([1.0, 1.0, d]) @ u.T, s
@@ -196,7 +198,7 @@ def _fit(
         if motions is not None:
             motions.update(pairs=(i, j), estimate=(qb, tb, beta))
     alpha = geometry.quat_log(qa)
-    angle = np.degrees(np.linalg.norm(alpha, axis=1))
+    angle = np.degrees(geometry.norms(alpha))
     use = angle >= min_rotation_deg
     info["rotation_pairs"] = int(use.sum())
     info["excitation_rms_deg"] = float(np.sqrt(np.mean(angle[use] ** 2))) if use.any() else 0.0
@@ -240,13 +242,17 @@ def _solve_rotation(
     pairs beyond 3 median residuals; its covariance and unobservable directions (None, None with
     ``solution_only``)."""
     keep = use.copy()
+    h = beta[keep].T @ alpha[keep]
     for _ in range(outlier_iterations + 1):
-        r_x, sv = _kabsch(beta[keep], alpha[keep])
-        resid = np.degrees(np.linalg.norm(alpha - beta @ r_x.T, axis=1))
+        r_x, sv = _kabsch(h)
+        resid = np.degrees(geometry.norms(alpha - beta @ r_x.T))
         limit = max(3.0 * np.median(resid[keep]), 0.1)
         new_keep = use & (resid <= limit)
         if new_keep.sum() < min_pairs or np.array_equal(new_keep, keep):
             break
+        # the next round's cross-covariance: only the pairs that left or came back change it
+        out, back = keep & ~new_keep, new_keep & ~keep
+        h = h - beta[out].T @ alpha[out] + beta[back].T @ alpha[back]
         keep = new_keep
     rot_rms = float(np.sqrt(np.mean(resid[keep] ** 2)))
     info.update(
@@ -283,12 +289,13 @@ def _solve_translation(
     if solution_only:
         return x, None, None
     s = float(x[3]) if scale else 1.0
+    m_kept = m[keep_t]
     cov_x, null_x, h_pinv = _sandwich(
-        m[keep_t], np.einsum("kab,b->ka", m[keep_t], x) - b[keep_t], block[keep_t], max_condition
+        m_kept, (_rows(m_kept) @ x).reshape(-1, 3) - b[keep_t], block[keep_t], max_condition
     )
     # the rotation's own uncertainty moves R_X t_B: d(residual)/d(rotation) = s [R_X t_B]x
     lever = geometry.skew(s * rtb[keep_t])
-    gain = h_pinv @ np.einsum("kai,kaj->ij", m[keep_t], lever)
+    gain = h_pinv @ (_rows(m_kept).T @ _rows(lever))
     return x, cov_x + gain @ cov_rot @ gain.T, null_x
 
 
@@ -377,8 +384,9 @@ def _sandwich(jac: np.ndarray, resid: np.ndarray, block: np.ndarray, max_conditi
     each block with the next (overlapping motion pairs correlate only across neighbouring blocks),
     scaled by G/(G-1) for G blocks. No noise level is assumed: it comes from the residuals.
     Returns the covariance, the unobservable directions and H^+."""
-    h_pinv, null, _ = _pinv(np.einsum("kai,kaj->ij", jac, jac), max_condition)
-    grad = np.einsum("kai,ka->ki", jac, resid)
+    rows = _rows(jac)
+    h_pinv, null, _ = _pinv(rows.T @ rows, max_condition)
+    grad = jac[:, 0] * resid[:, 0:1] + jac[:, 1] * resid[:, 1:2] + jac[:, 2] * resid[:, 2:3]
     ids, inverse = np.unique(block, return_inverse=True)
     per_block = np.zeros((len(ids), jac.shape[2]))
     np.add.at(per_block, inverse, grad)
@@ -412,19 +420,31 @@ def _uncertainty(cov_rot, null_rot, cov_x, null_x, scale: bool) -> dict:
     }
 
 
+def _rows(blocks: np.ndarray) -> np.ndarray:
+    """(K, 3, n) blocks of equations as (3K, n) rows, so that sums over them are BLAS products."""
+    return np.ascontiguousarray(blocks).reshape(-1, blocks.shape[-1])
+
+
 def _robust_lstsq(m: np.ndarray, b: np.ndarray, max_condition: float):
     """Least squares on stacked 3-row blocks, with up to two rounds of outlier rejection and
     truncation of directions the motion does not observe (reported, and left at zero rather than
     fitted to noise). Returns the solution, the rows kept and the record."""
     k, _, n = m.shape
     keep = np.ones(k, bool)
+    rows = _rows(m)  # every 3-row block an equation: the sums over them are BLAS products
+    h, g = rows.T @ rows, rows.T @ b.reshape(-1)  # the normal equations over every pair
     for rejection in range(3):
-        pinv, null, sv = _pinv(np.einsum("kai,kaj->ij", m[keep], m[keep]), max_condition)
-        x = pinv @ np.einsum("kai,ka->i", m[keep], b[keep])
-        resid = np.linalg.norm(np.einsum("kab,b->ka", m, x) - b, axis=1)
+        pinv, null, sv = _pinv(h, max_condition)
+        x = pinv @ g
+        resid = geometry.norms((rows @ x).reshape(k, 3) - b)
         new_keep = resid <= max(3.0 * np.median(resid[keep]), 1e-3)
         if rejection == 2 or new_keep.sum() < max(n, k // 2) or np.array_equal(new_keep, keep):
             break
+        # the next round's normal equations: only the pairs that left or came back change them
+        for sign, changed in ((-1.0, keep & ~new_keep), (1.0, new_keep & ~keep)):
+            rows_c = _rows(m[changed])
+            h = h + sign * (rows_c.T @ rows_c)
+            g = g + sign * (rows_c.T @ b[changed].reshape(-1))
         keep = new_keep
     unobs_t = [d[:3].tolist() for d in null if np.linalg.norm(d[:3]) > 0.5]
     scale_unobs = bool(n == 4 and any(abs(d[3]) > 0.5 for d in null))

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from epa.artifacts.case import CaseData
 from epa.artifacts.stage import Stage
-from epa.outputs import report
 
 NAME = "report"
 
@@ -18,6 +17,8 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
             "reason": "report.per_case is off" if write_arrays else "no artifacts written",
         }
     else:
+        from epa.outputs import report  # tables and figures: only where a report is written
+
         folder = data.folder
         name = "/".join(folder.root.parts[-3:])
         # from the artifacts alone, as the workflow's report job reads them
