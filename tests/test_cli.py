@@ -218,7 +218,6 @@ def test_a_config_at_its_defaults_is_valid_without_the_validator():
         {"truth_dir": ".", "algorithms_dir": ".", "sync": {"max_diff": 0.05}},  # valid, not default
         {"truth_dir": ".", "algorithms_dir": ".", "grid": {"max_batches": 8.0}},  # float for an int
         {"truth_dir": ".", "algorithms_dir": ".", "typo": 1},  # an unknown key
-        {"truth_dir": "."},  # a required key missing
         {"truth_dir": ".", "algorithms_dir": ".", "mode": "ov_eval"},  # valid, not default
     ]
     for cfg in told_apart:
@@ -227,3 +226,7 @@ def test_a_config_at_its_defaults_is_valid_without_the_validator():
         settings.resolve(told_apart[1])
     with pytest.raises(EpaError, match="typo"):
         settings.resolve(told_apart[4])
+    # one folder without the other passes the schema (inputs may be named other ways) and is
+    # refused by the inputs check after it
+    with pytest.raises(EpaError, match="truth_dir without algorithms_dir"):
+        settings.resolve({"truth_dir": "."})
