@@ -163,30 +163,12 @@ def run_stage(
         data.readable(None)
 
 
-def run_case(
-    ref_path,
-    est_path,
-    out_dir,
-    cfg: dict,
-    *,
-    write_arrays: bool = False,
-    on_stage: Callable[[str], None] | None = None,
-    ref_source: dict | None = None,
-    est_source: dict | None = None,
-) -> dict:
+def run_case(ref_path, est_path, out_dir, cfg: dict, **options) -> dict:
     """Every stage for one case in this process (``epa eval``); returns each stage's ``result``
     (the records that tell the case: metrics, drift, consistency, efficiency), by stage name. A user
-    mistake raises EpaError after the failed stage's markers are written."""
-    data = run_case_data(
-        ref_path,
-        est_path,
-        out_dir,
-        cfg,
-        write_arrays=write_arrays,
-        on_stage=on_stage,
-        ref_source=ref_source,
-        est_source=est_source,
-    )
+    mistake raises EpaError after the failed stage's markers are written. ``options``: those of
+    :func:`run_case_data`."""
+    data = run_case_data(ref_path, est_path, out_dir, cfg, **options)
     return {st.name: getattr(data, st.result) for st in declared().stages if st.result is not None}
 
 
