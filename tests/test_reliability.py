@@ -388,3 +388,26 @@ def test_the_next_job_removes_a_killed_runs_temporaries_and_keeps_the_artifacts(
         "INFO removed what a killed run left: .pairs.csv.x7_q2k9z, .sync.json.x7_q2k9z,"
         " .xcorr.csv.x7_q2k9z\n"
     )
+
+
+def test_epa_eval_into_a_folder_a_killed_run_left_removes_its_temporaries(tmp_path):
+    """``epa eval --out`` runs every stage in one process: each stage first removes what a killed
+    write left in its folder, as a workflow job does."""
+    from epa.cli import main as cli
+
+    (tmp_path / "ref.txt").write_text(catalogue.GOOD)
+    (tmp_path / "est.txt").write_text(catalogue.GOOD)
+    out = tmp_path / "out"
+    left = [
+        out / folder("sync") / ".sync.json.abcd1234",
+        out / folder("metrics") / ".ape.csv.x1y2z3w4",
+    ]
+    for path in left:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("half a file")
+    users = out / folder("sync") / ".sync.json.notes"  # not a temporary's name: kept
+    users.write_text("the user's")
+    args = ["eval", str(tmp_path / "ref.txt"), str(tmp_path / "est.txt"), "--out", str(out)]
+    assert cli.main(args) == 0
+    assert not any(p.exists() for p in left) and users.exists()
+    assert json.loads((out / folder("metrics") / "metrics.json").read_text())["n_matched"] > 0

@@ -194,6 +194,8 @@ def run_case_data(
     for st in chain.stages:
         if on_stage is not None:
             on_stage(st.name)
+        # what a killed `epa eval --out` into this folder left, as a workflow job removes it
+        data.folder.remove_temporaries(st.name, st.artifacts)
         try:
             run_stage(st.name, data, cfg, write_arrays=write_arrays)
             data.forget(
