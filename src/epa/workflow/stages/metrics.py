@@ -11,6 +11,7 @@ from epa.artifacts.stage import Stage, Value
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory, position_only
 from epa.metrics import accuracy, registry
+from epa.readers import read_printed_quaternions
 from epa.readers.image_stamps import read_image_stamps
 
 log = logging.getLogger("epa")
@@ -147,6 +148,19 @@ def image_stamps(cfg: dict, case: Case | None):
     return read_image_stamps(path, c["image_stamps_unit"])
 
 
+def printed_quaternions(data: CaseData) -> tuple[Trajectory | None, Trajectory | None]:
+    """The case's two files read again with the settings load read them with, their quaternions as
+    printed (the ETH3D protocol's); None for a side that prints none (a bag, KITTI, positions)."""
+    case = data.folder.case
+    if case is None or case.truth is None or case.estimate is None:
+        return None, None
+    sources = data.load_record.get("sources", {})
+    return (
+        read_printed_quaternions(case.truth, sources.get("reference") or {}),
+        read_printed_quaternions(case.estimate, sources.get("estimate") or {}),
+    )
+
+
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     folder = data.folder
     inputs = {
@@ -156,6 +170,7 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         "estimate_source": lambda: data.load_record.get("sources", {}).get("estimate") or {},
         "estimate": lambda: data.cropped[1],
         "image_stamps": lambda: image_stamps(cfg, data.folder.case),
+        "printed_quaternions": lambda: printed_quaternions(data),
     }
     summary, tables = compute(data.matched[0], data.aligned, cfg, inputs)
     record = case_record(
