@@ -18,7 +18,10 @@ github.com/ETH3D/slam-evaluation ``src/main.cc``) computes it; see docs/protocol
 The arithmetic is the program's (Eigen's): its slerp, its rotation of a vector by a quaternion and
 its quaternion of the fitted matrix, which under Sim3 is the quaternion of ``s R`` (not a unit one:
 the relative translations of the Sim3-aligned estimate are turned by a distorted rotation, a
-quirk of the program kept here and documented). Sums are sequential, as the program's loops.
+quirk of the program kept here and documented), and it turns positions by the quaternions as the
+files print them, not normalised: the metric takes them from the files read again
+(:func:`as_printed`; epica's unit ones, with a note, for a bag). Sums are sequential, as the
+program's loops.
 Everything is vectorised: the program's pair search is a running maximum (:func:`pairs`).
 """
 
