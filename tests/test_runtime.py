@@ -10,7 +10,7 @@ from epa.core import runtime
 from epa.outputs import figures
 from epa.outputs.tables import cells
 from epa.workflow import jobs
-from epa.workflow.stages import load
+from epa.workflow.stages import load, metrics
 
 
 def test_reset_empties_every_cache():
@@ -18,6 +18,7 @@ def test_reset_empties_every_cache():
         "artifacts.case.parsed",
         "artifacts.case.written",
         "workflow.stages.load.loaded",
+        "workflow.stages.metrics.printed",
         "outputs.figures.kept",
         "outputs.tables.cells.index",
         "workflow.jobs.inside",
@@ -37,6 +38,7 @@ def test_reset_empties_every_cache():
     case._PARSED["key"] = "trajectory"
     case._WRITTEN["source"] = "path"
     load._LOADED["source"] = "trajectory"
+    metrics._PRINTED["source"] = "trajectory"
     figures._KEPT[("kind",)] = "figure"
     cells.ok_runs([], "alg")  # indexes this grid
     jobs._POOL = Pool()
@@ -46,7 +48,7 @@ def test_reset_empties_every_cache():
 
     runtime.reset()
 
-    assert not case._PARSED and not case._WRITTEN and not load._LOADED
+    assert not case._PARSED and not case._WRITTEN and not load._LOADED and not metrics._PRINTED
     assert not figures._KEPT and not cells._INDEX
     assert jobs._POOL is None and Pool.closed
     assert spawn.get_preparation_data is original

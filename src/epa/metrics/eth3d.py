@@ -18,7 +18,10 @@ github.com/ETH3D/slam-evaluation ``src/main.cc``) computes it; see docs/protocol
 The arithmetic is the program's (Eigen's): its slerp, its rotation of a vector by a quaternion and
 its quaternion of the fitted matrix, which under Sim3 is the quaternion of ``s R`` (not a unit one:
 the relative translations of the Sim3-aligned estimate are turned by a distorted rotation, a
-quirk of the program kept here and documented). Sums are sequential, as the program's loops.
+quirk of the program kept here and documented), and it turns positions by the quaternions as the
+files print them, not normalised: the metric takes them from the files read again
+(:func:`as_printed`; epica's unit ones, with a note, for a bag). Sums are sequential, as the
+program's loops.
 Everything is vectorised: the program's pair search is a running maximum (:func:`pairs`).
 """
 
@@ -436,6 +439,37 @@ def enabled(cfg: dict) -> bool:
     return bool(cfg["metrics"]["eth3d"]["enabled"])
 
 
+def as_printed(cropped: Trajectory, printed: Trajectory | None) -> Trajectory | None:
+    """``cropped`` with the quaternions its file prints (``printed``: the same file read again with
+    the same settings, quaternions not normalised), matched by stamp and position; None where there
+    is none (a bag, KITTI, positions only) or a pose has no twin (repeated stamps kept)."""
+    if printed is None:
+        return None
+    k = np.minimum(np.searchsorted(printed.t, cropped.t), len(printed) - 1)
+    if not (np.array_equal(printed.t[k], cropped.t) and np.array_equal(printed.p[k], cropped.p)):
+        return None
+    return Trajectory(cropped.t, cropped.p, printed.q[k])
+
+
+def _printed_sides(
+    reference: Trajectory, estimate: Trajectory, printed: tuple
+) -> tuple[Trajectory, Trajectory, list[str]]:
+    """Both sides with their quaternions as printed where their files print them (the program's
+    input), else epica's unit ones, with a note saying so."""
+    out, notes = [], []
+    for side, cropped, raw in zip(("reference", "estimate"), (reference, estimate), printed):
+        matched = as_printed(cropped, raw)
+        out.append(cropped if matched is None else matched)
+        if matched is None:
+            notes.append(
+                f"eth3d: the {side}'s quaternions are epica's normalised ones (its source prints no"
+                " quaternions as a text trajectory, e.g. a bag); the program turns positions by the"
+                " quaternions a file prints: relative translation errors may differ from its in the"
+                " 5th digit"
+            )
+    return out[0], out[1], notes
+
+
 def compute(
     ref: Trajectory,
     est: Trajectory,
@@ -444,6 +478,7 @@ def compute(
     reference: Trajectory,
     estimate: Trajectory,
     image_stamps: np.ndarray | None,
+    printed_quaternions: tuple = (None, None),
 ) -> tuple[dict, dict, list[str]]:
     """The ETH3D score of one case, on the whole cropped trajectories (its own association and
     alignment, not epica's matched and aligned poses).
@@ -456,12 +491,16 @@ def compute(
         The whole cropped reference and estimate.
     image_stamps : ndarray or None
         The image stamps read from ``metrics.eth3d.image_stamps``; None: the reference's stamps.
+    printed_quaternions : (Trajectory or None, Trajectory or None)
+        The reference's and the estimate's files read again, their quaternions as printed (the
+        program computes on them); None for a side that prints none.
 
     Returns
     -------
     (record, arrays, notes)
     """
     c = cfg["metrics"]["eth3d"]
+    reference, estimate, printed_notes = _printed_sides(reference, estimate, printed_quaternions)
     stamps = reference.t if image_stamps is None else image_stamps
     record, errors = evaluate(
         reference,
@@ -472,8 +511,8 @@ def compute(
     )
     record = {"image_stamps": c["image_stamps"] or "reference", **record}
     if not record["available"]:
-        return record, {}, [f"eth3d: {record['reason']}"]
-    notes = []
+        return record, {}, printed_notes + [f"eth3d: {record['reason']}"]
+    notes = printed_notes
     if record["n_held"]:
         notes.append(
             f"eth3d: {record['n_held']} of {record['n_images']} image stamps lie outside the"
@@ -523,7 +562,7 @@ METRIC = Metric(
     summary=summary,
     settings=("metrics.eth3d",),
     compute=compute,
-    inputs=("reference", "estimate", "image_stamps"),
+    inputs=("reference", "estimate", "image_stamps", "printed_quaternions"),
     arrays=("eth3d_relative_errors.csv",),
     summary_columns=tuple(
         f"eth3d_{m.lower()}_{q}" for m in MODES for q in ("ate_rmse_cm", "rel_trans_1m_pct")

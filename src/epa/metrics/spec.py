@@ -13,7 +13,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 # what the metrics stage can pass a metric's compute beyond the aligned matched poses (Metric.inputs)
-INPUTS = ("unaligned", "transform", "reference", "estimate_source", "estimate", "image_stamps")
+INPUTS = (
+    "unaligned",
+    "transform",
+    "reference",
+    "estimate_source",
+    "estimate",
+    "image_stamps",
+    "printed_quaternions",
+)
 
 
 @dataclass(frozen=True)
@@ -67,8 +75,9 @@ class Metric:
     - ``inputs``: what ``compute`` needs beyond the aligned matched poses, passed as keywords (one
       of :data:`INPUTS`: the matched estimate before Step 3, ``05_align/transform.json``, the whole
       cropped reference, the estimate's source settings as ``load.json`` records them, the whole
-      cropped estimate, the image stamps of metrics.eth3d.image_stamps or None); each is read only
-      when such a metric is on;
+      cropped estimate, the image stamps of metrics.eth3d.image_stamps or None, the reference's and
+      the estimate's files read again with their quaternions as printed, each None where its
+      source prints none); each is read only when such a metric is on;
     - ``protocol``: one of the field's published scoring protocols (TUM RGB-D, TartanAir, ...), turned on by ``epa eval
       --protocol <key>`` or ``metrics.<key>.enabled``;
     - ``arrays``: its own per-case files; ``tables``: its paper tables;

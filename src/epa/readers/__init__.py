@@ -10,6 +10,22 @@
 - :mod:`epa.readers.source`: a source read with its per-source settings (``read``, ``options``).
 """
 
-from epa.readers.source import KEYS, TIMING_DEFAULTS, describe, options, read, timing_file
+from epa.readers.source import (
+    KEYS,
+    TIMING_DEFAULTS,
+    describe,
+    options,
+    read,
+    read_printed_quaternions,
+    timing_file,
+)
 
-__all__ = ["KEYS", "TIMING_DEFAULTS", "describe", "options", "read", "timing_file"]
+__all__ = [
+    "KEYS",
+    "TIMING_DEFAULTS",
+    "describe",
+    "options",
+    "read",
+    "read_printed_quaternions",
+    "timing_file",
+]

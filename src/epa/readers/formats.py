@@ -42,6 +42,7 @@ def _finish(
     on_unsorted: str = "error",
     cov_rot=None,
     cov_pos=None,
+    printed_quaternions: bool = False,
 ) -> Trajectory:
     t = _seconds(tab, t, time_unit, header_ns)
     _check_positions(tab, p)
@@ -55,7 +56,8 @@ def _finish(
         tab.notes.append(
             f"quaternions normalised (norm off by up to {off:.3g}; check the column order)"
         )
-    q = q_xyzw / norms[:, None]
+    # as printed: for the ETH3D program's arithmetic only (epa.metrics.eth3d), never a stage's poses
+    q = q_xyzw if printed_quaternions else q_xyzw / norms[:, None]
     traj = Trajectory(t, p, q, cov_rot=cov_rot, cov_pos=cov_pos)
     return _check_order(traj, tab, on_unsorted)
 
@@ -130,16 +132,22 @@ def _check_order(traj: Trajectory, tab: Table, on_unsorted: str) -> Trajectory:
 
 
 # ----------------------------------------------------------------------------- builders
-def read_tum(tab: Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
+def read_tum(tab: Table, *, time_unit="auto", on_unsorted="error", **kw) -> Trajectory:
     rows = tab.rows
     if rows.shape[1] != 8:
         tab.fail(0, f"TUM needs 8 columns (t x y z qx qy qz qw), found {rows.shape[1]}")
     return _finish(
-        tab, rows[:, 0], rows[:, 1:4], rows[:, 4:8], time_unit=time_unit, on_unsorted=on_unsorted
+        tab,
+        rows[:, 0],
+        rows[:, 1:4],
+        rows[:, 4:8],
+        time_unit=time_unit,
+        on_unsorted=on_unsorted,
+        printed_quaternions=kw.get("printed_quaternions", False),
     )
 
 
-def read_openvins(tab: Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
+def read_openvins(tab: Table, *, time_unit="auto", on_unsorted="error", **kw) -> Trajectory:
     rows = tab.rows
     if rows.shape[1] != 20:
         tab.fail(0, f"OpenVINS needs 20 columns (TUM + 12 covariance), found {rows.shape[1]}")
@@ -152,17 +160,27 @@ def read_openvins(tab: Table, *, time_unit="auto", on_unsorted="error", **_) -> 
         on_unsorted=on_unsorted,
         cov_rot=upper_to_full(rows[:, 8:14]),
         cov_pos=upper_to_full(rows[:, 14:20]),
+        printed_quaternions=kw.get("printed_quaternions", False),
     )
 
 
-def read_euroc(tab: Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
+def read_euroc(tab: Table, *, time_unit="auto", on_unsorted="error", **kw) -> Trajectory:
     rows = tab.rows
     if rows.shape[1] < 8:
         tab.fail(
             0, f"EuRoC CSV needs at least 8 columns (t x y z qw qx qy qz), found {rows.shape[1]}"
         )
     q = rows[:, [5, 6, 7, 4]]
-    return _finish(tab, rows[:, 0], rows[:, 1:4], q, time_unit=time_unit, on_unsorted=on_unsorted)
+    printed = kw.get("printed_quaternions", False)
+    return _finish(
+        tab,
+        rows[:, 0],
+        rows[:, 1:4],
+        q,
+        time_unit=time_unit,
+        on_unsorted=on_unsorted,
+        printed_quaternions=printed,
+    )
 
 
 def read_positions(tab: Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
@@ -180,7 +198,7 @@ def _positions(tab: Table, t, p, time_unit: str, header_ns: bool, on_unsorted: s
     return _check_order(Trajectory.positions(t, p), tab, on_unsorted)
 
 
-def read_named_csv(tab: Table, *, time_unit="auto", on_unsorted="error", **_) -> Trajectory:
+def read_named_csv(tab: Table, *, time_unit="auto", on_unsorted="error", **kw) -> Trajectory:
     cols = named_columns(tab.header, tab.rows.shape[1])
     only = position_columns(tab.header, tab.rows.shape[1]) if cols is None else None
     if only is not None:
@@ -204,6 +222,7 @@ def read_named_csv(tab: Table, *, time_unit="auto", on_unsorted="error", **_) ->
         on_unsorted=on_unsorted,
         cov_rot=cov.get("rot"),
         cov_pos=cov.get("pos"),
+        printed_quaternions=kw.get("printed_quaternions", False),
     )
 
 

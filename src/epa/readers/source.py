@@ -80,6 +80,27 @@ def timing_file(run_path, opts: dict) -> Path | None:
     return None
 
 
+def read_printed_quaternions(
+    path, opts: dict, *, c_parser_min_bytes: int = text.C_PARSER_MIN_BYTES
+) -> Trajectory | None:
+    """A text source read again with its settings, its quaternions as the file prints them (not
+    normalised), for the ETH3D protocol (its program rotates by them). None where a source prints no
+    quaternions: a bag (its messages' quaternions are normalised on reading), a KITTI file (rotation
+    blocks) or positions only. ``c_parser_min_bytes``: as :func:`read`'s."""
+    if bags.is_bag(path):
+        return None
+    traj = text.read_trajectory(
+        path,
+        opts.get("format", "auto"),
+        time_unit=opts.get("time_unit", "auto"),
+        on_unsorted=opts.get("unsorted", "error"),
+        kitti_printed=True,  # tells a KITTI file (printed blocks) from the others
+        printed_quaternions=True,
+        c_parser_min_bytes=c_parser_min_bytes,
+    )
+    return None if traj.r_printed is not None or traj.position_only else traj
+
+
 def read(
     path,
     opts: dict,

@@ -311,11 +311,14 @@ def read_trajectory(
     kitti_printed: bool = False,
     notes: list | None = None,
     c_parser_min_bytes: int = C_PARSER_MIN_BYTES,
+    printed_quaternions: bool = False,
 ) -> Trajectory:
     """Read any supported trajectory file into seconds and unit quaternions. Every interpretation the
     file did not state (detected format, nanoseconds, sorting, KITTI times) is logged as a warning
     and appended to ``notes``. ``kitti_printed`` also keeps KITTI's printed rotation blocks (evo's
-    commands compute on them). ``c_parser_min_bytes``: as :func:`read_table`'s."""
+    commands compute on them). ``c_parser_min_bytes``: as :func:`read_table`'s.
+    ``printed_quaternions``: the quaternions as the file prints them, not normalised (a second read
+    of a file for the ETH3D protocol: its notes are not logged again)."""
     path = Path(path)
     if fmt not in FORMATS:
         raise EpaError(
@@ -343,10 +346,11 @@ def read_trajectory(
         times=times,
         rate=kitti_rate,
         keep_printed=kitti_printed,
+        printed_quaternions=printed_quaternions,
     )
     if len(traj) < 2:
         raise EpaError(f"only {len(traj)} pose(s); at least 2 are needed", path=str(path))
-    for note in tab.notes:
+    for note in () if printed_quaternions else tab.notes:
         log.warning("%s: %s", path, note)
     if notes is not None:
         notes.extend(detected + tab.notes)

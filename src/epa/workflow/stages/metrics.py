@@ -5,18 +5,26 @@ also holds what load and Steps 1-3 found, so one file tells the whole case."""
 from __future__ import annotations
 
 import logging
+import os
+from collections import OrderedDict
 
-from epa.artifacts.case import Case, CaseData, Columns, Record
+from epa.artifacts.case import Case, CaseData, Columns, Record, remember
 from epa.artifacts.stage import Stage, Value
+from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory, position_only
 from epa.metrics import accuracy, registry
+from epa.readers import read_printed_quaternions
 from epa.readers.image_stamps import read_image_stamps
+from epa.workflow.stages.load import c_parser_min_bytes
 
 log = logging.getLogger("epa")
 
 NAME = "metrics"
 BASE_ARRAYS = ("ape.csv", "rpe_segments.csv", "rpe_time.csv")
+
+# reference source -> its quaternions as printed (the ETH3D protocol's), shared by a dataset's cases
+_PRINTED: OrderedDict = runtime.register("workflow.stages.metrics.printed", OrderedDict())
 
 # A matched reference shorter than this has no distance metrics (RPE per metre, drift rate,
 # distance success rate would all be 0/0).
@@ -147,6 +155,32 @@ def image_stamps(cfg: dict, case: Case | None):
     return read_image_stamps(path, c["image_stamps_unit"])
 
 
+def printed_quaternions(data: CaseData) -> tuple[Trajectory | None, Trajectory | None]:
+    """The case's two files read again with the settings load read them with, their quaternions as
+    printed (the ETH3D protocol's); None for a side that prints none (a bag, KITTI, positions)."""
+    case = data.folder.case
+    if case is None or case.truth is None or case.estimate is None:
+        return None, None
+    sources = data.load_record.get("sources", {})
+    ref_opts = sources.get("reference") or {}
+    try:
+        st = os.stat(case.truth)
+        source = (os.path.abspath(case.truth), st.st_mtime_ns, st.st_size, repr(ref_opts))
+    except OSError:  # a vanished file: the reader says what is wrong
+        source = None
+    fast = c_parser_min_bytes()  # the parser load chose, so the same rows (and the same cost)
+    if source is None or source not in _PRINTED:
+        reference = read_printed_quaternions(case.truth, ref_opts, c_parser_min_bytes=fast)
+        if source is not None:
+            remember(_PRINTED, source, reference)
+    else:
+        reference = _PRINTED[source]
+    estimate = read_printed_quaternions(
+        case.estimate, sources.get("estimate") or {}, c_parser_min_bytes=fast
+    )
+    return reference, estimate
+
+
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     folder = data.folder
     inputs = {
@@ -156,6 +190,7 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         "estimate_source": lambda: data.load_record.get("sources", {}).get("estimate") or {},
         "estimate": lambda: data.cropped[1],
         "image_stamps": lambda: image_stamps(cfg, data.folder.case),
+        "printed_quaternions": lambda: printed_quaternions(data),
     }
     summary, tables = compute(data.matched[0], data.aligned, cfg, inputs)
     record = case_record(
