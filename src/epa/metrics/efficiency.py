@@ -187,11 +187,8 @@ def evaluate(
         )
         logging.getLogger("epa").warning("%s", summary["ea_drift_reason"])
     else:
-        summary.update(ea_drift(err_m[have], ms[idx[have]], rate_hz, est_path_length_m))
-        m2 = match_m2ud(t_ref, t_tim)
-        # the patch stops when a pose has no timing
-        summary["ea_drift_m2ud"] = (
-            ea_drift_m2ud(err_m, ms[m2], rate_hz, est_path_length_m) if (m2 >= 0).all() else None
+        summary.update(
+            _finite_ea_drift(t_ref, t_tim, ms, idx, have, err_m, rate_hz, est_path_length_m)
         )
     table = {
         "t": t_est,
@@ -200,6 +197,26 @@ def evaluate(
         "err_m": err_m,
     }
     return summary, table
+
+
+def _finite_ea_drift(t_ref, t_tim, ms, idx, have, err_m, rate_hz, path_length_m) -> dict:
+    """EA-Drift, its seed form and the M2UD variant; one whose weighted errors overflow a double
+    (a weight below the overflowing frame's bound times a large error) is None with a reason."""
+    with np.errstate(over="ignore"):  # an overflow is caught below, never reported as inf
+        values: dict = ea_drift(err_m[have], ms[idx[have]], rate_hz, path_length_m)
+        m2 = match_m2ud(t_ref, t_tim)
+        # the patch stops when a pose has no timing
+        values["ea_drift_m2ud"] = (
+            ea_drift_m2ud(err_m, ms[m2], rate_hz, path_length_m) if (m2 >= 0).all() else None
+        )
+    why = "its frame-time weights times the errors overflow a double, so it is left empty"
+    for key in ("ea_drift_seed", "ea_drift", "ea_drift_m2ud"):
+        if values[key] is not None and not np.isfinite(values[key]):
+            values[key] = None
+            values[f"{key}_reason" if key != "ea_drift_seed" else "ea_drift_reason"] = why
+    if values["ea_drift_seed"] is None and values["ea_drift"] is not None:
+        values["ea_drift"] = None  # the two differ by sqrt(n): one overflowing, both go
+    return values
 
 
 _TABLES = (
