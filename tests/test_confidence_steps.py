@@ -187,3 +187,27 @@ def test_gentle_motion_with_orientation_noise_finds_zero_or_says_so(rate, noise_
     # what it trusts is zero within its stated deviation (at most sync.max_offset_std, 10 ms)
     assert len(found) >= 8 and np.mean(np.abs(z) <= 3) >= 0.9 and np.max(np.abs(z)) < 4
     assert np.sqrt(np.mean(np.square(found))) < 0.006
+
+
+def test_a_step2_deviation_that_is_not_a_number_is_never_read_as_within_its_limit():
+    """max() over [nan, 0.1] is nan and nan > limit is False: the verdict must not call it trusted."""
+    import math
+
+    from epa.steps import calibrate as calibration
+
+    for rotation_std in ([math.nan, 0.01, 0.01], [0.01, math.nan, None], [math.inf, 0.01, 0.01]):
+        info = {
+            "rotation_residual_rms_deg": 0.1,
+            "translation_residual_rms_m": 0.001,
+            "rotation_unobservable_axes": [],
+            "translation_unobservable_directions": [],
+            "scale_unobservable": False,
+            "scale_std": None,
+            "rotation_std_deg": rotation_std,
+            "translation_std_m": [0.001, 0.001, 0.001],
+        }
+        ext = calibration._verdict(
+            calibration.Extrinsic(info=info), False, 1.0, 0.1, 0.5, 0.05, 0.05
+        )
+        assert ext.status == calibration.Step2Status.UNCERTAIN and not ext.trusted
+        assert ext.reason == "rotation std not finite"

@@ -333,8 +333,10 @@ def _verdict(
         ("translation", info["translation_std_m"], max_trans_std_m, " m"),
         ("relative scale", relative_scale_std, max_scale_std, ""),
     ):
-        worst = max((v for v in std if v is not None), default=0.0)
-        if worst > limit:
+        known = [v for v in std if v is not None]
+        if not all(np.isfinite(known)):  # NaN compares false: never read as within the limit
+            uncertain.append(f"{name} std not finite")
+        elif (worst := max(known, default=0.0)) > limit:
             uncertain.append(f"{name} std {worst:.3g}{unit} > {limit}")
     problems = (
         (["unobservable: " + ", ".join(unobservable)] if unobservable else [])
