@@ -157,13 +157,16 @@ def test_quaternions_as_printed_by_source(tmp_path):
     assert [n for n in notes if "normalised ones" in n] == [notes[0]] and "estimate's" in notes[0]
 
 
-def test_few_pairs_warn_and_no_pairs_print_nothing_byte_for_byte(data):
+def test_few_pairs_warn_and_no_pairs_print_nothing(data):
     """80 images in motion: fewer than 50 pairs at 0.5 and 1 m (the program's warning), none at 1.5
-    and 2 m (not printed): the program's bytes."""
+    and 2 m (not printed): the program's lines, its numbers to 1e-12 (byte-identical on this CPU's
+    default path; numbers made by another program are never compared bit for bit: the baseline
+    numpy/OpenBLAS path moves the 17th digit)."""
     reference, estimate = _as_printed(data / GT), _as_printed(data / ESTIMATES["vislam_ba0"])
     stamps = read_image_stamps(data / CAM0, "ns")[1000:1080]
     record, _ = eth3d.evaluate(reference, estimate, stamps)
-    assert eth3d.printed(record) == (ORACLE / "vislam_ba0.cam0_1000_1080.txt").read_text()
+    theirs = (ORACLE / "vislam_ba0.cam0_1000_1080.txt").read_text()
+    _compare(eth3d.printed(record), theirs, lambda _: 1e-12)
     assert [r["n_pairs"] for r in record["modes"][0]["relative"]][2:] == [0, 0]
 
 

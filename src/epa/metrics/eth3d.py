@@ -31,9 +31,10 @@ import math
 
 import numpy as np
 
+from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
-from epa.metrics.spec import Metric, Table
+from epa.metrics.spec import Table, protocol
 from epa.steps import align as alignment
 
 DISTANCES_M = (0.5, 1.0, 1.5, 2.0)
@@ -59,19 +60,15 @@ def _slerp(q0: np.ndarray, q1: np.ndarray, f: np.ndarray) -> np.ndarray:
     return w0[:, None] * q0 + w1[:, None] * q1
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product (``np.cross`` costs 4 times as much on (N, 3) rows)."""
-    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
-    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
-
-
 def _product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of (x, y, z, w) quaternions, not assumed unit."""
     av, aw = a[..., :3], a[..., 3:]
     bv, bw = b[..., :3], b[..., 3:]
     return np.concatenate(
-        [aw * bv + bw * av + _cross(av, bv), aw * bw - np.sum(av * bv, axis=-1, keepdims=True)],
+        [
+            aw * bv + bw * av + geometry.cross(av, bv),
+            aw * bw - np.sum(av * bv, axis=-1, keepdims=True),
+        ],
         axis=-1,
     )
 
@@ -84,9 +81,9 @@ def _inverse(q: np.ndarray) -> np.ndarray:
 def _turn(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Eigen's ``q * v`` (``_transformVector``), which assumes a unit ``q`` and is used on any."""
     u, w = q[..., :3], q[..., 3:]
-    uv = _cross(u, v)
+    uv = geometry.cross(u, v)
     uv = uv + uv
-    return v + w * uv + _cross(u, uv)
+    return v + w * uv + geometry.cross(u, uv)
 
 
 def _matrix_quaternion(m: np.ndarray) -> np.ndarray:
@@ -435,8 +432,6 @@ def printed(record: dict) -> str:
 
 
 # ----------------------------------------------------------------------------- the metric
-def enabled(cfg: dict) -> bool:
-    return bool(cfg["metrics"]["eth3d"]["enabled"])
 
 
 def as_printed(cropped: Trajectory, printed: Trajectory | None) -> Trajectory | None:
@@ -555,12 +550,9 @@ def documents(record: dict) -> dict[str, str]:
     return {"eth3d.txt": printed(record)}
 
 
-METRIC = Metric(
-    key="eth3d",  # metrics.eth3d: off by default; epa eval --protocol eth3d
-    stage="metrics",
-    enabled=enabled,
+METRIC = protocol(
+    "eth3d",  # metrics.eth3d: off by default; epa eval --protocol eth3d
     summary=summary,
-    settings=("metrics.eth3d",),
     compute=compute,
     inputs=("reference", "estimate", "image_stamps", "printed_quaternions"),
     arrays=("eth3d_relative_errors.csv",),
@@ -579,5 +571,4 @@ METRIC = Metric(
         ),
     ),
     documents=documents,
-    protocol=True,
 )

@@ -23,7 +23,7 @@ import numpy as np
 
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
-from epa.metrics.spec import Metric, Table
+from epa.metrics.spec import Table, protocol
 from epa.steps import align, sync
 
 KEY = "hilti"
@@ -101,10 +101,6 @@ def evaluate(
     }
 
 
-def enabled(cfg: dict) -> bool:
-    return bool(cfg["metrics"][KEY]["enabled"])
-
-
 def compute(
     ref: Trajectory, est: Trajectory, cfg: dict, *, reference: Trajectory, estimate: Trajectory
 ) -> tuple[dict, dict, list[str]]:
@@ -151,12 +147,9 @@ def summary(record: dict) -> dict:
     return {"hilti_score": record.get("score"), "hilti_rmse_m": record.get("rmse_m")}
 
 
-METRIC = Metric(
-    key=KEY,  # metrics.hilti: off by default; `epa eval --protocol hilti`
-    stage="metrics",
-    enabled=enabled,
+METRIC = protocol(
+    KEY,  # metrics.hilti: off by default; `epa eval --protocol hilti`
     summary=summary,
-    settings=(f"metrics.{KEY}",),
     compute=compute,
     inputs=("reference", "estimate"),
     summary_columns=("hilti_score", "hilti_rmse_m"),
@@ -169,5 +162,4 @@ METRIC = Metric(
             has=lambda r: r.get("score") is not None,
         ),
     ),
-    protocol=True,
 )

@@ -139,3 +139,17 @@ class Metric:
     def sections(self) -> tuple[str, ...]:
         """The config sections its settings are in, in order."""
         return tuple(dict.fromkeys(s.split(".")[0] for s in self.settings))
+
+
+def protocol(key: str, **fields) -> Metric:
+    """A scoring protocol's declaration: a metric of the metrics stage whose settings are the
+    section ``metrics.<key>``, on where its ``enabled`` is true (what ``epa eval --protocol <key>``
+    sets); ``fields``: the rest of its :class:`Metric`."""
+    return Metric(
+        key=key,
+        stage="metrics",
+        enabled=lambda cfg: bool(cfg["metrics"][key]["enabled"]),
+        settings=(f"metrics.{key}",),
+        protocol=True,
+        **fields,
+    )

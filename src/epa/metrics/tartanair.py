@@ -26,7 +26,7 @@ from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.metrics import kitti
-from epa.metrics.spec import Metric, Table
+from epa.metrics.spec import Table, protocol
 
 KEY = "tartanair"
 KITTI_LENGTHS_M = (5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0)
@@ -198,10 +198,6 @@ def evaluate(ref: Trajectory, est: Trajectory, *, scale: bool, max_pairs: int, s
     }
 
 
-def enabled(cfg: dict) -> bool:
-    return bool(cfg["metrics"][KEY]["enabled"])
-
-
 def compute(
     ref: Trajectory,
     est: Trajectory,
@@ -252,12 +248,9 @@ def summary(record: dict) -> dict:
     }
 
 
-METRIC = Metric(
-    key=KEY,  # metrics.tartanair: off by default; `epa eval --protocol tartanair`
-    stage="metrics",
-    enabled=enabled,
+METRIC = protocol(
+    KEY,  # metrics.tartanair: off by default; `epa eval --protocol tartanair`
     summary=summary,
-    settings=(f"metrics.{KEY}",),
     compute=compute,
     inputs=("reference", "estimate", "unaligned"),
     summary_columns=(
@@ -276,5 +269,4 @@ METRIC = Metric(
             has=lambda r: bool(r.get("kitti_n_segments")),
         ),
     ),
-    protocol=True,
 )

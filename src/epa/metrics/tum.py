@@ -28,7 +28,7 @@ import random
 import numpy as np
 
 from epa.core.errors import EpaError
-from epa.metrics.spec import Metric, Table
+from epa.metrics.spec import Table, protocol
 
 UNITS = ("s", "m", "rad", "deg", "f")
 SAMPLERS = ("python2", "python3")
@@ -440,10 +440,6 @@ def evaluate(reference, estimate, c: dict) -> dict:
     }
 
 
-def enabled(cfg: dict) -> bool:
-    return bool(cfg["metrics"]["tum"]["enabled"])
-
-
 def compute(ref, est, cfg: dict, *, reference, estimate) -> tuple[dict, dict, list[str]]:
     """The protocol on the whole cropped trajectories: its own association, no epica alignment."""
     c = {k: v for k, v in cfg["metrics"]["tum"].items() if k != "enabled"}
@@ -470,15 +466,11 @@ _TABLES = (
 )
 
 
-METRIC = Metric(
-    key="tum",  # metrics.tum: off by default; epa eval --protocol tum
-    stage="metrics",
-    enabled=enabled,
+METRIC = protocol(
+    "tum",  # metrics.tum: off by default; epa eval --protocol tum
     summary=summary,
-    settings=("metrics.tum",),
     compute=compute,
     inputs=("reference", "estimate"),  # its own association, not epica's matched poses
     summary_columns=("tum_ate_rmse_m", "tum_rpe_trans_rmse_m", "tum_rpe_rot_rmse_deg"),
     tables=_TABLES,
-    protocol=True,
 )
