@@ -1,3 +1,5 @@
+import sys
+
 import numpy as np
 import pytest
 
@@ -145,32 +147,137 @@ FAST_PATH_CASES = {
 }
 
 
+# what pyarrow's reader takes or refuses differently from pandas' and numpy's: each file must read
+# (or fail, on the same line with the same words) as the general path does
+FAST_PATH_CASES |= {
+    "nan(1), which pyarrow alone reads (as NaN)": ROWS.replace(" 0 0 0 1\n", " 0 nan(1) 0 1\n", 4),
+    "overflow to inf": ROWS.replace("0.25 0 0 0 1\n", "1e500 0 0 0 1\n", 2),
+    "empty field": ROWS.replace("0.25 0 0 0 1\n", "0.25  0 0 1\n", 6),
+    "quoted number": ROWS.replace("0.25 0 0 0 1\n", '0.25 "0" 0 0 1\n', 3),
+    "NA": ROWS.replace("0.25 0 0 0 1\n", "0.25 NA 0 0 1\n", 3),
+    "blank lines": ROWS.replace("0.25 0 0 0 1\n", "0.25 0 0 0 1\n\n\n", 7),
+    "a blank line of spaces": ROWS.replace("0.25 0 0 0 1\n", "0.25 0 0 0 1\n   \n", 7),
+    "no final newline": ROWS,
+    "lone CR line ends": ROWS.replace("\n", "\r"),
+    "leading space": ROWS.replace("\n", "\n ", 5),
+    "two spaces": ROWS.replace(" 0.5 ", "  0.5 "),
+    "a tab inside": ROWS.replace(" 0.5 ", " \t0.5 ", 3),
+    "a header and no rows": "# t x y z qx qy qz qw\n\n",
+    "comma and space": ROWS.replace(" ", ", "),
+    "semicolons": "t;x;y;z;qx;qy;qz;qw\n" + ROWS.replace(" ", ";"),
+    "a row of spaces among commas": ROWS.replace(" ", ",").replace(
+        "\n", "\n" + ROWS[:40] + "\n", 1
+    ),
+    "a trailing comma": ROWS.replace(" ", ",").replace("\n", ",\n", 3),
+    "an empty field among commas": ROWS.replace(" ", ",").replace(",0,0,1\n", ",,0,1\n", 3),
+    "a comment among commas": ROWS.replace(" ", ",").replace(",1\n", ",1\n# here\n", 5),
+    "a csv with quotes": "t,x,y,z,qx,qy,qz,qw\n"
+    + ROWS.replace(" ", ",").replace(",0,1\n", ',"0",1\n', 2),
+}
+# parsers in C, as text.parsers_for may choose them: pyarrow's, pandas', both in turn
+PARSER_SETS = [("arrow",), ("pandas",), ("arrow", "pandas")]
+
+
+@pytest.mark.parametrize("parsers", PARSER_SETS, ids="+".join)
 @pytest.mark.parametrize("name", sorted(FAST_PATH_CASES))
-def test_c_parser_fast_path_reads_as_the_general_path(tmp_path, monkeypatch, name):
-    """Asked for (c_parser_min_bytes=0), a file goes whole to pandas' C parser without its body being
-    decoded (text._read_in_c); the trajectory, the notes and every error (with its line) are the
-    general reader's, and the line-by-line reader's, bit for bit."""
-    pytest.importorskip("pandas")
+def test_c_parser_fast_path_reads_as_the_general_path(tmp_path, monkeypatch, name, parsers):
+    """Asked for, a file goes whole to a parser in C without its body being decoded
+    (text._read_in_c); the trajectory, the notes and every error (with its line) are the general
+    reader's, and the line-by-line reader's, bit for bit."""
+    for parser in parsers:
+        pytest.importorskip({"arrow": "pyarrow", "pandas": "pandas"}[parser])
+    monkeypatch.setattr(text, "parsers_for", lambda size, pandas_min_bytes: parsers)
     path = tmp_path / "f.txt"
     path.write_bytes(FAST_PATH_CASES[name].encode())
 
     def read():
         notes: list = []
         try:
-            tr = text.read_trajectory(path, notes=notes, c_parser_min_bytes=0)
+            tr = text.read_trajectory(path, notes=notes)
         except EpaError as exc:
             return str(exc)
         covariance = [c.tobytes() for c in (tr.cov_rot, tr.cov_pos) if c is not None]
         return [a.tobytes() for a in (tr.t, tr.p, tr.q)] + covariance + notes
 
     in_c, real = [], text._read_in_c
-    monkeypatch.setattr(text, "_read_in_c", lambda path, data: in_c.append(1) or real(path, data))
+    monkeypatch.setattr(text, "_read_in_c", lambda *args: in_c.append(1) or real(*args))
     fast = read()
     assert in_c  # the C parser had the file
-    monkeypatch.setattr(text, "_read_in_c", lambda path, data: (None, False))
+    monkeypatch.setattr(text, "_read_in_c", lambda *args: (None, False))
     assert read() == fast
-    monkeypatch.setattr(text, "_c_parser_rows", lambda data, offset, width: None)
+    monkeypatch.setattr(text, "_c_parser_rows", lambda *args: None)
     assert read() == fast  # and the line-by-line reader's
+
+
+def _tricky_numbers(rng, n: int) -> np.ndarray:
+    """Text of n rows of 8 numbers a parser may round differently: shortest round-trip reprs over
+    the whole exponent range (subnormals included), 17- and 20-digit mantissas, exponents with
+    signs and leading zeros, -0, integers beyond 2**53, leading zeros and a leading '+'."""
+    bits = rng.integers(0, 2**63 - 2**52, size=(n, 8), dtype=np.int64)
+    values = bits.view(np.float64) * rng.choice([-1.0, 1.0], size=(n, 8))
+    tokens = np.array([repr(float(v)) for v in values.ravel()], dtype=object).reshape(n, 8)
+    close = rng.normal(size=(n, 8)) * 10.0 ** rng.integers(-30, 30, size=(n, 8))
+    forms = [
+        lambda v, k: f"{v:.16e}",  # 17 significant digits
+        lambda v, k: f"{v:.19e}".replace("e", "E"),  # 20, and a capital E
+        lambda v, k: f"{v:.16e}".replace("e-", "e-00").replace("e+", "e+0"),
+        lambda v, k: "-0" if k % 2 else "-0.0",
+        lambda v, k: str(int(2**53 + k * 12345)),
+        lambda v, k: "+" + f"{abs(v):.12f}",
+        lambda v, k: "000" + f"{abs(v):.17g}".lstrip("-"),
+        lambda v, k: f"{v:.25g}",
+    ]
+    pick = rng.integers(0, len(forms) + 2, size=(n, 8))
+    for (i, j), f in np.ndenumerate(pick):
+        if f < len(forms):
+            tokens[i, j] = forms[f](close[i, j], i)
+    return tokens
+
+
+@pytest.mark.parametrize("sep", [" ", ","])
+def test_every_parser_gives_the_same_doubles(tmp_path, monkeypatch, sep):
+    """pyarrow's reader, pandas' C parser (whitespace only) and numpy's loadtxt (the parser chosen
+    by a file's size and what is installed) give the same doubles, bit for bit, on numbers any of
+    them might round differently; and with pyarrow missing, pandas takes its files."""
+    pytest.importorskip("pyarrow")
+    pytest.importorskip("pandas")
+    rng = np.random.default_rng(34)
+    path = tmp_path / "tricky.txt"
+    tokens = _tricky_numbers(rng, 40_000)
+    path.write_text("\n".join(sep.join(row) for row in tokens) + "\n")
+    expected = np.array([[float(t) for t in row] for row in tokens])
+    used = []
+    for name in ("arrow_rows", "_pandas_rows"):
+        real = getattr(text, name)
+        spy = lambda *a, real=real, name=name: used.append(name) or real(*a)  # noqa: E731
+        monkeypatch.setattr(text, name, spy)
+    for parsers in [*PARSER_SETS, ()]:
+        used.clear()
+        monkeypatch.setattr(text, "parsers_for", lambda size, least, parsers=parsers: parsers)
+        rows = text.read_table(path).rows
+        takes = [p for p in parsers if p == "arrow" or sep == " "][:1]  # the one that parsed it
+        assert used == [{"arrow": "arrow_rows", "pandas": "_pandas_rows"}[p] for p in takes]
+        assert rows.flags.c_contiguous and rows.tobytes() == expected.tobytes(), parsers
+    monkeypatch.setitem(sys.modules, "pyarrow", None)  # as if not installed: pandas parses
+    used.clear()
+    monkeypatch.setattr(text, "parsers_for", lambda size, least: ("arrow", "pandas"))
+    assert text.read_table(path).rows.tobytes() == expected.tobytes()
+    assert used == ["arrow_rows", "_pandas_rows"][: 2 if sep == " " else 1]
+
+
+def test_the_parser_is_chosen_by_size_and_what_is_imported(monkeypatch):
+    """pyarrow from 2 MB on (its import repaid), from 32 KB on once imported; pandas from the
+    caller's size on; below both, numpy's loadtxt."""
+    monkeypatch.setitem(text._ARROW, "installed", True)
+    monkeypatch.delitem(sys.modules, "pyarrow", raising=False)
+    assert text.parsers_for(text.ARROW_MIN_BYTES - 1, text.C_PARSER_MIN_BYTES) == ()
+    assert text.parsers_for(text.ARROW_MIN_BYTES, text.C_PARSER_MIN_BYTES) == ("arrow",)
+    assert text.parsers_for(text.C_PARSER_MIN_BYTES, text.C_PARSER_MIN_BYTES) == ("arrow", "pandas")
+    assert text.parsers_for(1000, 0) == ("pandas",)
+    monkeypatch.setitem(sys.modules, "pyarrow", object())
+    assert text.parsers_for(text.ARROW_IMPORTED_MIN_BYTES, text.C_PARSER_MIN_BYTES) == ("arrow",)
+    monkeypatch.setitem(text._ARROW, "installed", False)
+    assert text.parsers_for(text.C_PARSER_MIN_BYTES - 1, text.C_PARSER_MIN_BYTES) == ()
 
 
 def test_artifact_text_is_np_savetxt_byte_for_byte():
@@ -216,3 +323,43 @@ def test_artifact_numbers_keep_negative_zero_next_to_a_missing_value(tmp_path):
     read = files._numbers(path, ",", 1)
     expected = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     assert read.tobytes() == expected.tobytes() and np.signbit(read[7, 1])
+
+
+@pytest.mark.parametrize("parsers", [*PARSER_SETS, ()], ids=lambda p: "+".join(p) or "loadtxt")
+def test_artifacts_read_back_alike_by_every_parser(tmp_path, monkeypatch, parsers):
+    """A stage's TUM and CSV artifacts read back (files._numbers) by pyarrow's reader, pandas' C
+    parser or loadtxt: the same doubles, bit for bit (-0, 17 digits, a NaN, a header and no rows)."""
+    from epa.core import runtime
+    from epa.core.trajectory import Trajectory
+
+    for parser in parsers:
+        pytest.importorskip({"arrow": "pyarrow", "pandas": "pandas"}[parser])
+    rng = np.random.default_rng(5)
+    n = 3000
+    q = rng.normal(size=(n, 4))
+    traj = Trajectory(1e9 + np.arange(n) * 0.005, rng.normal(size=(n, 3)) * 1e3, q)
+    traj.p[5] = -0.0
+    files.write_tum(tmp_path / "a.tum", traj)
+    columns = {
+        "i": np.arange(n) % 4 * 1.0,
+        "x": rng.normal(size=n) * 10.0 ** rng.integers(-9, 9, n),
+    }
+    columns["i"][7] = -0.0
+    files.write_csv(tmp_path / "a.csv", columns)
+    files.write_csv(tmp_path / "nan.csv", {**columns, "y": np.where(np.arange(n) == 9, np.nan, 1)})
+    files.write_csv(tmp_path / "empty.csv", {"a": np.zeros(0), "b": np.zeros(0)})
+    expected = {
+        name: np.loadtxt(tmp_path / name, delimiter=delimiter, ndmin=2, skiprows=skip)
+        for name, delimiter, skip in (("a.tum", None, 0), ("a.csv", ",", 1), ("nan.csv", ",", 1))
+    }
+    monkeypatch.setattr(text, "parsers_for", lambda size, least: parsers)
+    runtime.use_pandas_parser("pandas" in parsers)
+    try:
+        for name, rows in expected.items():
+            delimiter, skip = (" ", 0) if name.endswith(".tum") else (",", 1)
+            assert files._numbers(tmp_path / name, delimiter, skip).tobytes() == rows.tobytes()
+        assert files.read_tum_file(tmp_path / "a.tum").p.tobytes() == traj.p.tobytes()
+        assert np.signbit(files.read_csv(tmp_path / "a.csv")["i"][7])
+        assert files.read_csv(tmp_path / "empty.csv")["a"].shape == (0,)
+    finally:
+        runtime.use_pandas_parser(False)

@@ -6,22 +6,26 @@ A file is read into a :class:`~epa.readers.table.Table` (here: its parse paths),
 format told by :mod:`epa.readers.detect` when it is not given. Every reader returns seconds with unit
 quaternions, or raises :class:`~epa.core.errors.EpaError` naming the file, the line and what is wrong.
 
-The parse paths, fastest first: pandas' C parser on the file's own bytes (:func:`_read_in_c`), the
-same parser on the decoded body (a byte-order mark, comments beyond the head), numpy's ``loadtxt``
-(small files, other separators, comments), and the line-by-line reader that names a bad line
-(:func:`_diagnose`). They give the same doubles, bit for bit.
+The parse paths, fastest first: a parser in C on the file's own bytes (:func:`_read_in_c`):
+pyarrow's CSV reader where it is installed (one space between fields), else pandas' C parser (any
+whitespace); the same parsers on the decoded body (a byte-order mark, comments beyond the head);
+numpy's ``loadtxt`` (small files, other separators, comments); and the line-by-line reader that
+names a bad line (:func:`_diagnose`). They give the same doubles, bit for bit.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import logging
 import stat
+import sys
 import warnings
 from pathlib import Path
 from typing import NoReturn
 
 import numpy as np
 
+from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.readers.checks import (
@@ -52,6 +56,8 @@ from epa.readers.table import Table, is_number, split_fields
 
 # the names other modules have used from here since before the split, kept in place
 __all__ = [
+    "ARROW_IMPORTED_MIN_BYTES",
+    "ARROW_MIN_BYTES",
     "C_PARSER_MIN_BYTES",
     "FORMATS",
     "FORMAT_SETTINGS",
@@ -62,12 +68,14 @@ __all__ = [
     "TIME_UNITS",
     "Table",
     "Unordered",
+    "arrow_rows",
     "beyond_reach",
     "detect_format",
     "disorder",
     "frame_rows",
     "in_order",
     "kitti_times_for",
+    "parsers_for",
     "read_euroc",
     "read_kitti",
     "read_named_csv",
@@ -81,11 +89,17 @@ __all__ = [
 
 log = logging.getLogger("epa")
 
-# From this size on, a file is parsed by pandas' C parser: 3-4x faster than numpy's loadtxt
-# (0.10 s against 0.37 s for a 100k-pose TUM file; same doubles, bit for bit), worth its 0.5 s
-# import for a file of about 120,000 poses or more (at 4 MB, a 200 Hz EuRoC reference, a loop of
-# `epa eval` spent 0.5 s a case importing it). A caller that has imported pandas already passes 0.
+# From this size on, a file pyarrow does not take is parsed by pandas' C parser: 3-4x faster than
+# numpy's loadtxt (0.10 s against 0.37 s for a 100k-pose TUM file; same doubles, bit for bit), worth
+# its 0.2-0.5 s import for a file of about 120,000 poses or more (at 4 MB, a 200 Hz EuRoC reference,
+# a loop of `epa eval` spent 0.5 s a case importing it). A caller that has imported pandas passes 0.
 C_PARSER_MIN_BYTES = 12_000_000
+# From this size on, pyarrow's reader (where installed) is tried first: its import costs 0.04 s, its
+# parse 2.5-4 ms a MB against loadtxt's 20-28; in a new process import and parse take 50 ms at 2 MB
+# (loadtxt 43-68), 42 at 4 MB (78), 55 at 8 MB (162). Once imported (pandas imports it too), it
+# beats loadtxt from about 20 KB on (0.5 ms against 1.8 at 64 KB; 0.6-0.7 against 0.25 at 10 KB).
+ARROW_MIN_BYTES = 2_000_000
+ARROW_IMPORTED_MIN_BYTES = 32_000
 HEAD_CHARS = 1 << 16  # the header is looked for in the first 64 KB, the whole file only if need be
 
 
@@ -106,8 +120,8 @@ def read_table(path: Path, *, c_parser_min_bytes: int = C_PARSER_MIN_BYTES) -> T
     except OSError as exc:
         raise EpaError(f"cannot read: {exc.strerror}", path=str(path)) from None
     check_text(path, data[:4096])
-    c_parser = len(data) >= c_parser_min_bytes
-    whole, refused = _read_in_c(path, data) if c_parser else (None, False)
+    parsers = parsers_for(len(data), c_parser_min_bytes)
+    whole, refused = _read_in_c(path, data, parsers) if parsers else (None, False)
     if whole is not None:
         return whole
     try:
@@ -121,7 +135,22 @@ def read_table(path: Path, *, c_parser_min_bytes: int = C_PARSER_MIN_BYTES) -> T
     if found[0] == len(raw) and len(text) > HEAD_CHARS:  # comments beyond the head: whole file
         raw = text.splitlines(keepends=True)
         found = scan_header(path, raw)
-    return _read_body(path, text, raw, found, raw_bytes, try_c_parser=c_parser and not refused)
+    return _read_body(path, text, raw, found, raw_bytes, parsers=() if refused else parsers)
+
+
+# whether pyarrow is installed: looked up once (0.1 ms), imported only when a file needs it
+_ARROW: dict[str, bool] = runtime.register("readers.text.arrow", {})
+
+
+def parsers_for(size: int, pandas_min_bytes: int) -> tuple[str, ...]:
+    """The parsers in C worth their cost for a file of ``size`` bytes, in the order tried: "arrow"
+    (where installed; from 64 KB on once imported, else from 2 MB on), then "pandas" (from
+    ``pandas_min_bytes`` on). None of them: numpy's loadtxt. The same doubles whichever parses."""
+    if "installed" not in _ARROW:
+        _ARROW["installed"] = importlib.util.find_spec("pyarrow") is not None
+    least = ARROW_IMPORTED_MIN_BYTES if "pyarrow" in sys.modules else ARROW_MIN_BYTES
+    arrow = _ARROW["installed"] and size >= least
+    return ("arrow",) * bool(arrow) + ("pandas",) * (size >= pandas_min_bytes)
 
 
 def _head_lines(text: str, cut: bool) -> list[str]:
@@ -131,12 +160,13 @@ def _head_lines(text: str, cut: bool) -> list[str]:
     return raw[:-1] if cut else raw
 
 
-def _read_in_c(path: Path, data: bytes) -> tuple[Table | None, bool]:
+def _read_in_c(path: Path, data: bytes, parsers: tuple[str, ...]) -> tuple[Table | None, bool]:
     """A file the C parser takes whole, read without decoding or copying its body (0.4 s of a
     million-pose file's 1.3 s): only the head is decoded, to find the header; the body's text is
     decoded only if a later check names a line. (None, refused) wherever the general path must
     decide (a byte-order mark, comments beyond the head, a body the C parser refused: ``refused``,
-    so that it is not parsed again), which then reads the file as before and says what is wrong."""
+    so that it is not parsed again), which then reads the file as before and says what is wrong.
+    ``parsers``: as :func:`parsers_for` returns them."""
     if data.startswith(b"\xef\xbb\xbf"):
         return None, False
     head = data[:HEAD_CHARS]
@@ -151,7 +181,7 @@ def _read_in_c(path: Path, data: bytes) -> tuple[Table | None, bool]:
     if start == len(raw) or (";" in raw[start] and "," in raw[start]):
         return None, False
     offset = len("".join(raw[:start]).encode("utf-8"))
-    rows = _c_parser_rows(data, offset, len(split_fields(raw[start])))
+    rows = _c_parser_rows(data, offset, len(split_fields(raw[start])), parsers)
     if rows is None:
         return None, True
     tab = Table(path, np.zeros((0, 0)), (data, offset), start + 1, header)
@@ -159,10 +189,16 @@ def _read_in_c(path: Path, data: bytes) -> tuple[Table | None, bool]:
 
 
 def _read_body(
-    path: Path, text: str, raw: list[str], found, raw_bytes=None, try_c_parser: bool = True
+    path: Path,
+    text: str,
+    raw: list[str],
+    found,
+    raw_bytes=None,
+    parsers: tuple[str, ...] = ("arrow", "pandas"),
 ) -> Table:
     """``raw_bytes``: the file's bytes as ``text`` decodes (None after a decoding error): the C
-    parser takes the body's bytes from it, not re-encoded from the text (0.2 s a million poses)."""
+    parser takes the body's bytes from it, not re-encoded from the text (0.2 s a million poses).
+    ``parsers``: the parsers in C to try (:func:`parsers_for`), none: numpy's."""
     start, header, header_line = found
     head = "".join(raw[:start])
     body_text = text[len(head) :]
@@ -176,13 +212,13 @@ def _read_body(
         )
     tab = Table(path, np.zeros((0, 0)), body_text, start + 1, header)
     rows = None
-    if try_c_parser:  # (a body is encoded only if so)
+    if parsers:  # (a body is encoded only if so)
         data, offset = (
             (body_text.encode("utf-8"), 0)
             if raw_bytes is None
             else (raw_bytes, len(head.encode("utf-8")))
         )
-        rows = _c_parser_rows(data, offset, len(split_fields(first)))
+        rows = _c_parser_rows(data, offset, len(split_fields(first)), parsers)
     if rows is not None:
         return _checked(tab, rows, header, header_line)
     body = body_text.splitlines()
@@ -219,13 +255,77 @@ def _checked(tab: Table, rows: np.ndarray, header, header_line) -> Table:
     return tab
 
 
-def _c_parser_rows(data: bytes, offset: int, width: int) -> np.ndarray | None:
-    """Rows of ``width`` whitespace-separated numbers, ``data[offset:]`` parsed at once in C (without
-    copying it), or None where the line-by-line reader must decide (and say which line is wrong):
-    other separators or comments, a line with another number of fields, or anything that is not a
-    finite number."""
-    if offset >= len(data) or width == 0 or any(data.find(c, offset) >= 0 for c in b",;#%"):
+def _c_parser_rows(
+    data: bytes, offset: int, width: int, parsers: tuple[str, ...] = ("arrow", "pandas")
+) -> np.ndarray | None:
+    """Rows of ``width`` numbers, ``data[offset:]`` parsed at once in C (without copying it), or
+    None where the line-by-line reader must decide (and say which line is wrong): comments, a line
+    with another number of fields or separator, or anything that is not a finite number.
+    ``parsers`` in order: "arrow", pyarrow's reader (where installed; one space, comma or semicolon
+    between fields, as the first row has them), "pandas", pandas' C parser (whitespace only): the
+    same doubles, bit for bit."""
+    if offset >= len(data) or width == 0:
         return None
+    rows = None
+    if "arrow" in parsers:  # it refuses a comment, a separator other than the first row's
+        end = data.find(b"\n", offset)
+        first = data[offset : end if end >= 0 else len(data)]
+        rows = arrow_rows(
+            data, offset, width, "," if b"," in first else ";" if b";" in first else " "
+        )
+    if rows is None and "pandas" in parsers and all(data.find(c, offset) < 0 for c in b",;#%"):
+        rows = _pandas_rows(data, offset, width)
+    return rows
+
+
+def arrow_rows(data: bytes, offset: int, width: int, delimiter: str = " ") -> np.ndarray | None:
+    """``data[offset:]``'s rows of ``width`` numbers by pyarrow's CSV reader, fields separated by one
+    ``delimiter``, no quotes, no comments (its import costs 0.04 s where pandas' costs 0.2-0.35 s;
+    it parses 1.4-2x faster than pandas). None where pyarrow is not installed, or refuses the body
+    (runs of spaces, tabs, a short line, a word: another parser then decides), or reads a value that
+    is not finite ("nan", "1e500", and "nan(1)", which the others refuse)."""
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+    except ImportError:
+        return None
+    names = [f"c{k}" for k in range(width)]
+    try:
+        table = pacsv.read_csv(
+            pa.BufferReader(pa.py_buffer(data).slice(offset)),  # shares the bytes
+            read_options=pacsv.ReadOptions(column_names=names, use_threads=False),
+            parse_options=pacsv.ParseOptions(
+                delimiter=delimiter, quote_char=False, escape_char=False
+            ),
+            convert_options=pacsv.ConvertOptions(
+                column_types=dict.fromkeys(names, pa.float64()),
+                null_values=[],  # an empty field or "NA" is refused, not a null
+                strings_can_be_null=False,
+            ),
+        )
+    except (pa.ArrowException, ValueError):
+        return None
+    if table.num_rows == 0 or any(c.null_count for c in table.columns):
+        return None
+    # the float64 buffers as they are (to_numpy() would import pandas), copied row-major a batch of
+    # rows at a time (each in cache, as frame_rows), stacked then transposed: 0.05 s for a million
+    # 20-column rows where stacking along the rows took 0.1 s
+    rows = np.empty((table.num_rows, width))
+    start = 0
+    for batch in table.to_batches():
+        stop = start + batch.num_rows
+        columns = [
+            np.frombuffer(c.buffers()[1], np.float64, count=len(c), offset=c.offset * 8)
+            for c in batch.columns
+        ]
+        rows[start:stop] = np.stack(columns).T
+        start = stop
+    return rows if np.isfinite(rows).all() else None
+
+
+def _pandas_rows(data: bytes, offset: int, width: int) -> np.ndarray | None:
+    """pandas' C parser: one space between fields, else any whitespace (runs of spaces, tabs,
+    leading or trailing blanks)."""
     import io
 
     import pandas as pd
@@ -234,7 +334,8 @@ def _c_parser_rows(data: bytes, offset: int, width: int) -> np.ndarray | None:
         body = io.BytesIO(data)  # shares the bytes; the parser reads from the body's start
         body.seek(offset)
         try:
-            frame = pd.read_csv(body, sep=sep, header=None, dtype=float, engine="c")
+            # quoting off (3, csv.QUOTE_NONE): a quoted number is refused, as loadtxt refuses it
+            frame = pd.read_csv(body, sep=sep, header=None, dtype=float, engine="c", quoting=3)
         except (ValueError, pd.errors.ParserError):
             continue
         if frame.shape[1] != width:
