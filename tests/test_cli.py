@@ -3,6 +3,7 @@ import subprocess
 import sys
 
 import bag_fixture
+import pytest
 
 from epa.cli import main as cli
 
@@ -173,26 +174,41 @@ def test_epica_is_the_same_command():
     assert scripts["epica"] == scripts["epa"] == "epa.cli.main:main"
 
 
-def test_eval_imports_only_what_its_path_needs(tmp_path):
-    """`epa eval` of two small text files without a report: no matplotlib, pandas (files under the C
-    parser's 12 MB), scipy, rosbags, nor jsonschema (the defaults need no validator), and none of
-    the other commands' modules."""
+def _eval_imports(tmp_path, prelude: str = "") -> str:
+    """What `epa eval` of the example's two small text files without a report imports: its exit
+    status, the heavy modules and the other commands' modules, after ``prelude``."""
     from pathlib import Path
 
     example = Path(__file__).resolve().parents[1] / "example"
     code = (
         "import sys\n"
         "from epa.cli import main\n"
+        f"{prelude}"
         f"status = main.main(['eval', {str(example / 'truth/drone_figure8.txt')!r},"
         f" {str(example / 'algorithms/vio_camera/drone_figure8/run1.csv')!r},"
         f" '--out', {str(tmp_path / 'out')!r}])\n"
-        "heavy = ('matplotlib', 'pandas', 'scipy', 'rosbags', 'jsonschema')\n"
+        "heavy = ('matplotlib', 'pandas', 'scipy', 'rosbags', 'jsonschema', 'pyarrow')\n"
         "others = ('epa.evo.commands', 'epa.rpg.command', 'epa.workflow.verify')\n"
         "print(status, sorted({n.split('.')[0] for n in sys.modules if n.split('.')[0] in heavy}),"
         " sorted(n for n in sys.modules if n in others))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip().splitlines()[-1] == "0 [] []"
+    return out.stdout.strip().splitlines()[-1]
+
+
+def test_eval_imports_only_what_its_path_needs(tmp_path):
+    """`epa eval` of two small text files without a report: no matplotlib, pandas nor pyarrow (files
+    under the C parsers' sizes), scipy, rosbags, nor jsonschema (the defaults need no validator), and
+    none of the other commands' modules."""
+    assert _eval_imports(tmp_path) == "0 [] []"
+
+
+def test_eval_of_large_files_reads_them_without_pandas(tmp_path):
+    """Files large enough for a parser in C (here: every size is) are read by pyarrow's reader where
+    it is installed, the TUM file and the CSV alike: pandas (0.2-0.35 s to import) is not imported."""
+    pytest.importorskip("pyarrow")
+    prelude = "from epa.readers import text\ntext.ARROW_MIN_BYTES = text.C_PARSER_MIN_BYTES = 0\n"
+    assert _eval_imports(tmp_path, prelude) == "0 ['pyarrow'] []"
 
 
 def test_a_config_at_its_defaults_is_valid_without_the_validator():

@@ -7,8 +7,8 @@ format told by :mod:`epa.readers.detect` when it is not given. Every reader retu
 quaternions, or raises :class:`~epa.core.errors.EpaError` naming the file, the line and what is wrong.
 
 The parse paths, fastest first: a parser in C on the file's own bytes (:func:`_read_in_c`):
-pyarrow's CSV reader where it is installed (one space between fields), else pandas' C parser (any
-whitespace); the same parsers on the decoded body (a byte-order mark, comments beyond the head);
+pyarrow's CSV reader where it is installed (one space, comma or semicolon between fields), else
+pandas' C parser (any whitespace); the same parsers on the decoded body (a byte-order mark, comments beyond the head);
 numpy's ``loadtxt`` (small files, other separators, comments); and the line-by-line reader that
 names a bad line (:func:`_diagnose`). They give the same doubles, bit for bit.
 """

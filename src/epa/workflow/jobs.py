@@ -190,7 +190,8 @@ class EpaWorker(context.ForkServerProcess):
     """A pool worker (named EpaWorker-N, which :func:`_without_main_module` recognises)."""
 
     def run(self):
-        # pandas is preloaded in the forkserver (_context): its C parser reads every file here
+        # pandas is preloaded in the forkserver (_context): pyarrow's reader (which pandas imports,
+        # where installed) or its C parser reads every file here
         runtime.use_pandas_parser()
         super().run()
 
@@ -204,8 +205,9 @@ def _context():
     if not getattr(spawn.get_preparation_data, "epa_without_main", False):
         spawn.get_preparation_data = _without_main_module(spawn.get_preparation_data)
     ctx = EpaContext()
-    # pandas: its C parser reads the artifacts (epa.artifacts.files); imported once here
-    ctx.set_forkserver_preload(["epa.workflow.jobs", "pandas"])
+    # pandas: its C parser reads the artifacts (epa.artifacts.files); imported once here, and
+    # pyarrow's reader, tried first where installed (a preload that is not installed is skipped)
+    ctx.set_forkserver_preload(["epa.workflow.jobs", "pandas", "pyarrow.csv"])
     return ctx
 
 
