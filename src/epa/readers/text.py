@@ -8,9 +8,10 @@ quaternions, or raises :class:`~epa.core.errors.EpaError` naming the file, the l
 
 The parse paths, fastest first: a parser in C on the file's own bytes (:func:`_read_in_c`):
 pyarrow's CSV reader where it is installed (one space, comma or semicolon between fields), else
-pandas' C parser (any whitespace); the same parsers on the decoded body (a byte-order mark, comments beyond the head);
-numpy's ``loadtxt`` (small files, other separators, comments); and the line-by-line reader that
-names a bad line (:func:`_diagnose`). They give the same doubles, bit for bit.
+pandas' C parser (any whitespace); the same parsers on the decoded body (a byte-order mark,
+comments beyond the head); numpy's ``loadtxt`` (small files, other separators, comments); and the
+line-by-line reader that names a bad line (:func:`_diagnose`). They give the same doubles, bit for
+bit.
 """
 
 from __future__ import annotations
@@ -144,7 +145,7 @@ _ARROW: dict[str, bool] = runtime.register("readers.text.arrow", {})
 
 def parsers_for(size: int, pandas_min_bytes: int) -> tuple[str, ...]:
     """The parsers in C worth their cost for a file of ``size`` bytes, in the order tried: "arrow"
-    (where installed; from 64 KB on once imported, else from 2 MB on), then "pandas" (from
+    (where installed; from 32 KB on once imported, else from 2 MB on), then "pandas" (from
     ``pandas_min_bytes`` on). None of them: numpy's loadtxt. The same doubles whichever parses."""
     if "installed" not in _ARROW:
         _ARROW["installed"] = importlib.util.find_spec("pyarrow") is not None
