@@ -40,6 +40,7 @@ RUNTIME_PACKAGES = (
     "rosbags",
     "pyyaml",
     "jsonschema",
+    "pyarrow",
     "snakemake",
 )
 VOLATILE = ("created_utc", "command_line", "host", "workdir", "workflow_dir")
