@@ -175,8 +175,10 @@ def test_epica_is_the_same_command():
 
 def test_eval_imports_only_what_its_path_needs(tmp_path):
     """`epa eval` of two small text files without a report: no matplotlib, pandas (files under the C
-    parser's 12 MB), scipy, rosbags, nor jsonschema (the defaults need no validator), and none of
-    the other commands' modules."""
+    parser's 12 MB), scipy, rosbags, nor jsonschema (the defaults need no validator), nor PyYAML
+    (the schema is read from its JSON, the resolved config written without it) or importlib.metadata
+    (the package versions are read from their dist-info folders), and none of the other commands'
+    modules."""
     from pathlib import Path
 
     example = Path(__file__).resolve().parents[1] / "example"
@@ -186,7 +188,7 @@ def test_eval_imports_only_what_its_path_needs(tmp_path):
         f"status = main.main(['eval', {str(example / 'truth/drone_figure8.txt')!r},"
         f" {str(example / 'algorithms/vio_camera/drone_figure8/run1.csv')!r},"
         f" '--out', {str(tmp_path / 'out')!r}])\n"
-        "heavy = ('matplotlib', 'pandas', 'scipy', 'rosbags', 'jsonschema')\n"
+        "heavy = ('matplotlib', 'pandas', 'scipy', 'rosbags', 'jsonschema', 'yaml', 'email')\n"
         "others = ('epa.evo.commands', 'epa.rpg.command', 'epa.workflow.verify')\n"
         "print(status, sorted({n.split('.')[0] for n in sys.modules if n.split('.')[0] in heavy}),"
         " sorted(n for n in sys.modules if n in others))"

@@ -616,9 +616,8 @@ def _eval(args) -> None:
     )
     on_stage(None)
     from epa.artifacts import files
-    from epa.outputs import report
 
-    files.write_json(document, report.case_document(out))
+    files.write_json(document, out.document())
     record = result["metrics"]
     ate = record["ate"]["trans_m"]["rmse"]
     print(
