@@ -10,6 +10,7 @@ See docs/reproducibility.md.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import importlib.util
 import json
@@ -21,6 +22,7 @@ import shlex
 import stat
 import subprocess
 import sys
+import threading
 from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
 from importlib.machinery import PathFinder
@@ -571,29 +573,73 @@ def document(
     extra: dict | None = None,
 ) -> dict:
     """The provenance record: ``kind`` is ``grid`` (a workflow's results) or ``case`` (``epa eval``)."""
+    return document_started(
+        kind,
+        cfg,
+        inputs,
+        workflow_dir=workflow_dir,
+        command_line=command_line,
+        workdir=workdir,
+        extra=extra,
+    )()
+
+
+def document_started(
+    kind: str,
+    cfg: dict,
+    inputs,
+    *,
+    workflow_dir=None,
+    command_line: str | None = None,
+    workdir=None,
+    extra: dict | None = None,
+) -> Callable[[], dict]:
+    """:func:`document` in two steps: the inputs are hashed in a thread (file reads and hashlib
+    release the GIL) and git runs while the caller goes on (``epa eval``: loading the inputs);
+    the returned function waits for them and gives the record, the same as :func:`document`'s
+    (the config as it is now, the time now)."""
     roots = input_roots(kind, cfg, (extra or {}).get("case"))
-    git = checkout_started(workflow_dir)  # git runs while the environment is read
-    env = environment()
-    doc = {
-        "format": FORMAT,
-        "kind": kind,
-        "epica": {"version": __version__, **git()},
-        **env,
-        **(extra or {}),
-        "config": cfg,
-        "config_file": CONFIG,
-        "inputs": [file_record(p, roots) for p in sorted(set(map(str, inputs)))],
-        "volatile": {
-            "created_utc": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-            "command_line": command_line
-            or os.environ.get(COMMAND_ENV)
-            or shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]),
-            "host": _host(),
-            "workdir": str(Path(workdir or os.getcwd()).resolve()),
-            "workflow_dir": None if workflow_dir is None else str(Path(workflow_dir).resolve()),
-        },
+    paths = sorted(set(map(str, inputs)))
+    records: list[dict] = []
+    failed: list[BaseException] = []
+
+    def hash_inputs() -> None:
+        try:
+            records.extend(file_record(p, roots) for p in paths)
+        except BaseException as exc:  # raised by the caller's thread, in finish
+            failed.append(exc)
+
+    hashing = threading.Thread(target=hash_inputs, name="epa-provenance", daemon=True)
+    hashing.start()
+    git = checkout_started(workflow_dir)
+    head = {"format": FORMAT, "kind": kind}
+    env, extra, cfg = environment(), copy.deepcopy(extra or {}), copy.deepcopy(cfg)
+    volatile = {
+        "created_utc": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "command_line": command_line
+        or os.environ.get(COMMAND_ENV)
+        or shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+        "host": _host(),
+        "workdir": str(Path(workdir or os.getcwd()).resolve()),
+        "workflow_dir": None if workflow_dir is None else str(Path(workflow_dir).resolve()),
     }
-    return doc
+
+    def finish() -> dict:
+        hashing.join()
+        if failed:
+            raise failed[0]
+        return {
+            **head,
+            "epica": {"version": __version__, **git()},
+            **env,
+            **extra,
+            "config": cfg,
+            "config_file": CONFIG,
+            "inputs": records,
+            "volatile": volatile,
+        }
+
+    return finish
 
 
 def _host() -> str:
