@@ -689,8 +689,8 @@ def _fig(args) -> None:
 
 def _eval_provenance(args, cfg) -> Callable[[], None]:
     """provenance.json and config.resolved.yaml of the case (docs/reproducibility.md): started now
-    (the inputs hashed in a thread while they are loaded), written when the returned function is
-    first called."""
+    (the environment read and the inputs hashed in a thread while they are loaded), written when
+    the returned function is first called."""
     from epa.outputs import provenance
 
     timing = provenance.run_timing(cfg, args.est, EVAL_ALGORITHM)
