@@ -461,11 +461,10 @@ def test_command(tmp_path, capsys, caplog, b):
             assert {len(r) for r in rows} == {20 if "--covariance" in argv else 8}
         if b.setup == "eval-document":
             from epa.artifacts.case import CaseFolder
-            from epa.outputs import report
 
             doc = json.loads((tmp_path / "out" / "metrics.json").read_text())
             assert list(doc) == ["metrics", "drift", "consistency", "efficiency"]
-            assert doc == report.case_document(CaseFolder(tmp_path / "out"))
+            assert doc == CaseFolder(tmp_path / "out").document()
         return
     lines = [line for line in err.splitlines() if line.startswith("epa: error: ")]
     assert rc == 2 and len(lines) == 1, err

@@ -187,7 +187,8 @@ def _eval_imports(tmp_path, prelude: str = "") -> str:
         f"status = main.main(['eval', {str(example / 'truth/drone_figure8.txt')!r},"
         f" {str(example / 'algorithms/vio_camera/drone_figure8/run1.csv')!r},"
         f" '--out', {str(tmp_path / 'out')!r}])\n"
-        "heavy = ('matplotlib', 'pandas', 'scipy', 'rosbags', 'jsonschema', 'pyarrow')\n"
+        "heavy = ('matplotlib', 'pandas', 'scipy', 'rosbags', 'jsonschema', 'pyarrow', 'yaml',"
+        " 'email')\n"
         "others = ('epa.evo.commands', 'epa.rpg.command', 'epa.workflow.verify')\n"
         "print(status, sorted({n.split('.')[0] for n in sys.modules if n.split('.')[0] in heavy}),"
         " sorted(n for n in sys.modules if n in others))"
@@ -198,8 +199,10 @@ def _eval_imports(tmp_path, prelude: str = "") -> str:
 
 def test_eval_imports_only_what_its_path_needs(tmp_path):
     """`epa eval` of two small text files without a report: no matplotlib, pandas nor pyarrow (files
-    under the C parsers' sizes), scipy, rosbags, nor jsonschema (the defaults need no validator), and
-    none of the other commands' modules."""
+    under the C parsers' sizes), scipy, rosbags, nor jsonschema (the defaults need no validator), nor
+    PyYAML (the schema is read from its JSON, the resolved config written without it) or
+    importlib.metadata (the package versions are read from their dist-info folders), and none of the
+    other commands' modules."""
     assert _eval_imports(tmp_path) == "0 [] []"
 
 

@@ -84,4 +84,31 @@ def test_schema_reads_the_same_with_libyaml():
     from epa.workflow import settings
 
     with open(settings.SCHEMA_PATH, encoding="utf-8") as fh:
-        assert settings.schema() == yaml.safe_load(fh)
+        assert settings._schema_yaml(settings.SCHEMA_PATH.read_bytes()) == yaml.safe_load(fh)
+
+
+def test_schema_json_is_current():
+    """config.schema.json is what the YAML loads to (types and key order too: compared by repr), so
+    that `epa eval` reads it instead of importing PyYAML; after editing the schema, rewrite it with
+    ``python -m epa.workflow.settings``."""
+    from epa.workflow import settings
+
+    assert settings.SCHEMA_JSON.read_text(encoding="utf-8") == settings.schema_json_text(), (
+        "src/epa/workflow/config.schema.json is stale: python -m epa.workflow.settings"
+    )
+    schema = settings._schema_yaml(settings.SCHEMA_PATH.read_bytes())
+    assert repr(settings.schema()) == repr(schema)
+
+
+def test_schema_json_of_another_yaml_is_not_used(monkeypatch, tmp_path):
+    """A JSON written from another version of the YAML is ignored: the YAML is read."""
+    from epa.workflow import settings
+
+    stale = tmp_path / "config.schema.json"
+    stale.write_text('{"yaml_sha256": "0", "schema": {"stale": true}}', encoding="utf-8")
+    monkeypatch.setattr(settings, "SCHEMA_JSON", stale)
+    settings.schema.cache_clear()
+    try:
+        assert "stale" not in settings.schema() and "properties" in settings.schema()
+    finally:
+        settings.schema.cache_clear()

@@ -179,3 +179,85 @@ def test_this_checkout_records_its_head(tmp_path):
     doc = provenance.read(out)
     assert doc["epica"]["git_commit"] == head
     assert doc["volatile"]["workflow_dir"] == str(ROOT)
+
+
+def _safe_dump(data) -> str:
+    import yaml
+
+    return yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)
+
+
+def test_the_resolved_config_is_written_as_pyyaml_writes_it():
+    """config.resolved.yaml without PyYAML (provenance._plain_yaml) is PyYAML's text, on the defaults,
+    the example's and the test configs, and configs with names, paths, lists and numbers changed."""
+    from epa.workflow import settings
+
+    configs = [settings.defaults()]
+    for path in [ROOT / "config" / "config.yaml", *sorted((ROOT / ".test").glob("*.yaml"))]:
+        if path.is_file():
+            configs.append(settings.from_configfile(path))
+    edited = settings.defaults()
+    edited.update(truth_dir="../data/truth", algorithms_dir="/data/runs_2024/v1.2", mode="rpg")
+    edited["metrics"]["segments"] = [0.5, 1e-05, 1e17, -0.0, 3, 2.5e300]
+    edited["sources"]["algorithms"]["ov-vio_stereo"] = {"topic": "/ov_msckf/poseimu"}
+    configs.append(edited)
+    for cfg in configs:
+        data = json.loads(json.dumps(cfg))
+        assert provenance._plain_yaml(data) == _safe_dump(data)
+        assert provenance.config_yaml(cfg).endswith(_safe_dump(data))
+
+
+def test_plain_yaml_writes_pyyaml_text_or_leaves_it_to_pyyaml():
+    """On random documents: where _plain_yaml writes a text it is PyYAML's (strings that PyYAML
+    quotes or folds, numbers that look like strings, nested lists are left to PyYAML)."""
+    rng = np.random.default_rng(5)
+    pool = list("abyYnN_./-0:1 #'\"e~é") + [
+        "yes", "No", "on", "null", "true", ".inf", ".5", "1e3", "0x1f", "2024-01-02", "./a", "..",
+        "a" * 120, "x y", "-a", "_", "12:30", "=", "<<", "", "/ov/pose", "E5", "nan", ".", ".a/b",
+        ".INF", ".Nan", "._x", ".1", ".e5",
+    ]  # fmt: skip
+
+    def value(depth):
+        kind = rng.integers(0, 9 if depth < 3 else 6)
+        if kind == 0:
+            return "".join(rng.choice(pool, rng.integers(1, 4)))
+        if kind == 1:
+            return float(rng.choice([0.1, 1e-5, 1e16, 1e17, -0.0, 2.0, 1 / 3, 123456789.0]))
+        if kind == 2:
+            return int(rng.integers(-5, 10**6))
+        if kind in (3, 4):
+            return [None, True, False][kind - 3 + int(rng.integers(0, 2))]
+        if kind == 5:
+            return str(rng.choice(pool))
+        if kind in (6, 7):
+            return {
+                str(rng.choice(pool)) + str(k): value(depth + 1) for k in range(rng.integers(0, 4))
+            }
+        return [value(depth + 2) for _ in range(rng.integers(0, 4))]
+
+    written = 0
+    for _ in range(3000):
+        doc = {str(rng.choice(pool)) + str(k): value(0) for k in range(rng.integers(1, 5))}
+        text = provenance._plain_yaml(doc)
+        if text is not None:
+            assert text == _safe_dump(doc), doc
+            written += 1
+    assert written > 150  # the plain forms were met
+
+
+def test_package_versions_are_importlib_metadata_s():
+    """provenance.versions reads the plain dist-info folders itself: the same versions (or None)
+    as importlib.metadata, also for names spelled otherwise and for one not installed."""
+    import importlib.metadata
+
+    names = (*provenance.RUNTIME_PACKAGES, "PyYAML", "Snakemake", "epica", "pip", "not-installed-x")
+
+    def meta(name):
+        try:
+            return importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            return None
+
+    assert provenance.versions(names) == {name: meta(name) for name in names}
+    fast = provenance._dist_info_versions(names)
+    assert {"numpy", "pyyaml"} <= fast.keys() and "not-installed-x" not in fast

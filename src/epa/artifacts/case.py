@@ -232,6 +232,21 @@ class CaseFolder:
         folder (:func:`epa.artifacts.files.remove_temporaries`); returns their names."""
         return files.remove_temporaries(self.root / stage_folder(stage), names)
 
+    def document(self) -> dict:
+        """Every stage's record of the case, as one document (``epa eval``'s metrics.json, the
+        per-case report's)."""
+        doc = {}
+        for stage, name in (
+            ("metrics", "metrics.json"),
+            ("drift", "drift.json"),
+            ("consistency", "consistency.json"),
+            ("efficiency", "efficiency.json"),
+        ):
+            path = self.path(stage, name)
+            if path.exists():
+                doc[stage] = files.read_json(path)
+        return doc
+
     def write_failure(self, stage: str, names, reason: str) -> None:
         for name in names:
             if name.endswith(".json"):

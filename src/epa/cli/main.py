@@ -11,6 +11,7 @@ import json
 import logging
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,8 @@ from epa import __version__
 from epa.artifacts.stage import folder
 from epa.core.errors import EpaError
 
-REPORT = folder("report")  # the report stage's folder in a case folder
+REPORT_STAGE = "report"
+REPORT = folder(REPORT_STAGE)  # the report stage's folder in a case folder
 
 # The commands whose parsers this module builds; the others' (evo, rpg, verify, pack) are built by
 # their modules, whose imports (numpy, yaml, the contract) a run of these commands does not need.
@@ -584,7 +586,7 @@ def _eval(args) -> None:
     document = Path(args.out) / "metrics.json"  # every stage's record in one document
     if document.is_file():  # a previous run's: never beside this run's stage folders
         document.unlink()
-    _eval_provenance(args, cfg)  # first: the report (--report) lists the inputs from it
+    write_provenance = _eval_provenance(args, cfg)
     clock: dict[str, Any] = {"stage": None, "t": time.perf_counter()}
     size_mb = sum(_input_bytes(p) for p in (args.ref, args.est)) / 1e6
     progress = args.verbose or size_mb >= LARGE_INPUT_MB
@@ -601,24 +603,28 @@ def _eval(args) -> None:
         if progress and name and not args.verbose:
             print(f"epa: {name} ...", file=sys.stderr, flush=True)
         clock.update(stage=name, t=now)
+        if name == REPORT_STAGE:  # the report (--report) lists the inputs from provenance.json
+            write_provenance()
 
     from epa import readers
 
-    result = chain.run_case(
-        args.ref,
-        args.est,
-        args.out,
-        cfg,
-        write_arrays=args.artifacts or args.report or args.rerun,
-        on_stage=on_stage,
-        ref_source=readers.options(cfg, "reference"),
-        est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM),
-    )
+    try:
+        result = chain.run_case(
+            args.ref,
+            args.est,
+            args.out,
+            cfg,
+            write_arrays=args.artifacts or args.report or args.rerun,
+            on_stage=on_stage,
+            ref_source=readers.options(cfg, "reference"),
+            est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM),
+        )
+    finally:  # also for a case that fails: what it was run on
+        write_provenance()
     on_stage(None)
     from epa.artifacts import files
-    from epa.outputs import report
 
-    files.write_json(document, report.case_document(out))
+    files.write_json(document, out.document())
     record = result["metrics"]
     ate = record["ate"]["trans_m"]["rmse"]
     print(
@@ -681,20 +687,28 @@ def _fig(args) -> None:
     print("wrote " + ", ".join(map(str, written)))
 
 
-def _eval_provenance(args, cfg) -> None:
-    """provenance.json and config.resolved.yaml of the case (docs/reproducibility.md)."""
+def _eval_provenance(args, cfg) -> Callable[[], None]:
+    """provenance.json and config.resolved.yaml of the case (docs/reproducibility.md): started now
+    (the environment read and the inputs hashed in a thread while they are loaded), written when
+    the returned function is first called."""
     from epa.outputs import provenance
 
     timing = provenance.run_timing(cfg, args.est, EVAL_ALGORITHM)
     case = {"reference": args.ref, "estimate": args.est, "algorithm": EVAL_ALGORITHM}
-    doc = provenance.document(
+    finish = provenance.document_started(
         "case",
         cfg,
         provenance.case_inputs(args.ref, args.est, timing),
         workflow_dir=provenance.source_checkout(),  # None for an installed package
         extra={"case": case},
     )
-    provenance.write(args.out, doc)
+    written: list = []
+
+    def write() -> None:
+        if not written:
+            written.append(provenance.write(args.out, finish()))
+
+    return write
 
 
 def _traj(args) -> None:

@@ -10,19 +10,22 @@ See docs/reproducibility.md.
 
 from __future__ import annotations
 
+import copy
 import hashlib
-import importlib.metadata
 import importlib.util
 import json
+import math
 import os
 import platform
+import re
 import shlex
-import socket
 import stat
 import subprocess
 import sys
-from collections.abc import Mapping
+import threading
+from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
+from importlib.machinery import PathFinder
 from pathlib import Path
 from typing import Any
 
@@ -172,15 +175,38 @@ def grid_inputs(cfg: dict, cases, idle_truths: dict | None = None) -> list[str]:
 
 def _run(argv, timeout: float = 20) -> str | None:
     """A command's output, or None when it cannot run or fails."""
+    return _output(_start(argv), timeout)
+
+
+def _start(argv) -> subprocess.Popen | None:
+    """A command started (its output read by _output), or None when it cannot run."""
     try:
-        out = subprocess.run(argv, capture_output=True, text=True, timeout=timeout)
+        return subprocess.Popen(
+            argv,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            stdin=subprocess.DEVNULL,
+            text=True,
+        )
     except (OSError, subprocess.SubprocessError):
         return None
-    return out.stdout.strip() if out.returncode == 0 else None
 
 
-def _git(folder, *args) -> str | None:
-    return _run(["git", "-C", str(folder), *args])
+def _output(proc: subprocess.Popen | None, timeout: float = 20) -> str | None:
+    """A started command's output, or None when it could not run, fails or times out."""
+    if proc is None:
+        return None
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.SubprocessError:
+        proc.kill()
+        proc.communicate()
+        return None
+    return out.strip() if proc.returncode == 0 else None
+
+
+def _git(folder, *args) -> subprocess.Popen | None:
+    return _start(["git", "-C", str(folder), *args])
 
 
 def is_checkout(folder) -> bool:
@@ -204,31 +230,41 @@ def checkout(folder) -> dict:
     """The workflow's git commit (and whether tracked files differ) when ``folder`` is epica's
     checkout and the root of its git repository; nothing for a folder inside another repository
     (a project's ``.venv``), whose commit is not epica's."""
+    return checkout_started(folder)()
+
+
+def checkout_started(folder) -> Callable[[], dict]:
+    """:func:`checkout` as two steps: its git commands start now and their output is read when the
+    returned function is called (meanwhile the rest of a record is made). A folder with its own
+    ``.git`` runs both commands at once; another runs ``git status`` only if it is the root after
+    all (never a status of a large enclosing repository)."""
     if folder is None or not is_checkout(folder):
-        return {}
-    out = _git(folder, "rev-parse", "--show-toplevel", "HEAD")
-    lines = (out or "").splitlines()
-    if len(lines) != 2 or Path(lines[0]).resolve() != Path(folder).resolve():
-        return {}
-    status = _git(folder, "status", "--porcelain", "--untracked-files=no")
-    return {"git_commit": lines[1], "git_dirty": bool(status)}
+        return dict
+    head = _git(folder, "rev-parse", "--show-toplevel", "HEAD")
+    status_args = ("status", "--porcelain", "--untracked-files=no")
+    status = _git(folder, *status_args) if (Path(folder) / ".git").exists() else None
+
+    def finish() -> dict:
+        lines = (_output(head) or "").splitlines()
+        if len(lines) != 2 or Path(lines[0]).resolve() != Path(folder).resolve():
+            if status is not None:
+                _output(status)
+            return {}
+        dirty = _output(status if status is not None else _git(folder, *status_args))
+        return {"git_commit": lines[1], "git_dirty": bool(dirty)}
+
+    return finish
 
 
 def environment() -> dict:
     """Python, every runtime dependency's version, the platform and what the numbers ran on
     (deterministic on one machine with one environment)."""
-    packages: dict[str, str | None] = {}
-    for name in RUNTIME_PACKAGES:
-        try:
-            packages[name] = importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
-            packages[name] = None
     return {
         "python": {
             "version": platform.python_version(),
             "implementation": platform.python_implementation(),
         },
-        "packages": packages,
+        "packages": versions(RUNTIME_PACKAGES),
         "platform": {
             "system": platform.system(),
             "release": platform.release(),
@@ -237,6 +273,80 @@ def environment() -> dict:
         },
         "numerics": numerics(),
     }
+
+
+def versions(names) -> dict[str, str | None]:
+    """Each distribution's version as ``importlib.metadata.version`` gives it (None: not installed).
+    The plain case (only the path finder lists distributions; the first ``sys.path`` folder holding
+    the name holds one ``<name>-<version>.dist-info`` whose METADATA has one unfolded Version line)
+    is read directly: importlib.metadata's import (the email package) and its eight searches of
+    every path folder were 15-25 ms of every ``epa eval``. Anything else is asked of it."""
+    found: dict[str, str | None] = {}
+    if all(f is PathFinder or not hasattr(f, "find_distributions") for f in sys.meta_path):
+        found.update(_dist_info_versions(names))
+    for name in names:
+        if name not in found:
+            import importlib.metadata
+
+            try:
+                found[name] = importlib.metadata.version(name)
+            except importlib.metadata.PackageNotFoundError:
+                found[name] = None
+    return {name: found[name] for name in names}
+
+
+def _dist_info_versions(names) -> dict[str, str]:
+    """The versions of ``names`` read from their dist-info folders where that is plain (above)."""
+    wanted: dict[str, list[str]] = {}
+    for name in names:
+        wanted.setdefault(re.sub(r"[-_.]+", "_", name).lower(), []).append(name)
+    found: dict[str, str] = {}
+    for entry in sys.path:
+        if not wanted:
+            break
+        try:
+            children = os.listdir(entry or ".")
+        except OSError:
+            if os.path.exists(entry or "."):  # a zip or an unreadable folder: not plain
+                return found
+            continue
+        if entry.lower().endswith(".egg"):
+            return found
+        hits: dict[str, list[str]] = {}
+        for child in children:
+            low = child.lower()
+            if low.endswith((".dist-info", ".egg-info")):
+                key = re.sub(r"[-_.]+", "_", low.rpartition(".")[0].partition("-")[0])
+                if key in wanted:
+                    hits.setdefault(key, []).append(child)
+        for key, folders in hits.items():
+            same = wanted.pop(key)
+            version = _metadata_version(os.path.join(entry, folders[0]))
+            if len(folders) > 1 or not folders[0].lower().endswith(".dist-info") or not version:
+                continue  # importlib.metadata decides
+            found.update(dict.fromkeys(same, version))
+    return found
+
+
+def _metadata_version(folder: str) -> str | None:
+    """The Version header of a dist-info folder's METADATA as email's compat32 parser reads it, when
+    the header lines up to it are plain ``Name: value`` lines (None otherwise)."""
+    try:
+        with open(os.path.join(folder, "METADATA"), encoding="utf-8") as fh:
+            head = [fh.readline() for _ in range(8)]
+    except (OSError, ValueError):
+        return None
+    for k, line in enumerate(head[:-1]):
+        if not _HEADER.match(line):
+            return None
+        if line.partition(":")[0].lower() == "version":
+            if head[k + 1][:1] in (" ", "\t"):  # folded onto the next line
+                return None
+            return line.partition(":")[2].lstrip(" \t").rstrip("\r\n") or None
+    return None
+
+
+_HEADER = re.compile(r"[\x21-\x39\x3b-\x7e]+:")  # email.feedparser's header line, without "From "
 
 
 def numerics() -> dict:
@@ -377,15 +487,80 @@ def _openblas(build: Mapping[str, Any]) -> dict:
 
 def config_yaml(cfg: dict) -> str:
     """The resolved config as YAML (every setting, defaults included; keys in the schema's order)."""
-    import yaml
-
     head = (
         "# Every setting of this run, defaults included (epica resolved them). Regenerate with\n"
         "# `epa verify RESULTS_DIR` or `snakemake --cores 2 --configfile config.resolved.yaml`.\n"
     )
-    return head + yaml.safe_dump(
-        json.loads(json.dumps(cfg)), sort_keys=False, allow_unicode=True, width=100
-    )
+    data = json.loads(json.dumps(cfg))
+    text = _plain_yaml(data)
+    if text is None:
+        import yaml
+
+        text = yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)
+    return head + text
+
+
+# A string PyYAML writes unquoted, in the few forms a config's names and paths take: no spaces,
+# quotes, colons or other indicators, not read back as another type (a number, a date, a YAML 1.1
+# boolean or null word, .inf; "..." ends a document), so never folded at the line width or quoted.
+_PLAIN = re.compile(r"[A-Za-z/_][A-Za-z0-9_./-]*|\.(?:[A-Za-z/.][A-Za-z0-9_./-]*)?")
+_WORDS = {"y", "n", "yes", "no", "true", "false", "on", "off", "null", "nan", "inf", ".nan", ".inf"}
+
+
+def _plain_yaml(data) -> str | None:
+    """``yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)`` for a mapping of
+    mappings, lists of scalars and scalars whose strings are ``_PLAIN``, without importing PyYAML
+    (about 20 ms of every ``epa eval``); None for anything else (PyYAML writes that).
+    tests/test_provenance.py compares the two on the configs and on random documents."""
+
+    def scalar(v) -> str | None:
+        if v is None:
+            return "null"
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, int):
+            return str(v)
+        if isinstance(v, float):
+            if v != v or v in (math.inf, -math.inf):
+                return None
+            text = repr(v).lower()
+            return text.replace("e", ".0e", 1) if "." not in text and "e" in text else text
+        if (
+            isinstance(v, str)
+            and _PLAIN.fullmatch(v)
+            and v.lower() not in _WORDS
+            and v[:3] != "..."
+        ):
+            return v
+        return None
+
+    lines: list[str] = []
+
+    def mapping(node: dict, indent: str) -> bool:
+        for key, value in node.items():
+            name = scalar(key) if isinstance(key, str) and len(key) < 100 else None
+            if name is None:
+                return False
+            if isinstance(value, dict) and value:
+                lines.append(f"{indent}{name}:")
+                if not mapping(value, indent + "  "):
+                    return False
+            elif isinstance(value, list) and value:
+                lines.append(f"{indent}{name}:")
+                items = [scalar(v) for v in value]
+                if None in items:
+                    return False
+                lines.extend(f"{indent}- {item}" for item in items)
+            else:
+                text = "{}" if value == {} else "[]" if value == [] else scalar(value)
+                if text is None:
+                    return False
+                lines.append(f"{indent}{name}: {text}")
+        return True
+
+    if not isinstance(data, dict) or not data or not mapping(data, ""):
+        return None
+    return "\n".join(lines) + "\n"
 
 
 def document(
@@ -399,27 +574,85 @@ def document(
     extra: dict | None = None,
 ) -> dict:
     """The provenance record: ``kind`` is ``grid`` (a workflow's results) or ``case`` (``epa eval``)."""
+    return document_started(
+        kind,
+        cfg,
+        inputs,
+        workflow_dir=workflow_dir,
+        command_line=command_line,
+        workdir=workdir,
+        extra=extra,
+    )()
+
+
+def document_started(
+    kind: str,
+    cfg: dict,
+    inputs,
+    *,
+    workflow_dir=None,
+    command_line: str | None = None,
+    workdir=None,
+    extra: dict | None = None,
+) -> Callable[[], dict]:
+    """:func:`document` in two steps: the environment is read and the inputs hashed in a thread
+    (waiting for ``uname -p``, which ``platform.platform()`` runs, reading files and hashing
+    release the GIL: 20-40 ms of ``epa eval``) and git runs while the caller goes on (``epa eval``:
+    loading the inputs); the returned function waits for them and gives the record, the same as
+    :func:`document`'s (the config as it is now, the time now)."""
     roots = input_roots(kind, cfg, (extra or {}).get("case"))
-    doc = {
-        "format": FORMAT,
-        "kind": kind,
-        "epica": {"version": __version__, **checkout(workflow_dir)},
-        **environment(),
-        **(extra or {}),
-        "config": cfg,
-        "config_file": CONFIG,
-        "inputs": [file_record(p, roots) for p in sorted(set(map(str, inputs)))],
-        "volatile": {
-            "created_utc": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-            "command_line": command_line
-            or os.environ.get(COMMAND_ENV)
-            or shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]),
-            "host": socket.gethostname(),
-            "workdir": str(Path(workdir or os.getcwd()).resolve()),
-            "workflow_dir": None if workflow_dir is None else str(Path(workflow_dir).resolve()),
-        },
+    paths = sorted(set(map(str, inputs)))
+    found: dict[str, Any] = {}
+    failed: list[BaseException] = []
+
+    def read() -> None:
+        try:
+            found["env"] = environment()
+            found["inputs"] = [file_record(p, roots) for p in paths]
+        except BaseException as exc:  # raised in the caller's thread, by finish
+            failed.append(exc)
+
+    reading = threading.Thread(target=read, name="epa-provenance", daemon=True)
+    reading.start()
+    git = checkout_started(workflow_dir)
+    head = {"format": FORMAT, "kind": kind}
+    extra, cfg = copy.deepcopy(extra or {}), copy.deepcopy(cfg)
+    volatile = {
+        "created_utc": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "command_line": command_line
+        or os.environ.get(COMMAND_ENV)
+        or shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+        "host": _host(),
+        "workdir": str(Path(workdir or os.getcwd()).resolve()),
+        "workflow_dir": None if workflow_dir is None else str(Path(workflow_dir).resolve()),
     }
-    return doc
+
+    def finish() -> dict:
+        reading.join()
+        if failed:
+            raise failed[0]
+        return {
+            **head,
+            "epica": {"version": __version__, **git()},
+            **found["env"],
+            **extra,
+            "config": cfg,
+            "config_file": CONFIG,
+            "inputs": found["inputs"],
+            "volatile": volatile,
+        }
+
+    return finish
+
+
+def _host() -> str:
+    """``socket.gethostname()``: on a POSIX system the kernel's node name, which ``os.uname`` reads
+    without importing socket."""
+    if hasattr(os, "uname"):
+        return os.uname().nodename
+    import socket
+
+    return socket.gethostname()
 
 
 def write(folder, doc: dict) -> list[Path]:

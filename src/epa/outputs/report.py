@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from epa.artifacts import files
-from epa.artifacts.case import CaseData, CaseFolder
+from epa.artifacts.case import CaseData
 from epa.metrics.accuracy import segment_key
 from epa.outputs import case_report, figures, parallel, tables
 
@@ -98,21 +98,6 @@ def case_bundles(data: CaseData) -> dict[str, dict]:
 
 
 # ----------------------------------------------------------------------------- documents
-def case_document(case: CaseFolder) -> dict:
-    """Every stage's record of a case, as one document."""
-    doc = {}
-    for stage, name in (
-        ("metrics", "metrics.json"),
-        ("drift", "drift.json"),
-        ("consistency", "consistency.json"),
-        ("efficiency", "efficiency.json"),
-    ):
-        path = case.path(stage, name)
-        if path.exists():
-            doc[stage] = files.read_json(path)
-    return doc
-
-
 def _numbers(prefix: str, obj):
     """(dotted name, value) of every number in a nested record."""
     if isinstance(obj, dict):
@@ -211,7 +196,7 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
     c = cfg["report"]
     case = data.folder
     folder = case.path("report", "report.json").parent
-    doc = case_document(case)
+    doc = case.document()
     files.write_json(folder / "metrics.json", doc)
     files.write_text(folder / "metrics_summary.csv", summary_csv(doc))
     # Figures cost most of a report (0.7 s a case): by default only the cases a reader opens first,

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import copy
+import hashlib
+import json
 import math
 from functools import lru_cache
 from pathlib import Path
@@ -10,15 +12,47 @@ from pathlib import Path
 from epa.core.errors import EpaError
 
 SCHEMA_PATH = Path(__file__).with_name("config.schema.yaml")
+# The schema as JSON, with the sha256 of the YAML it was written from (write_schema_json): read in
+# 0.2 ms where PyYAML's import and libyaml's load took 30-40 ms of every `epa eval`. A JSON that does
+# not match the YAML is never used (the YAML is read instead); tests/test_config_reference.py fails
+# until it is rewritten.
+SCHEMA_JSON = SCHEMA_PATH.with_suffix(".json")
 
 
 @lru_cache(maxsize=1)
 def schema() -> dict:
+    source = SCHEMA_PATH.read_bytes()
+    cached = _schema_json(hashlib.sha256(source).hexdigest())
+    return cached if cached is not None else _schema_yaml(source)
+
+
+def _schema_yaml(source: bytes) -> dict:
     import yaml
 
-    with open(SCHEMA_PATH, encoding="utf-8") as fh:
-        # libyaml's loader where PyYAML has it: 0.2 s less in every process that reads a config
-        return yaml.load(fh, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))  # noqa: S506
+    # libyaml's loader where PyYAML has it: 0.2 s less in every process that reads a config
+    return yaml.load(source, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))  # noqa: S506
+
+
+def _schema_json(sha256: str) -> dict | None:
+    """The schema from SCHEMA_JSON when that was written from the YAML whose hash is ``sha256``."""
+    try:
+        with open(SCHEMA_JSON, encoding="utf-8") as fh:
+            cached = json.load(fh)
+    except (OSError, ValueError):
+        return None
+    return cached["schema"] if cached.get("yaml_sha256") == sha256 else None
+
+
+def schema_json_text() -> str:
+    """What SCHEMA_JSON holds: the YAML's hash and the document it loads to."""
+    source = SCHEMA_PATH.read_bytes()
+    cached = {"yaml_sha256": hashlib.sha256(source).hexdigest(), "schema": _schema_yaml(source)}
+    return json.dumps(cached, indent=1, ensure_ascii=False) + "\n"
+
+
+def write_schema_json() -> None:
+    """Rewrite SCHEMA_JSON from the YAML (after editing the schema: ``python -m epa.workflow.settings``)."""
+    SCHEMA_JSON.write_text(schema_json_text(), encoding="utf-8")
 
 
 def _fill(value, sch: dict):
@@ -364,3 +398,7 @@ def without_bundled_folders(config: dict, named: set[str]) -> dict:
     if "inputs" not in named or named & set(GRID_FOLDERS):
         return config
     return {k: v for k, v in config.items() if k not in GRID_FOLDERS}
+
+
+if __name__ == "__main__":
+    write_schema_json()
