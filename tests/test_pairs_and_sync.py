@@ -260,3 +260,47 @@ def test_angular_and_linear_speed_are_the_relative_motions():
         assert np.array_equal(w, geometry.quat_angle(rel) / dt)
         _, v = sync.linear_speed(traj, step)
         assert np.array_equal(v, np.linalg.norm(traj.p[i + step] - traj.p[i], axis=1) / dt)
+
+
+def test_selecting_every_pose_copies_as_the_gather_does():
+    """Every pose matched (0, 1, ..., n - 1) takes plain copies: the same values in the same C-ordered
+    arrays as the gather gives for any other index array, never views of the source's columns."""
+    from epa.core.trajectory import Trajectory
+
+    rng = np.random.default_rng(2)
+    table = rng.normal(size=(50, 8))  # columns of one table: strided, as a parsed file gives them
+    cov = rng.normal(size=(50, 3, 3))
+    traj = Trajectory(table[:, 0], table[:, 1:4], table[:, 4:8], cov_rot=cov, cov_pos=2 * cov)
+    for idx in (np.arange(50), np.arange(50, dtype=np.int32), np.r_[0:25, 26:50, 49]):
+        got = traj.select(idx)
+        for name in ("t", "p", "q", "cov_rot", "cov_pos"):
+            x, source = getattr(got, name), getattr(traj, name)
+            assert x.flags.c_contiguous and not np.shares_memory(x, source)
+            assert np.array_equal(x, source[idx])
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    st.lists(st.floats(0, 3), min_size=1, max_size=50),
+    st.floats(0.5, 8),
+    st.booleans(),
+    st.integers(0, 2),
+)
+def test_closest_pairs_is_the_first_closest_by_scan(steps, delta, strict, skip):
+    """closest_pairs against the nested scan it replaces, with plateaus (equal distances) and both
+    tolerance rules: the first closest j >= i + skip."""
+    from epa.core.stamps import closest_pairs
+
+    d = np.concatenate([[0.0], np.cumsum([0.0 if s < 1.0 else s for s in steps])])
+    tol = 0.3 * delta
+    want = []
+    for i in range(len(d)):
+        best, err = -1, np.inf
+        for j in range(i + skip, len(d)):
+            e = abs(d[j] - (d[i] + delta))
+            if e < err:
+                best, err = j, e
+        if best >= 0 and (err < tol if strict else err <= tol):
+            want.append((i, best))
+    i, j = closest_pairs(d, delta, tol, strict=strict, skip=skip)
+    assert list(zip(i.tolist(), j.tolist())) == want

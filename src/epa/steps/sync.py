@@ -100,11 +100,9 @@ def associate(
 # ----------------------------------------------------------------------------- Step 1
 def angular_speed(traj: Trajectory, step: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """|log(R_i^T R_{i+step})| / dt, stamped at the midpoints (seed 004; step 1 = consecutive poses)."""
-    t, q = traj.t, traj.q
+    t = traj.t
     dt = t[step:] - t[:-step]
-    # the rotation of relative_motions (its translation unused), on slices rather than gathers
-    rel = geometry.quat_mul(geometry.quat_conj(q[:-step]), q[step:])
-    return t[:-step] + dt / 2, geometry.quat_angle(rel) / dt
+    return t[:-step] + dt / 2, geometry.relative_angles(traj.q, step) / dt
 
 
 def linear_speed(traj: Trajectory, step: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -179,20 +177,16 @@ POLICIES = {Policy.OV_EVAL: 0.02, Policy.EVO: 0.01, Policy.RPG: 0.02}  # default
 JACKKNIFE_BLOCKS = 10
 
 
-def _clipped_run(c: np.ndarray, start: int, count: int) -> np.ndarray:
-    """c[clip(start + j, 0, len(c) - 1)] for j in range(count), by slices rather than an index array."""
-    n = len(c)
-    before = min(max(-start, 0), count)
-    s0, s1 = min(max(start, 0), n), min(max(start + count, 0), n)
-    after = count - before - (s1 - s0)
-    return np.concatenate([np.full(before, c[0]), c[s0:s1], np.full(after, c[-1])])
-
-
 def _window_sums(x: np.ndarray, lo: int, width: int, count: int) -> np.ndarray:
     """sum(x[lo + j : lo + j + width]) for j in range(count), x taken as zero outside itself:
-    differences of one prefix sum."""
-    c = np.concatenate([[0.0], np.cumsum(x)])
-    return _clipped_run(c, lo + width, count) - _clipped_run(c, lo, count)
+    differences of one prefix sum, padded with its first (0) and last values so that both ends of
+    every window are slices of it."""
+    before = max(1, 1 - lo)  # prefix[k] = sum(x[:k]) sits at k - 1 + before
+    after = max(0, lo + width + count - 1 - len(x))
+    c = np.cumsum(x)
+    prefix = np.concatenate([np.zeros(before), c, np.full(after, c[-1] if len(c) else 0.0)])
+    start = lo - 1 + before
+    return prefix[start + width : start + width + count] - prefix[start : start + count]
 
 
 def _clip_spikes(w: np.ndarray) -> np.ndarray:
@@ -320,7 +314,8 @@ def _on_grid(grid: np.ndarray, ts: np.ndarray, w: np.ndarray):
     i1 = int(np.searchsorted(grid, ts[-1], side="right")) - 1
     s = np.zeros(len(grid))
     s[i0 : i1 + 1] = np.interp(grid[i0 : i1 + 1], ts, w) - w.mean()
-    return s / (np.sqrt(np.sum(s * s)) + 1e-300), (i0, i1)
+    s /= np.sqrt(np.sum(s * s)) + 1e-300
+    return s, (i0, i1)
 
 
 def _normalised_correlation(a, span_a, b, span_b):
@@ -337,7 +332,9 @@ def _normalised_correlation(a, span_a, b, span_b):
     # it) halves the transforms' time but moves the offset's ninth printed digit (2 of the 18
     # example cases): the same transform, so the same bits, is kept.
     nfft = 1 << int(np.ceil(np.log2(2 * n)))
-    full = np.fft.irfft(np.fft.rfft(a, nfft) * np.conj(np.fft.rfft(b, nfft)), nfft)
+    spectrum, spectrum_b = np.fft.rfft(a, nfft), np.fft.rfft(b, nfft)
+    spectrum *= np.conjugate(spectrum_b, out=spectrum_b)  # in place: the same products
+    full = np.fft.irfft(spectrum, nfft)
     (a0, a1), (b0, b1) = span_a, span_b
     need = math.ceil(0.5 * (min(a1 - a0, b1 - b0) + 1))  # the overlap is an integer
     # overlap = min(b1, a1 - k) - max(b0, a0 - k) + 1 >= need, term by term
@@ -348,7 +345,9 @@ def _normalised_correlation(a, span_a, b, span_b):
         num = _circular_run(full, lo, count)
         energy_a = _window_sums(a[a0 : a1 + 1] ** 2, b0 + lo - a0, b1 - b0 + 1, count)
         energy_b = _window_sums(b[b0 : b1 + 1] ** 2, a0 - hi - b0, a1 - a0 + 1, count)[::-1]
-        corr[lo + n - 1 : hi + n] = num / np.sqrt(np.maximum(energy_a * energy_b, 1e-300))
+        energy_a *= energy_b  # in place: the same arithmetic, fewer 8-byte-per-lag temporaries
+        np.sqrt(np.maximum(energy_a, 1e-300, out=energy_a), out=energy_a)
+        np.divide(num, energy_a, out=corr[lo + n - 1 : hi + n])
     return corr, (b0, b1)
 
 
