@@ -216,18 +216,21 @@ def _peak(curve: np.ndarray) -> tuple[int, float]:
 
 
 def _block_sums(
-    a: tuple[np.ndarray, np.ndarray, np.ndarray], bb: tuple[np.ndarray, np.ndarray], starts, lo: int
+    a: tuple[np.ndarray, np.ndarray, np.ndarray],
+    bb: tuple[np.ndarray, np.ndarray],
+    starts: np.ndarray,
+    lo: int,
 ) -> np.ndarray:
     """Over each block of b's support, at one lag: the correlation's products a[m + lag] b[m] and the
     two energies under the overlap, a[m + lag]^2 and b[m]^2 where a is defined. (3, blocks).
 
     ``a`` is (a, a^2, a defined) zero-padded so that every lag's shifted support is the slice from
     ``lo``; ``bb`` is (b, b^2) over b's support: the squares are made once for every lag."""
-    a1, a2, defined = (x[lo : lo + len(bb[0])] for x in a)
+    seg, seg2, defined = (x[lo : lo + len(bb[0])] for x in a)
     return np.stack(
         [
-            np.add.reduceat(a1 * bb[0], starts),
-            np.add.reduceat(a2, starts),
+            np.add.reduceat(seg * bb[0], starts),
+            np.add.reduceat(seg2, starts),
             np.add.reduceat(np.where(defined, bb[1], 0.0), starts),
         ]
     )
