@@ -153,3 +153,154 @@ def test_step1_refuses_an_ambiguous_periodic_peak():
     est = traj.select(np.arange(0, len(t), 10)).shifted(-0.3)
     out = sync.estimate_offset(traj, est, fallback=0.0)
     assert not out.used and out.offset == 0.0 and "ambiguous" in out.reason
+
+
+def _signal_on(n, span, rng):
+    """A random signal zero outside its support (as _on_grid leaves it)."""
+    x = np.zeros(n)
+    x[span[0] : span[1] + 1] = rng.normal(size=span[1] - span[0] + 1)
+    return x
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(8, 120), st.data())
+def test_normalised_correlation_is_the_direct_formula(n, data):
+    """Every lag's normalised correlation, the lags with too little overlap -1, against the sums
+    written out (the FFT's rounding: 1e-12 of the signals' energy)."""
+    spans = [
+        tuple(sorted(data.draw(st.lists(st.integers(0, n - 1), min_size=2, max_size=2))))
+        for _ in range(2)
+    ]
+    rng = np.random.default_rng(n)
+    a, b = _signal_on(n, spans[0], rng), _signal_on(n, spans[1], rng)
+    corr, span_b = sync._normalised_correlation(a, spans[0], b, spans[1])
+    (a0, a1), (b0, b1) = spans
+    shortest = min(a1 - a0, b1 - b0) + 1
+    assert span_b == spans[1] and len(corr) == 2 * n - 1
+    for i, k in enumerate(range(-(n - 1), n)):
+        m = np.arange(max(0, -k), min(n, n - k))  # a[m + k] and b[m] both on the grid
+        overlap = min(b1, a1 - k) - max(b0, a0 - k) + 1
+        if overlap < 0.5 * shortest:
+            assert corr[i] == -1.0
+            continue
+        in_a = (m + k >= a0) & (m + k <= a1)
+        in_b = (m >= b0) & (m <= b1)
+        num = np.sum(a[m + k] * b[m])
+        energy = np.sum(a[m + k] ** 2 * in_b) * np.sum(b[m] ** 2 * in_a)
+        # the FFT's rounding is relative to the whole signals' energies, not the overlap's
+        assert abs(corr[i] * np.sqrt(energy) - num) <= 1e-12 * np.sqrt(np.sum(a**2) * np.sum(b**2))
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 40), st.integers(-50, 50), st.integers(0, 45), st.integers(1, 60))
+def test_window_sums_and_circular_runs_by_slices(n, lo, width, count):
+    x = np.random.default_rng(n).normal(size=n)
+    want = [x[max(lo + j, 0) : max(lo + j + width, 0)].sum() for j in range(count)]
+    assert np.allclose(sync._window_sums(x, lo, width, count), want, rtol=0, atol=1e-12)
+    full = np.arange(n, dtype=float)
+    if count <= n:
+        assert sync._circular_run(full, lo, count).tolist() == [(lo + j) % n for j in range(count)]
+
+
+def test_coarse_sums_are_the_reshaped_sums_bit_for_bit():
+    x = np.random.default_rng(3).normal(size=10_007)
+    for q in (1, 2, 5, 7):
+        n = len(x) // q * q
+        assert np.array_equal(sync._coarse(x, q), x[:n].reshape(-1, q).sum(axis=1))
+
+
+def test_jackknife_is_the_delete_one_block_replicates_written_out():
+    """The jackknife's replicate peaks from sums written out per block and lag (1e-12 s)."""
+    rng = np.random.default_rng(7)
+    t = np.arange(6000) * 0.001
+    wave = np.convolve(rng.normal(size=len(t) + 400), np.hanning(400), "valid")[: len(t)]
+    a = np.where((t > 0.3) & (t < 5.7), wave, 0.0)
+    b = np.where((t > 1.0) & (t < 5.0), np.roll(wave, 20) + 0.3 * rng.normal(size=len(t)), 0.0)
+    span = (int(np.flatnonzero(b)[0]), int(np.flatnonzero(b)[-1]))
+    got = sync._jackknife_std(a, b, span, peak_lag=-20, reach=250, dt=0.001)
+    q = 5
+    a_c, b_c = sync._coarse(a, q), sync._coarse(b, q)
+    b0, b1 = span[0] // q, span[1] // q
+    edges = np.linspace(0, b1 + 1 - b0, sync.JACKKNIFE_BLOCKS + 1).astype(int) + b0
+    lags = np.arange(-4 - 16, -4 + 17)
+    shifts = []
+    for drop in range(sync.JACKKNIFE_BLOCKS):
+        m = np.r_[b0 : edges[drop], edges[drop + 1] : b1 + 1]
+        curve = []
+        for lag in lags:
+            seg = np.where(
+                (m + lag >= 0) & (m + lag < len(a_c)), a_c[np.clip(m + lag, 0, len(a_c) - 1)], 0.0
+            )
+            energy = np.sum(seg**2) * np.sum(np.where(seg != 0.0, b_c[m] ** 2, 0.0))
+            curve.append(np.sum(seg * b_c[m]) / np.sqrt(energy))
+        k, frac = sync._peak(np.array(curve))
+        assert 0 < k < len(lags) - 1
+        shifts.append((lags[k] + frac) * q * 0.001)
+    jack = np.sqrt(
+        (sync.JACKKNIFE_BLOCKS - 1)
+        / sync.JACKKNIFE_BLOCKS
+        * np.sum((shifts - np.mean(shifts)) ** 2)
+    )
+    assert abs(got - np.hypot(jack, 0.001 / np.sqrt(12.0))) <= 1e-12
+
+
+def test_angular_and_linear_speed_are_the_relative_motions():
+    from epa.core.trajectory import Trajectory
+
+    rng = np.random.default_rng(5)
+    t = np.cumsum(rng.uniform(0.004, 0.006, 500))
+    q = geometry.normalize_quat(rng.normal(size=(500, 4)))
+    traj = Trajectory(t, rng.normal(size=(500, 3)), q)
+    for step in (1, 7):
+        i = np.arange(len(t) - step)
+        dt = t[i + step] - t[i]
+        rel, _ = geometry.relative_motions(q, traj.p, i, i + step)
+        mid, w = sync.angular_speed(traj, step)
+        assert np.array_equal(mid, t[i] + dt / 2)
+        assert np.array_equal(w, geometry.quat_angle(rel) / dt)
+        _, v = sync.linear_speed(traj, step)
+        assert np.array_equal(v, np.linalg.norm(traj.p[i + step] - traj.p[i], axis=1) / dt)
+
+
+def test_selecting_every_pose_copies_as_the_gather_does():
+    """Every pose matched (0, 1, ..., n - 1) takes plain copies: the same values in the same C-ordered
+    arrays as the gather gives for any other index array, never views of the source's columns."""
+    from epa.core.trajectory import Trajectory
+
+    rng = np.random.default_rng(2)
+    table = rng.normal(size=(50, 8))  # columns of one table: strided, as a parsed file gives them
+    cov = rng.normal(size=(50, 3, 3))
+    traj = Trajectory(table[:, 0], table[:, 1:4], table[:, 4:8], cov_rot=cov, cov_pos=2 * cov)
+    for idx in (np.arange(50), np.arange(50, dtype=np.int32), np.r_[0:25, 26:50, 49]):
+        got = traj.select(idx)
+        for name in ("t", "p", "q", "cov_rot", "cov_pos"):
+            x, source = getattr(got, name), getattr(traj, name)
+            assert x.flags.c_contiguous and not np.shares_memory(x, source)
+            assert np.array_equal(x, source[idx])
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    st.lists(st.floats(0, 3), min_size=1, max_size=50),
+    st.floats(0.5, 8),
+    st.booleans(),
+    st.integers(0, 2),
+)
+def test_closest_pairs_is_the_first_closest_by_scan(steps, delta, strict, skip):
+    """closest_pairs against the nested scan it replaces, with plateaus (equal distances) and both
+    tolerance rules: the first closest j >= i + skip."""
+    from epa.core.stamps import closest_pairs
+
+    d = np.concatenate([[0.0], np.cumsum([0.0 if s < 1.0 else s for s in steps])])
+    tol = 0.3 * delta
+    want = []
+    for i in range(len(d)):
+        best, err = -1, np.inf
+        for j in range(i + skip, len(d)):
+            e = abs(d[j] - (d[i] + delta))
+            if e < err:
+                best, err = j, e
+        if best >= 0 and (err < tol if strict else err <= tol):
+            want.append((i, best))
+    i, j = closest_pairs(d, delta, tol, strict=strict, skip=skip)
+    assert list(zip(i.tolist(), j.tolist())) == want

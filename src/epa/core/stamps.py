@@ -36,8 +36,10 @@ def closest_pairs(
     lo = k - 1
     has_lo = lo >= first
     lo_c = np.maximum(lo, 0)
-    # the earliest index holding the same value as the lower candidate (scans keep the first best)
-    lo_first = np.minimum(np.maximum(np.searchsorted(d, d[lo_c], side="left"), first), n - 1)
+    # the earliest index holding the same value as the lower candidate (scans keep the first best):
+    # the start of its run of equal values, found in one pass rather than a second binary search
+    run_start = np.maximum.accumulate(np.where(np.diff(d, prepend=np.nan) == 0.0, 0, i))
+    lo_first = np.minimum(np.maximum(run_start[lo_c], first), n - 1)
     err_up = np.where(has_up, np.abs(d[up] - target), np.inf)
     err_lo = np.where(has_lo, np.abs(d[lo_first] - target), np.inf)
     take_lo = err_lo <= err_up

@@ -20,6 +20,23 @@ def position_only(ref: Trajectory, est: Trajectory) -> str | None:
     return " and ".join(sides) + (" are" if len(sides) == 2 else " is") + " position-only"
 
 
+def _every_index(idx, n: int) -> bool:
+    """Whether ``idx`` is the integer array 0, 1, ..., n - 1."""
+    if (
+        not isinstance(idx, np.ndarray)
+        or idx.ndim != 1
+        or len(idx) != n
+        or idx.dtype.kind not in "iu"
+    ):
+        return False
+    # n integers from 0 to n - 1 in steps of one are exactly these
+    return bool(n > 0 and idx[0] == 0 and idx[-1] == n - 1 and (np.diff(idx) == 1).all())
+
+
+def _copy(x: np.ndarray) -> np.ndarray:
+    return np.array(x, order="C", copy=True)
+
+
 @dataclass(frozen=True)
 class Trajectory:
     t: np.ndarray  # (N,) seconds
@@ -66,15 +83,18 @@ class Trajectory:
             return (
                 self  # a mask that keeps every pose (a crop without limits): no copy, same arrays
             )
+        # 0, 1, ..., n - 1 (every pose matched): plain copies, 2x cheaper than gathers and the same
+        # C-ordered arrays (the later stages' bits depend on the layout, so never the views)
+        take = _copy if _every_index(idx, len(self)) else (lambda x: x[idx])
         return replace(
             self,
-            t=self.t[idx],
-            p=self.p[idx],
-            q=self.q[idx],
-            cov_rot=None if self.cov_rot is None else self.cov_rot[idx],
-            cov_pos=None if self.cov_pos is None else self.cov_pos[idx],
-            cov_ros=None if self.cov_ros is None else self.cov_ros[idx],
-            r_printed=None if self.r_printed is None else self.r_printed[idx],
+            t=take(self.t),
+            p=take(self.p),
+            q=take(self.q),
+            cov_rot=None if self.cov_rot is None else take(self.cov_rot),
+            cov_pos=None if self.cov_pos is None else take(self.cov_pos),
+            cov_ros=None if self.cov_ros is None else take(self.cov_ros),
+            r_printed=None if self.r_printed is None else take(self.r_printed),
         )
 
     def at(self, stamps: np.ndarray) -> Trajectory:

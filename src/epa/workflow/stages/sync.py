@@ -19,7 +19,7 @@ NAME = "sync"
 
 def compute(ref: Trajectory, est: Trajectory, cfg: dict):
     """Step 1 (when ``sync.estimate_offset``), then association. Returns the matched indices
-    (i_ref, i_est), the record and the correlation curve."""
+    (i_ref, i_est), the matched poses (ref, est), the record and the correlation curve."""
     c = cfg["sync"]
     info: dict = {"mode": cfg["mode"], "policy": c["policy"]}
     curve = None
@@ -52,12 +52,10 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict):
         offset = c["offset"]
     i_ref, i_est, assoc = associate(ref, est, c, offset)
     info.update(assoc)
+    matched = ref.select(i_ref), est.select(i_est)
     # ov_eval warns on these (a bad length ratio, a coarse reference): mode ov_eval prints what it prints
-    info["matched_length_m"] = {
-        "ref": ref.select(i_ref).length(),
-        "est": est.select(i_est).length(),
-    }
-    return (i_ref, i_est), info, curve
+    info["matched_length_m"] = {"ref": matched[0].length(), "est": matched[1].length()}
+    return (i_ref, i_est), matched, info, curve
 
 
 def offset_step(ref: Trajectory, est: Trajectory, cfg: dict) -> sync.OffsetEstimate:
@@ -119,9 +117,8 @@ def associate(ref: Trajectory, est: Trajectory, c: dict, offset: float):
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     folder = data.folder
     ref, est = data.cropped
-    (i_ref, i_est), info, curve = compute(ref, est, cfg)
+    (i_ref, i_est), data.sync_matched, info, curve = compute(ref, est, cfg)
     data.sync_pairs, data.sync_record = (i_ref, i_est), info
-    data.sync_matched = (ref.select(i_ref), est.select(i_est))
     folder.write_record(NAME, "sync.json", info)
     if write_arrays:
         folder.write_pairs(NAME, i_ref, i_est, ref.t, est.t)
