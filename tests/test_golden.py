@@ -174,16 +174,29 @@ def test_a_tampered_digit_fails(example):
 
 def test_tables_from_cases_read_in_parallel_are_the_same_bytes(example, tmp_path, monkeypatch):
     """The tables rule reads a large grid's cases in forked processes (results.collect): the same
-    tables, here forced on the example's 18 cases."""
+    tables, here forced on the example's 18 cases, handed back 5 at a time. What a case keeps is
+    only the columns the tables read, in arrays of their own (not views of the whole parsed table,
+    which a 10,000-case grid held in memory all at once)."""
     from epa.outputs.tables import results
 
     monkeypatch.setattr(results, "PARALLEL_FROM_CASES", 2)
+    monkeypatch.setattr(results, "SHARE_CASES", 5)
     out = tmp_path / "results"
     out.mkdir()
     (out / "cases").symlink_to(example / "cases")
     cfg = settings.resolve(settings.load_yaml(ROOT / "config/config.yaml"))
     keys = sorted("/".join(p.parts[-3:]) for p in (example / "cases").glob("*/*/*"))
-    assert len(results.collect(keys, out, workers=2)) == len(keys) == 18
+    grid = results.collect(keys, out, workers=2)
+    assert [f"{c.algorithm}/{c.dataset}/{c.run}" for c in grid] == keys and len(keys) == 18
+    kept = [c for c in grid if c.ok]
+    assert kept and all(
+        set(c.segments) == {"length_m", "rot_deg", "trans_m", "valid"} for c in kept
+    )
+    assert all(set(c.time) == {"rot_deg", "trans_m", "valid"} for c in kept)
+    columns = [a for c in kept for t in (c.segments, c.time, c.ape) for a in t.values()]
+    # an array unpickled from a worker keeps a buffer of its own bytes; never the whole table's
+    assert all(a.base is None or memoryview(a.base).nbytes == a.nbytes for a in columns)
+    assert all(c.segments["valid"].dtype == bool for c in kept)
     assert tables.make(keys, out, cfg, workers=2) == []
     for name in GRID_FILES:
         assert (out / name).read_bytes() == (example / name).read_bytes(), name

@@ -22,7 +22,7 @@ def write_across_runs(grid: list[CaseResult], results_dir) -> None:
             runs = {}
             for c in ok_runs(grid, alg, ds):
                 case = CaseFolder.of(results_dir, c.case)
-                ape = case.table("metrics", "ape.csv")
+                ape = c.ape or case.table("metrics", "ape.csv")  # read by collect, in parallel
                 nees = case.path("consistency", "nees.csv")
                 table = (
                     files.read_csv(nees)

@@ -18,7 +18,9 @@ def has_result(status: str) -> bool:
 class CaseResult:
     """A case's records as the tables read them. ``records`` holds the records of the stages after
     drift (consistency, efficiency), each ``{"available": False, "failed": reason}`` if that stage
-    failed; ``segments`` / ``time`` are the per-pair RPE errors with their drift validity."""
+    failed; ``segments`` / ``time`` are the per-pair RPE errors with their drift validity (only the
+    columns the tables read, ``valid`` as booleans), ``ape`` the per-pose APE results/consistency/
+    reads; a large grid holds these for every case at once (docs/performance.md)."""
 
     case: Case
     status: str = "ok"
@@ -28,6 +30,7 @@ class CaseResult:
     drift: dict = field(default_factory=dict)
     segments: dict = field(default_factory=dict)
     time: dict = field(default_factory=dict)
+    ape: dict = field(default_factory=dict)
     records: dict = field(default_factory=dict)
 
     algorithm = property(lambda self: self.case.algorithm)
@@ -48,6 +51,9 @@ class CaseResult:
 
 # Below this many cases one process reads them all: starting workers costs more than it saves.
 PARALLEL_FROM_CASES = 64
+# A worker hands back this many cases at a time: one share of a 10,000-case grid pickled whole was a
+# second copy of it in the worker and in this process at once.
+SHARE_CASES = 256
 
 
 def collect(keys: list[str], results_dir, workers: int = 1) -> list[CaseResult]:
@@ -56,7 +62,7 @@ def collect(keys: list[str], results_dir, workers: int = 1) -> list[CaseResult]:
     reading is most of the tables rule, the grid's serial tail (10 of 15 s on 1,000 cases)."""
     if workers <= 1 or len(keys) < PARALLEL_FROM_CASES:
         return _collect(keys, results_dir)
-    step = -(-len(keys) // workers)
+    step = min(SHARE_CASES, -(-len(keys) // workers))
     shares = [(keys[k : k + step], results_dir) for k in range(0, len(keys), step)]
     return [c for part in parallel.map_forked(_collect, shares, workers) for c in part]
 
@@ -81,14 +87,9 @@ def _collect(keys: list[str], results_dir) -> list[CaseResult]:
             res.sync = folder.record("sync", "sync.json")
             res.metrics = folder.record("metrics", "metrics.json")
             res.drift = drift
-            res.segments = {
-                **folder.table("metrics", "rpe_segments.csv"),
-                **folder.table("drift", "rpe_segments_valid.csv"),
-            }
-            res.time = {
-                **folder.table("metrics", "rpe_time.csv"),
-                **folder.table("drift", "rpe_time_valid.csv"),
-            }
+            res.segments = _pairs(folder, "rpe_segments", ("length_m", "rot_deg", "trans_m"))
+            res.time = _pairs(folder, "rpe_time", ("rot_deg", "trans_m"))
+            res.ape = _columns(folder.table("metrics", "ape.csv"), ("t", "trans_m", "rot_deg"))
             if res.drift.get("status"):
                 res.status = res.drift["status"]
             for stage in AFTER_DRIFT:
@@ -98,6 +99,22 @@ def _collect(keys: list[str], results_dir) -> list[CaseResult]:
                         record if failed is None else {"available": False, "failed": failed}
                     )
         out.append(res)
+    return out
+
+
+def _columns(table: dict, names) -> dict:
+    """Copies of some columns: a parsed table's columns are views of its whole array, which would
+    otherwise stay in memory (the case indices and stamps the tables never read)."""
+    return {n: table[n].copy() for n in names if n in table}
+
+
+def _pairs(folder: CaseFolder, name: str, columns) -> dict:
+    """A relative-error table's columns the tables read, with its drift validity as booleans (the
+    tables select ``valid > 0``)."""
+    out = _columns(folder.table("metrics", f"{name}.csv"), columns)
+    valid = folder.table("drift", f"{name}_valid.csv").get("valid")
+    if valid is not None:
+        out["valid"] = valid > 0
     return out
 
 
