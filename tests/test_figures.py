@@ -386,3 +386,25 @@ def test_figures_are_drawn_for_flagged_cases_and_one_command_draws_the_rest(tmp_
         p.name: p.read_bytes() for p in (clean / "10_report/figures").glob("*.png")
     } == by_command
     assert cli.main(["fig"]) == 2  # neither a bundle nor a case
+
+
+@pytest.mark.parametrize("values", [[0.0, 0.0], [float("nan"), float("nan")], []])
+def test_a_log_axis_without_positive_values_stays_linear(tmp_path, values):
+    """A grid whose every case failed (no values) or whose errors are all zero still gets its
+    figures: matplotlib refuses to log-scale such an axis, which failed the figures rule."""
+    from epa.outputs import figures
+
+    lines = {"label": "a", "x": [1.0, 2.0][: len(values)], "y": values}
+    b = figures.bundle(
+        "lines",
+        "RMSE over time across runs",
+        {"panels": [{"title": "d", "lines": [lines]}], "xlabel": "t", "ylabel": "m", "log": True},
+    )
+    grouped = figures.bundle(
+        "grouped",
+        "ATE",
+        {"datasets": ["d"], "algorithms": ["a"], "values": [[values]], "ylabel": "m", "log": True},
+    )
+    for name, bundle in (("lines", b), ("grouped", grouped)):
+        written = figures.render(bundle, tmp_path / name, formats=("png",))
+        assert [p.name for p in written] == [f"{name}.png"]

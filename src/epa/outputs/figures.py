@@ -614,6 +614,8 @@ def _log_axis(ax):
     """A log y axis labelled in plain numbers: 1-2-5 steps over up to two decades, decades beyond."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
+    if not ax.dataLim.y1 > 0:  # nothing positive (every case failed, every error zero): linear
+        return
     ax.set_yscale("log")
     lo, hi = ax.get_ylim()
     subs = (1.0, 2.0, 5.0) if hi / max(lo, 1e-300) <= 100 else (1.0,)
