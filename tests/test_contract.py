@@ -38,6 +38,9 @@ def test_a_digit_flipped_at_a_rounding_boundary_is_reported_and_passes():
     assert contract.compare_printed("s.csv", "x\n100\n", "x\n99.9999999\n").ok
     # a negative zero from a value that rounds to zero either way
     assert contract.compare_printed("t.txt", "-0.000\n", "0.000\n").verdict == Verdict.ROUNDING
+    # one unit exactly, which binary floating point made 1.0000000502e-13 against a unit of 1e-13
+    flip = contract.compare_printed("s.csv", "x\n-3.38073579e-05\n", "x\n-3.3807358e-05\n")
+    assert flip.verdict == Verdict.ROUNDING and flip.worst.where == "line 2, column x"
 
 
 def test_a_printed_change_beyond_one_unit_or_in_a_count_or_a_word_differs():

@@ -37,6 +37,7 @@ import json
 import math
 import re
 from dataclasses import dataclass, field
+from decimal import Decimal
 from enum import StrEnum
 from pathlib import Path
 
@@ -140,11 +141,12 @@ def _is_stamp(name: str) -> bool:
 
 
 # ----------------------------------------------------------------------------- printed text
-def _unit(token: str) -> float:
-    """One unit in the last printed digit of a number as text (0.089 -> 0.001, 1.2e-05 -> 1e-06)."""
+def _unit(token: str) -> Decimal:
+    """One unit in the last printed digit of a number as text (0.089 -> 0.001, 1.2e-05 -> 1e-06),
+    exactly: in binary floating point a one-unit flip could come out a hair above its unit."""
     mantissa, _, exponent = token.lower().partition("e")
     decimals = len(mantissa.split(".", 1)[1]) if "." in mantissa else 0
-    return 10.0 ** (int(exponent or 0) - decimals)
+    return Decimal(1).scaleb(int(exponent or 0) - decimals)
 
 
 def _is_integer(token: str) -> bool:
@@ -183,9 +185,9 @@ def compare_printed(name: str, a: str, b: str) -> Comparison:
                 continue
             place = Place(_where_printed(name, la, i, p.start()), ta, tb)
             unit = min(_unit(ta), _unit(tb))
-            diff = abs(float(ta) - float(tb))
-            if (_is_integer(ta) and _is_integer(tb)) or diff > unit * (1 + 1e-9):
-                place = Place(place.where, ta, tb, diff, unit)
+            diff = abs(Decimal(ta) - Decimal(tb))  # exact, like the text
+            if (_is_integer(ta) and _is_integer(tb)) or diff > unit:
+                place = Place(place.where, ta, tb, float(diff), float(unit))
                 return Comparison(name, "printed", Verdict.DIFFERS, place)
             flips.append(place)
     return Comparison(name, "printed", Verdict.ROUNDING, flips[0], tuple(flips))
