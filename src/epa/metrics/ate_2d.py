@@ -29,7 +29,8 @@ def errors(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     -------
     yaw_deg, trans_xy_m : ndarray
     """
-    yaw = np.degrees(geometry.quat_log(geometry.quat_mul(est.q, geometry.quat_conj(ref.q)))[:, 2])
+    error = geometry.quat_mul(est.q, geometry.quat_conj(ref.q))
+    yaw = np.degrees(geometry.quat_log_rows(error)[2])
     return yaw, geometry.norms(ref.p[:, :2] - est.p[:, :2])
 
 
