@@ -41,22 +41,21 @@ def closest_pairs(
     ``starts``: :func:`run_starts` of ``d``, made once for several deltas.
     """
     n = len(d)
-    i = np.arange(n)
     target = d + delta
-    first = np.minimum(i + skip, n)
-    k = np.maximum(np.searchsorted(d, target, side="left"), first)  # first index with d >= target
-    has_up = k < n
-    up = np.minimum(k, n - 1)
+    first = np.arange(skip, n + skip)  # the first partner each start may take
+    if skip > 1:
+        np.minimum(first, n, out=first)
+    # the first index with d >= target (no upper candidate: n, whose d is +inf below)
+    k = np.maximum(np.searchsorted(d, target, side="left"), first)
+    padded = np.append(d, np.inf)
     lo = k - 1
-    has_lo = lo >= first
-    lo_c = np.maximum(lo, 0)
-    # the earliest index holding the same value as the lower candidate (scans keep the first best)
+    # the earliest index holding the same value as the lower candidate (scans keep the first best);
+    # where there is no lower candidate (lo < first) its error is inf
     starts = run_starts(d) if starts is None else starts
-    lo_first = np.minimum(np.maximum(starts[lo_c], first), n - 1)
-    err_up = np.where(has_up, np.abs(d[up] - target), np.inf)
-    err_lo = np.where(has_lo, np.abs(d[lo_first] - target), np.inf)
+    lo_first = np.minimum(np.maximum(starts[np.maximum(lo, 0)], first), n - 1)
+    err_up = np.abs(padded[k] - target)
+    err_lo = np.where(lo >= first, np.abs(padded[lo_first] - target), np.inf)
     take_lo = err_lo <= err_up
-    j = np.where(take_lo, lo_first, up)
     err = np.where(take_lo, err_lo, err_up)
     ok = err < tol if strict else err <= tol
-    return i[ok], j[ok]
+    return np.flatnonzero(ok), np.where(take_lo, lo_first, np.minimum(k, n - 1))[ok]
