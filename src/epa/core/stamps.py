@@ -35,7 +35,8 @@ def closest_pairs(
 ) -> tuple[np.ndarray, np.ndarray]:
     """For every start i, the first j >= i + skip whose d[j] is closest to d[i] + delta.
 
-    ``d`` must be non-decreasing (cumulative path length or time). Kept when the gap is < tol
+    ``d`` must be non-decreasing (cumulative path length or time), ``delta`` finite (the settings
+    refuse a non-finite number). Kept when the gap is < tol
     (strict, ov_eval) or <= tol (evo). Equivalent to the nested scans of ov_eval's
     compute_comparison_indices_length and evo's filter_pairs_by_path(all_pairs=True), in O(N log N).
     ``starts``: :func:`run_starts` of ``d``, made once for several deltas.
