@@ -1,6 +1,9 @@
+import json
+
 import numpy as np
 import pytest
 
+from epa.core.trajectory import Trajectory
 from epa.metrics import drift
 from epa.workflow import chain, settings
 from epa.workflow.stages import drift as drift_stage
@@ -140,3 +143,28 @@ def test_scale_aware_mode_fires_where_metre_thresholds_cannot():
         aware["success_rate_time_pct"] == pytest.approx(50, abs=1.5)
         and abs(aware["diverged_at_s"] - 50) <= 1
     )
+
+
+@pytest.mark.parametrize("jump", [False, True])
+def test_drift_valid_statistics_from_the_metrics_record_are_the_recomputed_ones(jump):
+    """Where every sample is drift-valid the drift stage takes the metrics record's statistics
+    (the same sample); with and without the record the drift record is the same."""
+    from epa.metrics import accuracy
+
+    rng = np.random.default_rng(7)
+    t = np.arange(0, 60, 0.05)
+    p = np.c_[2.0 * t, np.sin(t), np.zeros_like(t)]
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1))
+    noise = rng.normal(0, 0.02, p.shape) + (np.where(t > 30, 8.0, 0.0)[:, None] if jump else 0.0)
+    ref, est = Trajectory(t, p, q), Trajectory(t, p + noise, q)
+    record, tables = accuracy.evaluate(ref, est, segments=(8, 16, 500))
+    with_record, arrays = drift_stage.compute(tables, CFG, dict(record))
+    without, arrays_without = drift_stage.compute(tables, CFG)
+    assert json.dumps(with_record, default=list) == json.dumps(without, default=list)
+    assert all(
+        np.array_equal(arrays[k]["valid"], arrays_without[k]["valid"])
+        for k in ("rpe_segments_valid", "rpe_time_valid")
+    )
+    assert (with_record["success_rate_distance_pct"] < 99) == jump
+    # all valid: the whole samples, so the metrics record's own statistics
+    assert (with_record["drift_valid"]["ate"] == record["ate"]) == (not jump)

@@ -6,7 +6,7 @@ from hypothesis import settings as hsettings
 from hypothesis import strategies as st
 
 from epa.artifacts import files
-from epa.core import geometry
+from epa.core import geometry, stamps
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.metrics import accuracy
@@ -302,3 +302,71 @@ def test_geometry_fast_paths_give_numpys_bits():
     assert same(
         geometry.quat_rotate(q, v), geometry.quat_rotate(q[:, None, :], v[:, None, :])[:, 0]
     )
+    assert same(geometry.quat_log(q), geometry.quat_log(q[:, None, :])[:, 0])
+
+
+def _relative_errors_before(d, p_ref, p_est, i, j):
+    """relative_errors as it was written before pair_rows (issue 34): numpy's row gathers."""
+    di = d[i]
+    angle = geometry.quat_angle(geometry.quat_mul(di, geometry.quat_conj(d[j])))
+    t_err = geometry.quat_rotate(di, p_est[j] - p_est[i]) - (p_ref[j] - p_ref[i])
+    return np.degrees(angle), np.linalg.norm(t_err, axis=-1)
+
+
+def test_pair_errors_give_the_previous_bits():
+    """The relative errors from pair_rows (gathered rows, runs of starts as views, blocks) are the
+    previous formula's bit for bit: on random, repeated, reversed and run-like index sets longer
+    than a block, with the identity, its negative and equal orientations among the poses."""
+    rng = np.random.default_rng(341)
+    n = 3 * geometry.PAIR_BLOCK + 17
+    q_ref, q_est = (rng.normal(size=(n, 4)) for _ in range(2))
+    q_ref /= np.linalg.norm(q_ref, axis=1, keepdims=True)
+    q_est /= np.linalg.norm(q_est, axis=1, keepdims=True)
+    q_est[: n // 3] = q_ref[: n // 3]
+    q_ref[5], q_est[5] = [0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, -1.0]
+    p_ref = rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-6, 4, size=(n, 1))
+    p_est = p_ref + rng.normal(size=(n, 3)) * 1e-3
+    d = geometry.pose_discrepancy(q_ref, q_est)
+    rows = geometry.pair_rows(None, p_ref, p_est, q=(q_ref, q_est))
+    assert np.array_equal(rows, geometry.pair_rows(d, p_ref, p_est))
+    run = np.arange(n - 40)
+    sets = [
+        (rng.integers(0, n, 2 * n), rng.integers(0, n, 2 * n)),
+        (run, run + 40),
+        (np.r_[run[:500], run], np.r_[run[:500] + 3, run + 1]),
+        (run[::-1].copy(), run),
+        (np.arange(0), np.arange(0)),
+    ]
+    for i, j in sets:
+        before = _relative_errors_before(d, p_ref, p_est, i, j)
+        for after in (
+            geometry.pair_errors(rows, i, j),
+            geometry.relative_errors(d, p_ref, p_est, i, j),
+        ):
+            assert all(np.array_equal(a, b) for a, b in zip(before, after))
+
+
+def test_run_starts_and_order_statistics_are_the_searches_they_replace():
+    """run_starts is searchsorted(d, d, 'left') on non-decreasing d (ties, NaN); the median from
+    order_statistics is np.median bit for bit (ties, zeros of both signs, inf, sorted and periodic
+    samples either side of the sample size that switches to the bracket)."""
+    rng = np.random.default_rng(342)
+    for n in (1, 2, 7, 1000):
+        steps = np.where(rng.random(n) < 0.4, 0.0, rng.random(n))
+        for d in (np.cumsum(steps), np.zeros(n), np.r_[np.cumsum(steps)[:-1], np.nan]):
+            assert np.array_equal(stamps.run_starts(d), np.searchsorted(d, d, side="left"))
+    size = 4 * accuracy.SELECT_SAMPLE
+    for n in (1, 2, 3, size, size + 1, size + 2, 50_001, 100_000):
+        x = rng.normal(size=n)
+        for sample in (
+            x,
+            np.abs(x),
+            np.sort(x),
+            np.round(x, 1),
+            np.where(x < 0, -0.0, 0.0),
+            np.sin(np.arange(n) / 7.0),
+            np.where(np.arange(n) % 97 == 0, np.inf, x),
+        ):
+            with np.errstate(invalid="ignore"):  # the std of a sample with inf
+                a, b = np.median(sample), accuracy.stats(sample)["median"]
+            assert a == b and np.signbit(a) == np.signbit(b), (n, a, b)

@@ -41,6 +41,29 @@ def _components(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(a, dtype=float).T)
 
 
+def _mul_rows(a, b) -> tuple:
+    """The Hamilton product of quaternions given as component rows (x, y, z, w): quat_mul's
+    arithmetic, for callers that keep their quaternions as rows."""
+    (ax, ay, az, aw), (bx, by, bz, bw) = a, b
+    return (
+        aw * bx + bw * ax + (ay * bz - az * by),
+        aw * by + bw * ay + (az * bx - ax * bz),
+        aw * bz + bw * az + (ax * by - ay * bx),
+        aw * bw - (ax * bx + ay * by + az * bz),
+    )
+
+
+def _rotate_rows(q, v) -> tuple:
+    """R(q) v on component rows (x, y, z, w) and (x, y, z): quat_rotate's arithmetic."""
+    (ux, uy, uz, w), (vx, vy, vz) = q, v
+    cx, cy, cz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx  # u x v
+    return (
+        vx + 2 * (w * cx + (uy * cz - uz * cy)),
+        vy + 2 * (w * cy + (uz * cx - ux * cz)),
+        vz + 2 * (w * cz + (ux * cy - uy * cx)),
+    )
+
+
 def normalize_quat(q: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     return q / norms(q)[..., None]
@@ -128,6 +151,8 @@ def so3_log(r: np.ndarray) -> np.ndarray:
 
 def quat_log(q: np.ndarray) -> np.ndarray:
     """Rotation vectors (..., 3) of unit quaternions (x, y, z, w)."""
+    if q.ndim == 2:  # on contiguous components: the same arithmetic, about 2x faster
+        return np.stack(quat_log_rows(q), axis=-1)
     q = np.where(q[..., 3:4] < 0, -q, q)  # same rotation, angle in [0, pi]
     v = q[..., :3]
     n = norms(v)
@@ -135,6 +160,19 @@ def quat_log(q: np.ndarray) -> np.ndarray:
     # angle/sin(angle/2) -> 2 as angle -> 0
     scale = np.where(n > 1e-12, angle / np.where(n > 1e-12, n, 1.0), 2.0)
     return v * scale[..., None]
+
+
+def quat_log_rows(q: np.ndarray) -> tuple:
+    """quat_log of (N, 4) quaternions as its three component rows (the same arithmetic, on
+    contiguous components)."""
+    x, y, z, w = _components(q)
+    flip = w < 0  # same rotation, angle in [0, pi]
+    x, y, z, w = (np.where(flip, -c, c) for c in (x, y, z, w))
+    n = np.sqrt(x * x + y * y + z * z)
+    angle = 2 * np.arctan2(n, w)
+    # angle/sin(angle/2) -> 2 as angle -> 0
+    scale = np.where(n > 1e-12, angle / np.where(n > 1e-12, n, 1.0), 2.0)
+    return x * scale, y * scale, z * scale
 
 
 def so3_exp(w: np.ndarray) -> np.ndarray:
@@ -172,7 +210,7 @@ def rot_z(yaw: float) -> np.ndarray:
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of (..., 4) quaternions (x, y, z, w): R(a) R(b)."""
     if a.ndim == 2 and a.shape == b.shape:  # one product per row: on contiguous components
-        return np.stack(_product(_components(a), _components(b)), axis=-1)
+        return np.stack(_mul_rows(_components(a), _components(b)), axis=-1)
     av, aw = a[..., :3], a[..., 3:]
     bv, bw = b[..., :3], b[..., 3:]
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))
@@ -181,26 +219,15 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def _product(a, b) -> tuple[np.ndarray, ...]:
-    """The Hamilton product's (x, y, z, w) from each factor's four component rows."""
-    (ax, ay, az, aw), (bx, by, bz, bw) = a, b
-    return (
-        aw * bx + bw * ax + (ay * bz - az * by),
-        aw * by + bw * ay + (az * bx - ax * bz),
-        aw * bz + bw * az + (ax * by - ay * bx),
-        aw * bw - (ax * bx + ay * by + az * bz),
-    )
-
-
 def relative_angles(q: np.ndarray, step: int) -> np.ndarray:
     """Rotation angle (rad) of q_i^-1 q_{i+step} for every i: quat_angle of relative_motions'
     rotation, the same operations on each component row once (3x cheaper than the (N, 4) arrays'
     conjugate, product and angle; Step 1's angular speed)."""
     x, y, z, w = _components(q)
-    rx, ry, rz, rw = _product(
+    rx, ry, rz, rw = _mul_rows(
         (-x[:-step], -y[:-step], -z[:-step], w[:-step]), (c[step:] for c in (x, y, z, w))
     )
-    return 2 * np.arctan2(np.sqrt(rx * rx + ry * ry + rz * rz), np.abs(rw))
+    return rows_angle(rx, ry, rz, rw)
 
 
 def quat_conj(q: np.ndarray) -> np.ndarray:
@@ -209,22 +236,18 @@ def quat_conj(q: np.ndarray) -> np.ndarray:
 
 def quat_angle(q: np.ndarray) -> np.ndarray:
     """Rotation angle (rad) of unit quaternions; atan2 keeps small angles accurate."""
-    return 2 * np.arctan2(norms(q[..., :3]), np.abs(q[..., 3]))
+    return rows_angle(q[..., 0], q[..., 1], q[..., 2], q[..., 3])
+
+
+def rows_angle(x, y, z, w) -> np.ndarray:
+    """quat_angle of quaternions given as their component rows (the same arithmetic)."""
+    return 2 * np.arctan2(np.sqrt(x * x + y * y + z * z), np.abs(w))
 
 
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """R(q) v for (..., 4) unit quaternions and (..., 3) vectors."""
     if q.ndim == 2 and v.ndim == 2 and len(q) == len(v):  # on contiguous components
-        (ux, uy, uz, w), (vx, vy, vz) = _components(q), _components(v)
-        cx, cy, cz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx  # u x v
-        return np.stack(
-            [
-                vx + 2 * (w * cx + (uy * cz - uz * cy)),
-                vy + 2 * (w * cy + (uz * cx - ux * cz)),
-                vz + 2 * (w * cz + (ux * cy - uy * cx)),
-            ],
-            axis=-1,
-        )
+        return np.stack(_rotate_rows(_components(q), _components(v)), axis=-1)
     u, w = q[..., :3], q[..., 3:]
     uv = cross(u, v)
     return v + 2 * (w * uv + cross(u, uv))
@@ -267,7 +290,25 @@ def pose_discrepancy(q_ref: np.ndarray, q_est: np.ndarray) -> np.ndarray:
     return quat_mul(q_ref, quat_conj(q_est))
 
 
-PAIR_BLOCK = 65536  # pose pairs per block in relative_errors
+PAIR_BLOCK = 8192  # pairs per block in pair_errors: temporaries in cache (10 % faster than 16384)
+
+
+def pair_rows(d: np.ndarray | None, p_ref: np.ndarray, p_est: np.ndarray, *, q=None) -> np.ndarray:
+    """What :func:`relative_errors` reads of each pose, as ten contiguous rows (D's x y z w, the
+    reference's and the estimate's positions): a set of pairs gathers each side with one ``take``
+    (0.3 ms for 100,000 pairs; rows of an (N, 4) array gathered and transposed take 6 ms). Made
+    once, it serves every set of pairs of the same poses. ``d`` None: D of ``q`` = (reference,
+    estimate quaternions), pose_discrepancy's arithmetic written straight into the rows."""
+    rows = np.empty((10, len(p_ref)))
+    if d is None:
+        ref, est = _components(q[0]), _components(q[1])
+        est[:3] *= -1  # conj(q_est)
+        for k, row in enumerate(_mul_rows(ref, est)):
+            rows[k] = row
+    else:
+        rows[:4] = np.asarray(d).T
+    rows[4:7], rows[7:] = np.asarray(p_ref).T, np.asarray(p_est).T
+    return rows
 
 
 def relative_errors(d: np.ndarray, p_ref: np.ndarray, p_est: np.ndarray, i, j):
@@ -277,18 +318,33 @@ def relative_errors(d: np.ndarray, p_ref: np.ndarray, p_est: np.ndarray, i, j):
     |t(E)| = |D_i (p_j - p_i) - (q_j - q_i)|, exact rewrites that gather one quaternion per pair.
     Returns (rotation angle in degrees, translation norm in metres) for each pair.
     """
-    if len(i) == 0:
-        return np.zeros(0), np.zeros(0)
-    if len(i) > PAIR_BLOCK:  # in blocks: each pair on its own, so the same numbers, in a few MB
-        angle, trans = np.empty(len(i)), np.empty(len(i))
-        for s in range(0, len(i), PAIR_BLOCK):
-            block = slice(s, s + PAIR_BLOCK)
-            angle[block], trans[block] = relative_errors(d, p_ref, p_est, i[block], j[block])
-        return angle, trans
-    di = d[i]
-    angle = quat_angle(quat_mul(di, quat_conj(d[j])))
-    t_err = quat_rotate(di, p_est[j] - p_est[i]) - (p_ref[j] - p_ref[i])
-    return np.degrees(angle), np.linalg.norm(t_err, axis=-1)
+    return pair_errors(pair_rows(d, p_ref, p_est), i, j)
+
+
+def pair_errors(rows: np.ndarray, i, j) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`relative_errors` of the pairs (i, j) of the poses whose :func:`pair_rows` are
+    ``rows`` (made once for several sets of pairs): quat_mul, quat_angle, quat_rotate and norms'
+    arithmetic, each pair on its own, so the same bits whatever the rows or blocks."""
+    i, j = np.asarray(i, dtype=np.intp), np.asarray(j, dtype=np.intp)
+    angle, trans = np.empty(len(i)), np.empty(len(i))
+    for s in range(0, len(i), PAIR_BLOCK):  # in blocks: a few MB of temporaries, in cache
+        block = slice(s, s + PAIR_BLOCK)
+        a, b = _gather(rows, i[block]), _gather(rows, j[block])
+        x, y, z, w = _mul_rows(a[:4], (-b[0], -b[1], -b[2], b[3]))  # D_i D_j^T
+        angle[block] = np.degrees(rows_angle(x, y, z, w))
+        x, y, z = _rotate_rows(a[:4], b[7:] - a[7:])
+        x, y, z = x - (b[4] - a[4]), y - (b[5] - a[5]), z - (b[6] - a[6])
+        trans[block] = np.sqrt(x * x + y * y + z * z)
+    return angle, trans
+
+
+def _gather(rows: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """rows[:, k]; a view where k is a run of consecutive indices (a pair set's starts mostly are:
+    every pose but the last few), half the gathering of a set of pairs."""
+    run = len(k) and 0 <= k[0] and k[-1] < rows.shape[1] and k[-1] - k[0] == len(k) - 1
+    if run and (np.diff(k) == 1).all():
+        return rows[:, k[0] : k[-1] + 1]
+    return np.take(rows, k, axis=1)
 
 
 def path_distances(p: np.ndarray) -> np.ndarray:

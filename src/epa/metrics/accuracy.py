@@ -13,7 +13,7 @@ import numpy as np
 from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.records import AccuracyRecord
-from epa.core.stamps import closest_pairs
+from epa.core.stamps import closest_pairs, run_starts
 from epa.core.trajectory import Trajectory
 
 RPE_UNITS = ("frames", "m", "s", "deg", "rad")
@@ -91,18 +91,51 @@ def stats(x: np.ndarray) -> dict:
         ``n`` and each of STATISTICS. An empty sample has ``n`` 0 and None for each statistic,
         never NaN: the record that holds it says why it is empty (a note).
     """
-    x = np.asarray(x, float)
+    x = np.asarray(x, float).ravel()
     if x.size == 0:
         return {"n": 0, **dict.fromkeys(STATISTICS)}
+    mean = np.mean(x)
     return {
         "n": int(x.size),
         "rmse": float(np.sqrt(np.mean(x * x))),
-        "mean": float(np.mean(x)),
-        "median": float(np.median(x)),
+        "mean": float(mean),
+        "median": float(np.median(x) if np.isnan(mean) else _median(x)),
         "std": float(np.std(x)),
         "min": float(np.min(x)),
         "max": float(np.max(x)),
     }
+
+
+def _median(x: np.ndarray) -> float:
+    """np.median of a sample without NaN: the mean of its middle value or two (numpy's arithmetic,
+    which also makes a zero of either sign +0), the values found by :func:`order_statistics`."""
+    h = x.size // 2
+    return float(np.mean(order_statistics(x, [h] if x.size % 2 else [h - 1, h])))
+
+
+SELECT_SAMPLE = 4096  # sample size of order_statistics: a bracket of about 5 % of the values
+
+
+def order_statistics(x: np.ndarray, ranks: list[int]) -> np.ndarray:
+    """The values of ranks ``ranks`` (0-based, ascending) of a sample without NaN, as
+    ``np.partition(x, ranks)[ranks]`` gives them, in a few passes: an evenly spaced sample brackets
+    them, and only the values within the bracket are partitioned (0.3 ms instead of 0.9 ms for
+    100,000). The values of given ranks are the same whatever finds them; a bracket that misses
+    them (a sample unlike the whole) falls back to the whole partition."""
+    n = x.size
+    if n <= 4 * SELECT_SAMPLE:
+        return np.partition(x, ranks)[ranks]
+    sample = np.sort(x[:: n // SELECT_SAMPLE])
+    m = len(sample)
+    margin = 4 * int(np.sqrt(m)) + 2  # some 8 standard deviations of a sample rank
+    lo = sample[max(ranks[0] * m // n - margin, 0)]
+    hi = sample[min(ranks[-1] * m // n + margin, m - 1)]
+    below = int(np.count_nonzero(x < lo))
+    inside = x[(x >= lo) & (x <= hi)]
+    if below <= ranks[0] and ranks[-1] < below + inside.size:
+        at = [r - below for r in ranks]
+        return np.partition(inside, at)[at]
+    return np.partition(x, ranks)[ranks]
 
 
 def drift_rate(trans_m: np.ndarray, length: float) -> float | None:
@@ -112,9 +145,10 @@ def drift_rate(trans_m: np.ndarray, length: float) -> float | None:
 
 
 # ----------------------------------------------------------------------------- pair selection
-def segment_pairs(d: np.ndarray, length: float, tol: float = 0.5):
-    """ov_eval's distance-segment pairs: end = pose whose path distance is closest to start + L, within tol."""
-    return closest_pairs(d, length, tol, strict=True, skip=0)
+def segment_pairs(d: np.ndarray, length: float, tol: float = 0.5, *, starts=None):
+    """ov_eval's distance-segment pairs: end = pose whose path distance is closest to start + L,
+    within tol. ``starts``: run_starts(d), made once for several lengths."""
+    return closest_pairs(d, length, tol, strict=True, skip=0, starts=starts)
 
 
 def time_pairs(t: np.ndarray, delta: float = 1.0, rel_tol: float = 0.1):
@@ -199,11 +233,19 @@ def segment_key(length) -> str:
 
 
 def ape(
-    ref: Trajectory, est: Trajectory, d: np.ndarray | None = None
+    ref: Trajectory,
+    est: Trajectory,
+    d: np.ndarray | None = None,
+    *,
+    rows: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-pose translation error (m) and rotation error (deg) of aligned, matched poses."""
+    """Per-pose translation error (m) and rotation error (deg) of aligned, matched poses; the
+    rotation's from ``d`` (D = Q P^T), or from the first four of geometry.pair_rows' ``rows``."""
+    trans = geometry.norms(est.p - ref.p)
+    if rows is not None:
+        return trans, np.degrees(geometry.rows_angle(*rows[:4]))
     d = geometry.pose_discrepancy(ref.q, est.q) if d is None else d
-    return geometry.norms(est.p - ref.p), np.degrees(geometry.quat_angle(d))
+    return trans, np.degrees(geometry.quat_angle(d))
 
 
 def evaluate(
@@ -216,15 +258,17 @@ def evaluate(
     time_tol: float = 0.1,
     rpe=(),
     discrepancy: np.ndarray | None = None,
+    dist: np.ndarray | None = None,
 ) -> tuple[AccuracyRecord, dict]:
     """All metrics of one case. Returns (summary dict for metrics.json, per-pose/per-pair tables).
-    ``discrepancy``: D = Q P^T of every matched pose when not the poses' own (position-only: I)."""
+    ``discrepancy``: D = Q P^T of every matched pose when not the poses' own (position-only: I).
+    ``dist``: the reference's path distances (geometry.path_distances), when the caller has them."""
     if len(ref) != len(est):
         raise EpaError("reference and estimate must be matched pose for pose")
-    # once, shared by every metric below
-    d = geometry.pose_discrepancy(ref.q, est.q) if discrepancy is None else discrepancy
-    trans, rot = ape(ref, est, d)
-    dist = geometry.path_distances(ref.p)
+    # once, shared by every metric below: D = Q P^T and the positions, as rows (geometry.pair_rows)
+    rows = geometry.pair_rows(discrepancy, ref.p, est.p, q=(ref.q, est.q))
+    trans, rot = ape(ref, est, rows=rows)
+    dist = geometry.path_distances(ref.p) if dist is None else dist
     summary: dict[str, Any] = {
         "n_matched": len(ref),
         "ref_length_m": float(dist[-1]) if len(dist) else 0.0,
@@ -240,24 +284,12 @@ def evaluate(
         }
     }
 
-    seg_rows: dict[str, list[np.ndarray]] = {
-        k: [] for k in ("length_m", "i", "j", "rot_deg", "trans_m")
-    }
-    summary["rpe_distance"], summary["drift_rate_pct"] = {}, {}
-    for length in segments:
-        i, j = segment_pairs(dist, float(length), segment_tol)
-        er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
-        key = segment_key(length)
-        summary["rpe_distance"][key] = {"trans_m": stats(et), "rot_deg": stats(er)}
-        summary["drift_rate_pct"][key] = drift_rate(et, length)
-        for name, v in zip(seg_rows, (np.full(len(i), float(length)), i, j, er, et)):
-            seg_rows[name].append(v)
-    tables["rpe_segments"] = {
-        k: np.concatenate(v) if v else np.zeros(0) for k, v in seg_rows.items()
-    }
+    summary["rpe_distance"], summary["drift_rate_pct"], tables["rpe_segments"] = segment_rpe(
+        dist, rows, segments, segment_tol
+    )
 
     i, j = time_pairs(ref.t, time_delta, time_tol)
-    er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
+    er, et = geometry.pair_errors(rows, i, j)
     summary[time_rpe_key(time_delta)] = {
         "delta_s": time_delta,
         "trans_m": stats(et),
@@ -275,10 +307,38 @@ def evaluate(
             all_pairs=spec.get("all_pairs", False),
             rel_tol=spec.get("rel_tol", 0.1),
         )
-        er, et = geometry.relative_errors(d, ref.p, est.p, i, j)
+        er, et = geometry.pair_errors(rows, i, j)
         summary["rpe"].append({**spec, "trans_m": stats(et), "rot_deg": stats(er)})
     # built as a plain dict: the time RPE's key follows time_delta, which a TypedDict cannot name
     return cast(AccuracyRecord, summary), tables
+
+
+def segment_rpe(
+    dist: np.ndarray, rows: np.ndarray, segments, tol: float
+) -> tuple[dict, dict, dict]:
+    """The distance RPE and drift rate of each segment length, and their pairs' table (evaluate's
+    ``rpe_segments``). Every length's pairs form one set, whose errors are computed in one pass
+    straight into the table's columns; each length's statistics are those of its stretch.
+    ``rows``: geometry.pair_rows of the matched poses."""
+    lengths = [float(length) for length in segments]
+    starts = run_starts(dist)
+    pairs = [segment_pairs(dist, length, tol, starts=starts) for length in lengths]
+    i, j = (np.concatenate(k) for k in zip(*pairs)) if pairs else (np.zeros(0), np.zeros(0))
+    er, et = geometry.pair_errors(rows, i, j)
+    sizes = [len(k) for k, _ in pairs]
+    rpe, drift = {}, {}
+    for length, end, size in zip(lengths, np.cumsum(sizes, dtype=int), sizes):
+        key, one = segment_key(length), slice(end - size, end)
+        rpe[key] = {"trans_m": stats(et[one]), "rot_deg": stats(er[one])}
+        drift[key] = drift_rate(et[one], length)
+    table = {
+        "length_m": np.repeat(np.array(lengths, float), sizes),
+        "i": i,
+        "j": j,
+        "rot_deg": er,
+        "trans_m": et,
+    }
+    return rpe, drift, table
 
 
 # ----------------------------------------------------------------------------- position-only estimates

@@ -29,8 +29,9 @@ def errors(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     -------
     yaw_deg, trans_xy_m : ndarray
     """
-    yaw = np.degrees(geometry.quat_log(geometry.quat_mul(est.q, geometry.quat_conj(ref.q)))[:, 2])
-    return yaw, np.linalg.norm(ref.p[:, :2] - est.p[:, :2], axis=1)
+    error = geometry.quat_mul(est.q, geometry.quat_conj(ref.q))
+    yaw = np.degrees(geometry.quat_log_rows(error)[2])
+    return yaw, geometry.norms(ref.p[:, :2] - est.p[:, :2])
 
 
 def compute(ref: Trajectory, est: Trajectory, cfg: dict) -> tuple[dict, dict, list[str]]:

@@ -47,12 +47,13 @@ def growth_stretches(
     rise: float,
     rate: float,
     hold: float,
+    steps: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[tuple[int, int]]:
     """APE jumps: a 1 s step (pi -> pj) rising more than ``rise`` faster than ``rate`` starts a
-    stretch at pi, which lasts while APE stays above the level before the jump plus ``hold``."""
-    d_ape = ape[pj] - ape[pi]
-    dt = np.maximum(t[pj] - t[pi], 1e-9)
-    starts = np.flatnonzero((d_ape > rise) & (d_ape / dt > rate))
+    stretch at pi, which lasts while APE stays above the level before the jump plus ``hold``.
+    ``steps``: :func:`ape_steps` of the same pairs, made once for several thresholds."""
+    d_ape, slope = ape_steps(t, ape, pi, pj) if steps is None else steps
+    starts = np.flatnonzero((d_ape > rise) & (slope > rate))
     out: list[tuple[int, int]] = []
     end_prev = -1
     for s in starts:  # few: one per jump, not one per pose
@@ -64,6 +65,12 @@ def growth_stretches(
         out.append((a, b))
         end_prev = b
     return out
+
+
+def ape_steps(t: np.ndarray, ape: np.ndarray, pi: np.ndarray, pj: np.ndarray):
+    """Each pair's APE rise (m) and its rate (m/s), what :func:`growth_stretches` thresholds."""
+    d_ape = ape[pj] - ape[pi]
+    return d_ape, d_ape / np.maximum(t[pj] - t[pi], 1e-9)
 
 
 def knee_threshold(ape: np.ndarray, lo: float = 5.0, hi: float = 30.0) -> dict:
@@ -103,11 +110,11 @@ THRESHOLD_KEYS = ("rpe_trans_max_m", "jump_rise_m", "jump_rate_m_s", "jump_hold_
 CURVE_FACTORS = np.logspace(-1, 1, 21)
 
 
-def _invalid(t, ape_trans, time_i, time_j, time_trans, th: dict):
-    """Invalid poses under thresholds ``th``, and the APE growth stretches."""
-    n = len(t)
-    bad_pair = ~np.isfinite(time_trans) | (time_trans > th["rpe_trans_max_m"])
-    invalid = _span_mask(n, time_i[bad_pair], time_j[bad_pair])
+def _invalid(t, ape_trans, time_i, time_j, time_trans, th: dict, shared: dict | None = None):
+    """Invalid poses under thresholds ``th``, and the APE growth stretches. ``shared``: what does
+    not depend on the thresholds (:func:`_shared`), made once for the success curve's 21."""
+    sh = _shared(t, ape_trans, time_i, time_j, time_trans) if shared is None else shared
+    bad_pair = sh["bad_pair"] | (time_trans > th["rpe_trans_max_m"])
     stretches = growth_stretches(
         t,
         ape_trans,
@@ -116,12 +123,25 @@ def _invalid(t, ape_trans, time_i, time_j, time_trans, th: dict):
         rise=th["jump_rise_m"],
         rate=th["jump_rate_m_s"],
         hold=th["jump_hold_m"],
+        steps=sh["steps"],
     )
+    if not stretches and not bad_pair.any():  # (the usual case at all but the lowest thresholds)
+        return sh["bad_ape"], stretches
+    invalid = _span_mask(len(t), time_i[bad_pair], time_j[bad_pair])
     if stretches:
         invalid |= _span_mask(
-            n, np.array([a for a, _ in stretches]), np.array([b for _, b in stretches])
+            len(t), np.array([a for a, _ in stretches]), np.array([b for _, b in stretches])
         )
-    return invalid | ~np.isfinite(ape_trans), stretches
+    return invalid | sh["bad_ape"], stretches
+
+
+def _shared(t, ape_trans, time_i, time_j, time_trans) -> dict:
+    """The parts of :func:`_invalid` that no threshold changes."""
+    return {
+        "bad_pair": ~np.isfinite(time_trans),
+        "bad_ape": ~np.isfinite(ape_trans),
+        "steps": ape_steps(t, ape_trans, time_i, time_j),
+    }
 
 
 def _success_distance(dist, invalid) -> float | None:
@@ -135,15 +155,16 @@ def _success_distance(dist, invalid) -> float | None:
 def success_curve(t, dist, ape_trans, time_i, time_j, time_trans, th: dict) -> dict:
     """The distance success rate with every drift threshold multiplied by each of CURVE_FACTORS, and
     its area: the mean over the log-spaced factors (%), so a ranking need not hinge on one threshold."""
-    rates = [
-        _success_distance(
-            dist,
-            _invalid(
-                t, ape_trans, time_i, time_j, time_trans, {k: f * th[k] for k in THRESHOLD_KEYS}
-            )[0],
-        )
-        for f in CURVE_FACTORS
-    ]
+    shared = _shared(t, ape_trans, time_i, time_j, time_trans)
+    rates: list = []
+    last = None
+    for f in CURVE_FACTORS:
+        scaled = {k: f * th[k] for k in THRESHOLD_KEYS}
+        invalid = _invalid(t, ape_trans, time_i, time_j, time_trans, scaled, shared)[0]
+        # a factor that invalidates nothing beyond a non-finite APE: the rate of the one before
+        same = bool(rates) and invalid is shared["bad_ape"] and last is invalid
+        rates.append(rates[-1] if same else _success_distance(dist, invalid))
+        last = invalid
     known = [r for r in rates if r is not None]
     auc = float(np.mean(known)) if len(known) == len(rates) else None  # None: a path without length
     return {
@@ -199,6 +220,8 @@ def detect(t, dist, ape_trans, ape_rot, time_i, time_j, time_trans, settings: di
 
 def pair_valid(valid_interval: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
     """A pair is valid when every interval it spans is valid."""
+    if valid_interval.all():
+        return np.ones(len(i), bool)
     bad = np.concatenate([[0], np.cumsum(~valid_interval)])
     return (bad[j] - bad[i]) == 0
 
@@ -208,11 +231,30 @@ NO_VALID_INTERVAL = (
 )
 
 
+def _valid_stats(x: np.ndarray, keep: np.ndarray, known, of: np.ndarray | None = None) -> dict:
+    """stats(x[keep]), ``keep`` within ``of`` (all of x without it). ``known``: the metrics stage's
+    statistics of x[of], taken when ``keep`` keeps all of that sample (every pose or pair valid,
+    the usual case): the same sample, so the same numbers, not computed a second time."""
+    whole = len(x) if of is None else int(np.count_nonzero(of))
+    if isinstance(known, dict) and known.get("n") == whole == np.count_nonzero(keep):
+        return dict(known)
+    return stats(x[keep])
+
+
 def valid_metrics(
-    det: dict, ape_trans, ape_rot, seg: dict, tpairs: dict, segments, *, time_delta: float
+    det: dict,
+    ape_trans,
+    ape_rot,
+    seg: dict,
+    tpairs: dict,
+    segments,
+    *,
+    time_delta: float,
+    known: dict | None = None,
 ) -> tuple[dict, np.ndarray, np.ndarray, list[str]]:
     """Drift-valid ATE (poses touching a valid interval) and RPE / drift rate / time RPE over valid pairs
-    (the time RPE keyed by ``time_delta``, :func:`epa.metrics.accuracy.time_rpe_key`).
+    (the time RPE keyed by ``time_delta``, :func:`epa.metrics.accuracy.time_rpe_key`). ``known``:
+    the metrics stage's record of the same errors, whose statistics stand where every sample is valid.
 
     Returns the metrics, the validity of each segment pair and each time pair (all False when
     the case is globally failed or has no valid path) and a note for each drift-valid quantity left
@@ -222,8 +264,9 @@ def valid_metrics(
     touch = np.zeros(len(ape_trans), bool)
     touch[:-1] |= viv
     touch[1:] |= viv
+    k = known or {}
     out: dict[str, Any] = {
-        "ate": {"trans_m": stats(ape_trans[touch]), "rot_deg": stats(ape_rot[touch])},
+        "ate": _stats_pair(ape_trans, ape_rot, touch, k.get("ate")),
         "rpe_distance": {},
         "drift_rate_pct": {},
     }
@@ -237,10 +280,10 @@ def valid_metrics(
         key = segment_key(length)
         of_length = seg["length_m"] == float(length)
         sel = sv & of_length
-        out["rpe_distance"][key] = {
-            "trans_m": stats(seg["trans_m"][sel]),
-            "rot_deg": stats(seg["rot_deg"][sel]),
-        }
+        known_rpe = k.get("rpe_distance", {}).get(key)
+        out["rpe_distance"][key] = _stats_pair(
+            seg["trans_m"], seg["rot_deg"], sel, known_rpe, of_length
+        )
         out["drift_rate_pct"][key] = drift_rate(seg["trans_m"][sel], length)
         if not sel.any():
             notes.append(
@@ -255,10 +298,8 @@ def valid_metrics(
         if len(tpairs["i"])
         else np.zeros(0, bool)
     )
-    out[time_rpe_key(time_delta)] = {
-        "trans_m": stats(tpairs["trans_m"][tv]),
-        "rot_deg": stats(tpairs["rot_deg"][tv]),
-    }
+    name = time_rpe_key(time_delta)
+    out[name] = _stats_pair(tpairs["trans_m"], tpairs["rot_deg"], tv, k.get(name))
     if not tv.any():
         notes.append(
             f"none of the {len(tv)} time-RPE pairs lies in drift-valid intervals: the drift-valid"
@@ -273,6 +314,15 @@ def valid_metrics(
     else:
         return out, sv, tv, notes
     return _empty_like(out), np.zeros_like(sv), np.zeros_like(tv), notes
+
+
+def _stats_pair(trans, rot, keep, known, of=None) -> dict:
+    """The translation and rotation statistics of one drift-valid quantity (:func:`_valid_stats`)."""
+    k = known if isinstance(known, dict) else {}
+    return {
+        "trans_m": _valid_stats(trans, keep, k.get("trans_m"), of),
+        "rot_deg": _valid_stats(rot, keep, k.get("rot_deg"), of),
+    }
 
 
 def _empty_like(d):

@@ -72,15 +72,39 @@ IDENTITY = Similarity(np.eye(3), np.zeros(3), 1.0)
 
 def umeyama(src: np.ndarray, dst: np.ndarray, *, with_scale: bool = False) -> Similarity:
     """Least-squares s, R, t with dst ≈ s·R·src + t (Umeyama 1991)."""
-    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
-    xs, xd = src - mu_s, dst - mu_d
-    cov = xd.T @ xs / len(src)
+    return _umeyama(_centred(src), _centred(dst), with_scale=with_scale)
+
+
+def _centred(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mean of the points and the points less it."""
+    mu = pts.mean(axis=0)
+    return mu, pts - mu
+
+
+def _umeyama(
+    src: tuple[np.ndarray, np.ndarray],
+    dst: tuple[np.ndarray, np.ndarray],
+    *,
+    with_scale: bool,
+    refuse_line: str | None = None,
+) -> Similarity:
+    """:func:`umeyama` of the centred points (:func:`_centred`). ``refuse_line``: the fit's name
+    (``100 poses used by align se3``), to refuse points on one line (the second singular value of
+    the cross-covariance below COLLINEAR times the first: the rotation about the line is
+    arbitrary) from the singular values the fit computes anyway."""
+    (mu_s, xs), (mu_d, xd) = src, dst
+    cov = xd.T @ xs / len(xs)
     u, d, vt = np.linalg.svd(cov)
+    if refuse_line is not None and d[1] <= COLLINEAR * d[0]:
+        raise EpaError(
+            f"the {refuse_line} lie on one straight line: the rotation about"
+            " it is undetermined (use align.method: posyaw, or more poses via align.first_n)"
+        )
     sign = np.eye(3)
     if np.linalg.det(u) * np.linalg.det(vt) < 0:
         sign[2, 2] = -1
     r = u @ sign @ vt
-    s = float(np.trace(np.diag(d) @ sign) / (np.sum(xs * xs) / len(src))) if with_scale else 1.0
+    s = float(np.trace(np.diag(d) @ sign) / (np.sum(xs * xs) / len(xs))) if with_scale else 1.0
     return Similarity(r, mu_d - s * r @ mu_s, s)
 
 
@@ -110,10 +134,16 @@ def fit(ref: Trajectory, est: Trajectory, *, method: str = "se3", first_n: int =
         )
         raise EpaError(f"align {method} needs at least {need} poses: {what}")
     src, dst = est.p[:n], ref.p[:n]
-    _check_determined(src, dst, method, n)
-    if method == "posyaw":
+    # an alignment that the data do not determine would give an arbitrary rotation (and rotation
+    # error) presented as a result: refuse it, naming what is degenerate
+    if method == "posyaw":  # it rotates about z only: the horizontal spread
+        _check_spread(_centred(dst[:, :2])[1], _centred(src[:, :2])[1], method, n)
         return posyaw(src, dst)
-    return umeyama(src, dst, with_scale=method == "sim3")
+    centred = _centred(src), _centred(dst)  # shared by the checks and the fit
+    _check_spread(centred[1][1], centred[0][1], method, n)
+    return _umeyama(
+        *centred, with_scale=method == "sim3", refuse_line=f"{n} poses used by align {method}"
+    )
 
 
 # Below this spread (m) the points are one point; below this ratio of the cross-covariance's second
@@ -122,24 +152,14 @@ STILL_M = 1e-6
 COLLINEAR = 1e-10
 
 
-def _check_determined(src: np.ndarray, dst: np.ndarray, method: str, n: int) -> None:
-    """An alignment that the data do not determine would give an arbitrary rotation (and rotation
-    error) presented as a result: refuse it, naming what is degenerate."""
-    axes = slice(0, 2) if method == "posyaw" else slice(0, 3)  # posyaw rotates about z only
-    for name, pts in (("reference", dst), ("estimate", src)):
-        spread = float(
-            np.sqrt(np.mean(np.sum((pts[:, axes] - pts[:, axes].mean(axis=0)) ** 2, axis=1)))
-        )
+def _check_spread(xd: np.ndarray, xs: np.ndarray, method: str, n: int) -> None:
+    """Refuse a side whose centred points (reference ``xd``, estimate ``xs``) do not move (their
+    spread below STILL_M)."""
+    for name, x in (("reference", xd), ("estimate", xs)):
+        spread = float(np.sqrt(np.mean(geometry.dots(x, x))))
         if spread < STILL_M:
             plane = " horizontally" if method == "posyaw" else ""
             raise EpaError(
                 f"the {name} does not move{plane} over the {n} poses used by align {method}"
                 f" (spread {spread:.3g} m): the alignment is undetermined"
-            )
-    if method in ("se3", "sim3"):
-        d = np.linalg.svd((dst - dst.mean(axis=0)).T @ (src - src.mean(axis=0)), compute_uv=False)
-        if d[1] <= COLLINEAR * d[0]:
-            raise EpaError(
-                f"the {n} poses used by align {method} lie on one straight line: the rotation about"
-                " it is undetermined (use align.method: posyaw, or more poses via align.first_n)"
             )

@@ -13,7 +13,9 @@ from epa.metrics.accuracy import null_rotation
 NAME = "drift"
 
 
-def compute(tables: dict, cfg: dict):
+def compute(tables: dict, cfg: dict, metrics_record: dict | None = None):
+    """The drift record and arrays of the metrics stage's ``tables``; ``metrics_record``, the
+    record of the same errors, lends its statistics where every sample is drift-valid."""
     ape, seg, tp = tables["ape"], tables["rpe_segments"], tables["rpe_time"]
     det = drift.detect(
         ape["t"],
@@ -33,6 +35,7 @@ def compute(tables: dict, cfg: dict):
         tp,
         cfg["metrics"]["segments"],
         time_delta=cfg["metrics"]["time_delta"],
+        known=metrics_record,
     )
     fs = det["fail_segments"]
     curve = drift.success_curve(
@@ -86,7 +89,7 @@ def compute(tables: dict, cfg: dict):
 
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     tables = {"ape": data.ape, "rpe_segments": data.rpe_segments, "rpe_time": data.rpe_time}
-    summary, artifacts = compute(tables, cfg)
+    summary, artifacts = compute(tables, cfg, data.metrics_record)
     data.drift_record, data.fail_segments = summary, artifacts["fail_segments"]
     if write_arrays:
         for name in STAGE.arrays:
@@ -100,7 +103,7 @@ STAGE = Stage(
     settings=("drift", "metrics"),
     records=("drift.json",),
     arrays=("fail_segments.csv", "pose_valid.csv", "rpe_segments_valid.csv", "rpe_time_valid.csv"),
-    reads=("ape", "rpe_segments", "rpe_time"),
+    reads=("ape", "rpe_segments", "rpe_time", "metrics_record"),
     values=(
         Value("drift_record", Record, lambda s: s.f.record(NAME, "drift.json")),
         Value("fail_segments", Columns, lambda s: s.f.table(NAME, "fail_segments.csv")),

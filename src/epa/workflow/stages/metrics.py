@@ -10,7 +10,7 @@ from collections import OrderedDict
 
 from epa.artifacts.case import Case, CaseData, Columns, Record, remember
 from epa.artifacts.stage import Stage, Value
-from epa.core import runtime
+from epa.core import geometry, runtime
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory, position_only
 from epa.metrics import accuracy, registry
@@ -49,7 +49,8 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
     registered metrics that declare ``inputs`` (mode rpg's: ``unaligned``, ``transform``,
     ``reference``); each is asked for only when such a metric is on."""
     c = cfg["metrics"]
-    length = ref.length()
+    dist = geometry.path_distances(ref.p)  # once: the check below and every distance metric
+    length = float(dist[-1]) if len(dist) else 0.0
     if length < MIN_PATH_M:
         raise EpaError(
             f"the reference does not move ({length:.3g} m over the matched poses): distance RPE,"
@@ -64,6 +65,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
         time_delta=c["time_delta"],
         time_tol=c["time_tol"],
         rpe=c["rpe"],
+        dist=dist,
     )
     summary: dict = dict(evaluated)  # metrics.json grows from here (records.MetricsRecord)
     summary["est_length_m"] = est.length()  # the aligned estimate's matched path (EA-Drift's L)
