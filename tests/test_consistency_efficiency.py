@@ -267,3 +267,52 @@ def test_m2ud_matching_is_the_patchs_all_pairs_rule():
         if n and rng.random() < 0.5:  # entries exactly on the edge, repeated, out of order
             t_timing = np.concatenate([t_timing, t_ref[rng.integers(0, n, 5)] + 0.15])[::-1]
         assert np.array_equal(efficiency.match_m2ud(t_ref, t_timing), patch(t_ref, t_timing))
+
+
+def _lapack_quadratic(e, cov):
+    """The previous formula, pose by pose: LAPACK's Cholesky and a solve, nan where it fails."""
+    out = np.full(len(e), np.nan)
+    for k, (v, c) in enumerate(zip(e, cov)):
+        try:
+            y = np.linalg.solve(np.linalg.cholesky(c), v)
+        except np.linalg.LinAlgError:
+            continue
+        out[k] = y @ y
+    return out
+
+
+def test_closed_form_nees_equals_lapack_on_random_and_near_singular_covariances():
+    # the 3x3 Cholesky written out takes LAPACK's steps in its order: the same value to rounding
+    rng = np.random.default_rng(3)
+    cov = random_spd(rng, 500, 0.02)
+    u = geometry.so3_exp(rng.normal(size=(200, 3)))
+    tiny = np.array([1.0, 1e-5, 1e-10])  # condition 1e10: one direction barely known
+    cov = np.concatenate([cov, u @ (tiny[:, None] * u.transpose(0, 2, 1))])
+    e = rng.normal(size=(len(cov), 3)) * 0.01
+    got, want = consistency._quadratic(e, cov), _lapack_quadratic(e, cov)
+    assert np.isfinite(want).all()
+    # the near-singular ones lose digits to their condition in both: relative 1e-5 at 1e10
+    np.testing.assert_allclose(got[:500], want[:500], rtol=1e-12)
+    np.testing.assert_allclose(got[500:], want[500:], rtol=1e-5)
+
+
+def test_closed_form_nees_is_nan_exactly_where_lapack_finds_no_cholesky():
+    spd = np.diag([1e-4, 2e-4, 3e-4])
+    cases = {
+        "spd": spd,
+        "negative first pivot": np.diag([-1e-4, 2e-4, 3e-4]),
+        "zero second pivot": np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]]),
+        "indefinite last pivot": np.array([[2.0, 0.0, 1.9], [0.0, 1.0, 0.0], [1.9, 0.0, 1.8]]),
+        "all zero": np.zeros((3, 3)),
+        "nan entry": np.where(np.eye(3) > 0, np.nan, 0.0),
+        # numpy reads the lower triangle only: a junk upper triangle changes nothing
+        "junk upper": spd + np.triu(np.full((3, 3), 5.0), 1),
+    }
+    cov = np.array(list(cases.values()))
+    e = np.tile([0.01, -0.02, 0.005], (len(cov), 1))
+    got, want = consistency._quadratic(e, cov), _lapack_quadratic(e, cov)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    assert list(np.isfinite(got)) == [True, False, False, False, False, False, True]
+    # hand-derived for the diagonal one: sum e_k^2 / sigma_k^2
+    assert got[0] == pytest.approx(1e-4 / 1e-4 + 4e-4 / 2e-4 + 2.5e-5 / 3e-4, rel=1e-14)

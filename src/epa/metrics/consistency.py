@@ -41,25 +41,25 @@ def reference_in_estimate_frame(
 
 
 def _quadratic(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
-    """e^T C^-1 e per pose; nan where C is not positive definite."""
-    out = np.full(len(e), np.nan)
-    try:
-        chol = np.linalg.cholesky(cov)
-        good = np.ones(len(e), bool)
-    except np.linalg.LinAlgError:  # some are not: do them one by one
-        good = np.array([_is_pd(c) for c in cov])
-        chol = np.linalg.cholesky(np.where(good[:, None, None], cov, np.eye(3)))
-    y = np.linalg.solve(chol, e[..., None])[..., 0]
-    out[good] = geometry.dots(y, y)[good]  # np.sum(y * y, axis=1)'s bits, faster
-    return out
-
-
-def _is_pd(c: np.ndarray) -> bool:
-    try:
-        np.linalg.cholesky(c)
-        return True
-    except np.linalg.LinAlgError:
-        return False
+    """e^T C^-1 e per pose; nan where C is not positive definite. C = L L^T by the 3x3 Cholesky
+    written out over all poses at once (LAPACK's, pose by pose, cost 0.4 µs a pose): L's pivots in
+    LAPACK's order, and C is not positive definite where one is <= 0 or NaN, LAPACK's test. Only
+    the lower triangle is read, as numpy.linalg.cholesky reads it."""
+    c = np.ascontiguousarray(np.reshape(cov, (len(cov), 9)).T)  # contiguous entries: faster arithmetic
+    e0, e1, e2 = np.ascontiguousarray(np.transpose(e))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        l00 = np.sqrt(c[0])
+        l10, l20 = c[3] / l00, c[6] / l00
+        p1 = c[4] - l10 * l10
+        l11 = np.sqrt(p1)
+        l21 = (c[7] - l20 * l10) / l11
+        p2 = c[8] - (l20 * l20 + l21 * l21)
+        good = (c[0] > 0) & (p1 > 0) & (p2 > 0)  # NaN compares false: not positive definite
+        # L y = e by forward substitution; e^T C^-1 e = |y|^2
+        y0 = e0 / l00
+        y1 = (e1 - l10 * y0) / l11
+        y2 = (e2 - (l20 * y0 + l21 * y1)) / np.sqrt(p2)
+        return np.where(good, y0 * y0 + y1 * y1 + y2 * y2, np.nan)
 
 
 def evaluate(
