@@ -115,7 +115,7 @@ def example_stage_costs() -> None:
 
     import pandas  # noqa: F401 - the workers preload it
 
-    from epa.artifacts.case import CaseData, CaseFolder
+    from epa.artifacts.case import CaseFolder
     from epa.workflow import discovery
 
     root = Path(__file__).resolve().parents[1]
@@ -128,7 +128,7 @@ def example_stage_costs() -> None:
         for stage in chain.NAMES[:-1]:
             for case in cases:
                 t0 = CLOCK()
-                chain.run_stage(stage, CaseData(CaseFolder.of(out, case)), cfg)
+                chain.run_stage(stage, chain.CaseData(CaseFolder.of(out, case)), cfg)
                 cpu[stage] = cpu.get(stage, 0.0) + CLOCK() - t0
     for stage, t in cpu.items():
         print(f"{stage:<12}{t:8.2f} s")

@@ -563,26 +563,10 @@ def _plain_yaml(data) -> str | None:
     return "\n".join(lines) + "\n"
 
 
-def document(
-    kind: str,
-    cfg: dict,
-    inputs,
-    *,
-    workflow_dir=None,
-    command_line: str | None = None,
-    workdir=None,
-    extra: dict | None = None,
-) -> dict:
-    """The provenance record: ``kind`` is ``grid`` (a workflow's results) or ``case`` (``epa eval``)."""
-    return document_started(
-        kind,
-        cfg,
-        inputs,
-        workflow_dir=workflow_dir,
-        command_line=command_line,
-        workdir=workdir,
-        extra=extra,
-    )()
+def document(kind: str, cfg: dict, inputs, **options) -> dict:
+    """The provenance record: ``kind`` is ``grid`` (a workflow's results) or ``case`` (``epa eval``);
+    ``options``: those of :func:`document_started`."""
+    return document_started(kind, cfg, inputs, **options)()
 
 
 def document_started(
