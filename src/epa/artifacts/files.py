@@ -301,6 +301,7 @@ def _numbers(path, delimiter: str, skip: int) -> np.ndarray:
     pandas; 3-4x faster than loadtxt on large files, the same doubles) and the file is not small,
     else by numpy."""
     size = os.path.getsize(path)
+    # pandas only where the process chose it (size + 1: never)
     parsers = text.parsers_for(size, PANDAS_FROM_BYTES if runtime.pandas_parser() else size + 1)
     rows = _arrow_numbers(path, delimiter, skip) if "arrow" in parsers else None
     if rows is not None:

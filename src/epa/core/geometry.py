@@ -341,10 +341,14 @@ def pair_errors(rows: np.ndarray, i, j) -> tuple[np.ndarray, np.ndarray]:
 def _gather(rows: np.ndarray, k: np.ndarray) -> np.ndarray:
     """rows[:, k]; a view where k is a run of consecutive indices (a pair set's starts mostly are:
     every pose but the last few), half the gathering of a set of pairs."""
-    run = len(k) and 0 <= k[0] and k[-1] < rows.shape[1] and k[-1] - k[0] == len(k) - 1
-    if run and (np.diff(k) == 1).all():
+    if consecutive(k) and 0 <= k[0] and k[-1] < rows.shape[1]:
         return rows[:, k[0] : k[-1] + 1]
     return np.take(rows, k, axis=1)
+
+
+def consecutive(k: np.ndarray) -> bool:
+    """Whether the integers ``k`` are k[0], k[0] + 1, ..., k[-1] (not empty)."""
+    return bool(len(k) and k[-1] - k[0] == len(k) - 1 and (np.diff(k) == 1).all())
 
 
 def path_distances(p: np.ndarray) -> np.ndarray:

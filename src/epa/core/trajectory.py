@@ -22,15 +22,9 @@ def position_only(ref: Trajectory, est: Trajectory) -> str | None:
 
 def _every_index(idx, n: int) -> bool:
     """Whether ``idx`` is the integer array 0, 1, ..., n - 1."""
-    if (
-        not isinstance(idx, np.ndarray)
-        or idx.ndim != 1
-        or len(idx) != n
-        or idx.dtype.kind not in "iu"
-    ):
+    if not isinstance(idx, np.ndarray) or idx.ndim != 1 or len(idx) != n:
         return False
-    # n integers from 0 to n - 1 in steps of one are exactly these
-    return bool(n > 0 and idx[0] == 0 and idx[-1] == n - 1 and (np.diff(idx) == 1).all())
+    return bool(idx.dtype.kind in "iu" and geometry.consecutive(idx) and idx[0] == 0)
 
 
 def _copy(x: np.ndarray) -> np.ndarray:

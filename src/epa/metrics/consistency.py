@@ -45,9 +45,7 @@ def _quadratic(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
     written out over all poses at once (LAPACK's, pose by pose, cost 0.4 µs a pose): L's pivots in
     LAPACK's order, and C is not positive definite where one is <= 0 or NaN, LAPACK's test. Only
     the lower triangle is read, as numpy.linalg.cholesky reads it."""
-    c = np.ascontiguousarray(
-        np.reshape(cov, (len(cov), 9)).T
-    )  # contiguous entries: faster arithmetic
+    c = np.ascontiguousarray(np.reshape(cov, (len(cov), 9)).T)  # each entry contiguous: faster
     e0, e1, e2 = np.ascontiguousarray(np.transpose(e))
     with np.errstate(invalid="ignore", divide="ignore"):
         l00 = np.sqrt(c[0])

@@ -599,7 +599,6 @@ def document_started(
     reading = threading.Thread(target=read, name="epa-provenance", daemon=True)
     reading.start()
     git = checkout_started(workflow_dir)
-    head = {"format": FORMAT, "kind": kind}
     extra, cfg = copy.deepcopy(extra or {}), copy.deepcopy(cfg)
     volatile = {
         "created_utc": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
@@ -616,7 +615,8 @@ def document_started(
         if failed:
             raise failed[0]
         return {
-            **head,
+            "format": FORMAT,
+            "kind": kind,
             "epica": {"version": __version__, **git()},
             **found["env"],
             **extra,

@@ -195,7 +195,7 @@ def _read_body(
     raw: list[str],
     found,
     raw_bytes=None,
-    parsers: tuple[str, ...] = ("arrow", "pandas"),
+    parsers: tuple[str, ...] = (),
 ) -> Table:
     """``raw_bytes``: the file's bytes as ``text`` decodes (None after a decoding error): the C
     parser takes the body's bytes from it, not re-encoded from the text (0.2 s a million poses).
@@ -257,7 +257,7 @@ def _checked(tab: Table, rows: np.ndarray, header, header_line) -> Table:
 
 
 def _c_parser_rows(
-    data: bytes, offset: int, width: int, parsers: tuple[str, ...] = ("arrow", "pandas")
+    data: bytes, offset: int, width: int, parsers: tuple[str, ...]
 ) -> np.ndarray | None:
     """Rows of ``width`` numbers, ``data[offset:]`` parsed at once in C (without copying it), or
     None where the line-by-line reader must decide (and say which line is wrong): comments, a line
