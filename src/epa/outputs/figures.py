@@ -614,7 +614,8 @@ def _log_axis(ax):
     """A log y axis labelled in plain numbers: 1-2-5 steps over up to two decades, decades beyond."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
-    if not ax.dataLim.y1 > 0:  # nothing positive (every case failed, every error zero): linear
+    if not ax.dataLim.y1 > 0:  # nothing positive (every case failed, every error zero): linear,
+        ax.set_ylim(0, 1)  # from zero, with short tick labels that leave room for the axis label
         return
     ax.set_yscale("log")
     lo, hi = ax.get_ylim()
