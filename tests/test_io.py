@@ -363,3 +363,19 @@ def test_artifacts_read_back_alike_by_every_parser(tmp_path, monkeypatch, parser
         assert files.read_csv(tmp_path / "empty.csv")["a"].shape == (0,)
     finally:
         runtime.use_pandas_parser(False)
+
+
+@pytest.mark.parametrize("content", [TUM, "1 0 0 0 0 0 0 1\n2 0 0 x 0 0 0 1\n", ""])
+def test_a_table_read_ahead_reads_and_fails_as_the_reader(tmp_path, content):
+    """`epa eval` parses the estimate in a second thread (text.TableAhead): the same trajectory,
+    or the same error, raised where the reader would have raised it."""
+    p = write(tmp_path, "a.txt", content)
+    try:
+        here = text.read_trajectory(p)
+    except EpaError as exc:
+        with pytest.raises(EpaError) as ahead:
+            text.read_trajectory(p, table=text.TableAhead(p))
+        assert ahead.value.one_line() == exc.one_line()
+        return
+    there = text.read_trajectory(p, table=text.TableAhead(p))
+    assert all(np.array_equal(getattr(here, k), getattr(there, k)) for k in ("t", "p", "q"))

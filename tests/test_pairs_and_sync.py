@@ -134,6 +134,27 @@ def test_step1_recovers_injected_shifts_on_real_euroc_estimates(data):
     assert np.median(errors) <= 0.002 and np.max(errors) <= 0.005 and np.max(z) <= 3
 
 
+def test_step1_with_a_spare_core_gives_the_same_bits():
+    """`epa eval` runs Step 1's transforms and energies two at a time (runtime.both)."""
+    from epa.core import runtime
+    from epa.core.trajectory import Trajectory
+
+    rng = np.random.default_rng(5)
+    t = np.arange(0, 120, 0.005)
+    yaw = np.cumsum(rng.normal(0, 0.01, len(t)))
+    q = np.c_[0 * t, 0 * t, np.sin(yaw / 2), np.cos(yaw / 2)]
+    traj = Trajectory(t, np.zeros((len(t), 3)), q)
+    est = traj.select(np.arange(0, len(t), 4)).shifted(-0.137)
+    one = sync.estimate_offset(traj, est)
+    runtime.use_spare_thread()
+    try:
+        two = sync.estimate_offset(traj, est)
+    finally:
+        runtime.reset()
+    assert one.used and one.to_dict() == two.to_dict()
+    assert np.array_equal(one.curve_corr, two.curve_corr)
+
+
 def test_step1_falls_back_without_motion():
     from epa.core.trajectory import Trajectory
 

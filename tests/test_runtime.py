@@ -61,3 +61,33 @@ def test_register_takes_a_cache_or_a_reset_function():
         runtime.register("x", {}, reset=lambda: None)
     with pytest.raises(TypeError):
         runtime.register("x")
+
+
+def test_both_runs_the_second_in_a_thread_only_with_a_spare_core():
+    import threading
+
+    def name():
+        return threading.current_thread().name
+
+    assert runtime.both(name, name) == (name(), name())
+    runtime.use_spare_thread()
+    try:
+        first, second = runtime.both(name, name)
+        assert first == name() and second != first
+        with pytest.raises(ZeroDivisionError):  # the second's error, in the caller's thread
+            runtime.both(name, lambda: 1 / 0)
+    finally:
+        runtime.reset()
+    assert not runtime.spare_thread()
+
+
+def test_the_load_stage_reads_ahead_only_a_large_text_with_a_spare_core(tmp_path):
+    big = tmp_path / "big.txt"
+    big.write_bytes(b"1 0 0 0 0 0 0 1\n" * (load.text.ARROW_MIN_BYTES // 16 + 1))
+    assert load.read_ahead(big) is None
+    runtime.use_spare_thread()
+    try:
+        assert load.read_ahead(tmp_path / "missing.txt") is None
+        assert load.read_ahead(big) is not None
+    finally:
+        runtime.reset()

@@ -578,8 +578,10 @@ def _eval(args) -> None:
     import time
 
     from epa.artifacts.case import CaseFolder
+    from epa.core import runtime
     from epa.workflow import chain
 
+    runtime.use_spare_thread()  # one case in this process: its stages may use a second core
     cfg = _eval_config(args)
     out = CaseFolder(args.out)
     chain.clear_arrays(out)

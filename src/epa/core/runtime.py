@@ -5,6 +5,10 @@ empty it, and :func:`reset` empties them all, e.g. between two grids in one proc
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TypeVar
+
+T = TypeVar("T")
+U = TypeVar("U")
 
 _RESETS: dict[str, Callable[[], None]] = {}
 
@@ -48,6 +52,51 @@ def pandas_parser() -> bool:
 
 
 register("core.runtime.parser", reset=lambda: use_pandas_parser(False))
+
+# Whether this process runs one case alone (`epa eval`), so that a stage may give a second thread
+# work that releases the GIL (the estimate's parse beside the reference's, Step 1's two forward
+# transforms). Off elsewhere: the workflow runs a worker per core, which a second thread would
+# oversubscribe. Either way the same bits: each thread computes what one thread did.
+_SPARE = {"thread": False}
+
+
+def use_spare_thread(on: bool = True) -> None:
+    """Let stages run GIL-releasing work in a second thread from now on (one case, one process)."""
+    _SPARE["thread"] = on
+
+
+def spare_thread() -> bool:
+    """Whether :func:`use_spare_thread` was called in this process (since the last reset)."""
+    return _SPARE["thread"]
+
+
+register("core.runtime.spare_thread", reset=lambda: use_spare_thread(False))
+
+
+def both(f: Callable[[], T], g: Callable[[], U]) -> tuple[T, U]:
+    """(f(), g()); g in a second thread where :func:`spare_thread` allows (both should release the
+    GIL for most of their time: else a second thread only adds its switches)."""
+    if not spare_thread():
+        return f(), g()
+    done: list = []
+
+    def second() -> None:
+        try:
+            done.append(g())
+        except BaseException as exc:  # raised in the caller's thread, below
+            done.extend((None, exc))
+
+    import threading  # (imported by every process that gets here: provenance's thread)
+
+    thread = threading.Thread(target=second, name="epa-second", daemon=True)
+    thread.start()
+    try:
+        first = f()
+    finally:
+        thread.join()
+    if len(done) == 2:
+        raise done[1]
+    return first, done[0]
 
 
 def names() -> tuple[str, ...]:

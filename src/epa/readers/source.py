@@ -108,10 +108,12 @@ def read(
     notes: list | None = None,
     kitti_times=None,
     c_parser_min_bytes: int = text.C_PARSER_MIN_BYTES,
+    table: text.TableAhead | None = None,
 ) -> Trajectory:
     """Read a source (bag or text file) into seconds and unit quaternions; what was inferred goes to
     ``notes`` and the log. ``c_parser_min_bytes``: text files from this size on are parsed by
-    pandas' C parser (:func:`epa.readers.text.read_table`)."""
+    pandas' C parser (:func:`epa.readers.text.read_table`). ``table``: a text file's table already
+    started (:class:`epa.readers.text.TableAhead`)."""
     path = Path(path)
     if bags.is_bag(path):
         own: list[str] = []
@@ -154,6 +156,7 @@ def read(
         kitti_printed=opts.get("kitti_printed", False),
         notes=notes,
         c_parser_min_bytes=c_parser_min_bytes,
+        table=table,
     )
     if traj.cov_rot is not None and opts.get("orientation_covariance") == "global":
         traj = Trajectory(

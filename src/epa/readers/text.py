@@ -20,6 +20,7 @@ import importlib.util
 import logging
 import stat
 import sys
+import threading
 import warnings
 from pathlib import Path
 from typing import NoReturn
@@ -68,6 +69,7 @@ __all__ = [
     "READERS",
     "TIME_UNITS",
     "Table",
+    "TableAhead",
     "Unordered",
     "arrow_rows",
     "beyond_reach",
@@ -137,6 +139,34 @@ def read_table(path: Path, *, c_parser_min_bytes: int = C_PARSER_MIN_BYTES) -> T
         raw = text.splitlines(keepends=True)
         found = scan_header(path, raw)
     return _read_body(path, text, raw, found, raw_bytes, parsers=() if refused else parsers)
+
+
+class TableAhead:
+    """:func:`read_table` of a file started in a thread, for a caller with a spare core
+    (:func:`epa.core.runtime.spare_thread`): reading the bytes, pyarrow's parse and numpy's copies
+    release the GIL, so it runs beside the caller's own work (`epa eval`: the estimate's 15 MB parse
+    beside the reference's). :meth:`result` waits for it and gives the table, or raises its error
+    as read_table would have raised it there."""
+
+    def __init__(self, path: Path, c_parser_min_bytes: int = C_PARSER_MIN_BYTES) -> None:
+        self.path = path
+        self._done: list = []  # [table] or [None, the exception]
+        self._thread = threading.Thread(
+            target=self._read, args=(c_parser_min_bytes,), name="epa-read-ahead", daemon=True
+        )
+        self._thread.start()
+
+    def _read(self, c_parser_min_bytes: int) -> None:
+        try:
+            self._done.append(read_table(self.path, c_parser_min_bytes=c_parser_min_bytes))
+        except BaseException as exc:  # raised in the caller's thread, by result()
+            self._done.extend((None, exc))
+
+    def result(self) -> Table:
+        self._thread.join()
+        if self._done[0] is None:
+            raise self._done[1]
+        return self._done[0]
 
 
 # whether pyarrow is installed: looked up once (0.1 ms), imported only when a file needs it
@@ -414,19 +444,23 @@ def read_trajectory(
     notes: list | None = None,
     c_parser_min_bytes: int = C_PARSER_MIN_BYTES,
     printed_quaternions: bool = False,
+    table: TableAhead | None = None,
 ) -> Trajectory:
     """Read any supported trajectory file into seconds and unit quaternions. Every interpretation the
     file did not state (detected format, nanoseconds, sorting, KITTI times) is logged as a warning
     and appended to ``notes``. ``kitti_printed`` also keeps KITTI's printed rotation blocks (evo's
     commands compute on them). ``c_parser_min_bytes``: as :func:`read_table`'s.
     ``printed_quaternions``: the quaternions as the file prints them, not normalised (a second read
-    of a file for the ETH3D protocol: its notes are not logged again)."""
+    of a file for the ETH3D protocol: its notes are not logged again). ``table``: the file's
+    :func:`read_table` already started (:class:`TableAhead` of ``path``), taken instead of reading."""
     path = Path(path)
     if fmt not in FORMATS:
         raise EpaError(
             f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}", path=str(path)
         )
-    tab = read_table(path, c_parser_min_bytes=c_parser_min_bytes)
+    tab = (
+        read_table(path, c_parser_min_bytes=c_parser_min_bytes) if table is None else table.result()
+    )
     detected = []  # a detected format is a note, not a warning: it is routine
     if fmt == "auto":
         fmt = detect_format(path, tab)
