@@ -379,3 +379,19 @@ def test_a_table_read_ahead_reads_and_fails_as_the_reader(tmp_path, content):
         return
     there = text.read_trajectory(p, table=text.TableAhead(p))
     assert all(np.array_equal(getattr(here, k), getattr(there, k)) for k in ("t", "p", "q"))
+
+
+def test_upper_to_full_is_the_gather_layout_and_all():
+    """The covariance columns' gather: the values and the strides of numpy's fancy index (sums over
+    the poses depend on the layout)."""
+    rows = np.random.default_rng(2).normal(size=(50, 20))
+    idx = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+    for u, columns in (
+        (rows[:, 8:14], None),
+        (rows, [14, 15, 16, 17, 18, 19]),
+        (rows[:0], [3] * 6),
+    ):
+        full = text.upper_to_full(u, columns)
+        gathered = u[:, idx if columns is None else np.asarray(columns)[idx]]
+        assert np.array_equal(full, gathered) and full.strides == gathered.strides
+        assert np.array_equal(full.sum(axis=0), gathered.sum(axis=0))
