@@ -17,6 +17,7 @@ from typing import Any
 
 from epa import __version__
 from epa.artifacts.stage import folder
+from epa.core import runtime
 from epa.core.errors import EpaError
 
 REPORT_STAGE = "report"
@@ -578,7 +579,6 @@ def _eval(args) -> None:
     import time
 
     from epa.artifacts.case import CaseFolder
-    from epa.core import runtime
     from epa.workflow import chain
 
     runtime.use_spare_thread()  # one case in this process: its stages may use a second core
