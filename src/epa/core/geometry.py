@@ -357,3 +357,53 @@ def path_distances(p: np.ndarray) -> np.ndarray:
         return np.zeros(0)
     steps = norms(np.diff(p, axis=0))
     return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+def relative_motion_rows(
+    q_rows: np.ndarray, p_rows: np.ndarray, i, j
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`relative_motions` on component rows ((4, N) quaternions, (3, N) positions), returned
+    as rows, (4, M) and (3, M): its arithmetic, without the (M, 4) arrays' copies. ``i``, ``j``:
+    index arrays or slices."""
+    x, y, z, w = q_rows[:, i]
+    inv = (-x, -y, -z, w)  # quat_conj
+    q = np.array(_mul_rows(inv, q_rows[:, j]))
+    return q, np.array(_rotate_rows(inv, p_rows[:, j] - p_rows[:, i]))
+
+
+def log_rows(q_rows: np.ndarray) -> np.ndarray:
+    """quat_log of (4, N) quaternion rows, as (3, N) rows (:func:`quat_log_rows`' arithmetic)."""
+    x, y, z, w = q_rows
+    flip = w < 0  # same rotation, angle in [0, pi]
+    x, y, z, w = (np.where(flip, -c, c) for c in (x, y, z, w))
+    n = np.sqrt(x * x + y * y + z * z)
+    angle = 2 * np.arctan2(n, w)
+    # angle/sin(angle/2) -> 2 as angle -> 0
+    scale = np.where(n > 1e-12, angle / np.where(n > 1e-12, n, 1.0), 2.0)
+    return np.array((x * scale, y * scale, z * scale))
+
+
+def rot_rows(q_rows: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """quat_to_rot of (4, N) quaternion rows, as (3, 3, N) rows (the same formulas), written into
+    ``out`` when given."""
+    x, y, z, w = q_rows
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    r = np.empty((3, 3) + np.shape(x)) if out is None else out
+    r[0, 0], r[0, 1], r[0, 2] = 1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)
+    r[1, 0], r[1, 1], r[1, 2] = 2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)
+    r[2, 0], r[2, 1], r[2, 2] = 2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)
+    return r
+
+
+def mul_rows(a_rows, b_rows) -> np.ndarray:
+    """The Hamilton product of component rows ((4, N) or four scalars each), as (4, N) rows:
+    quat_mul's arithmetic."""
+    return np.array(_mul_rows(a_rows, b_rows))
+
+
+def rotate_rows(q_rows, v_rows) -> np.ndarray:
+    """R(q) v on component rows ((4, N) quaternions, (3, N) or three scalars), as (3, N) rows:
+    quat_rotate's arithmetic."""
+    return np.array(_rotate_rows(q_rows, v_rows))
