@@ -363,7 +363,9 @@ def _verdict(
         ("relative scale", relative_scale_std, max_scale_std, ""),
     ):
         known = [v for v in std if v is not None]
-        if not all(np.isfinite(known)):  # NaN compares false: never read as within the limit
+        if any(np.isnan(known)):  # NaN compares false: never read as within the limit
+            uncertain.append(f"{name} std undefined (motion pairs in one time block)")
+        elif not all(np.isfinite(known)):
             uncertain.append(f"{name} std not finite")
         elif (worst := max(known, default=0.0)) > limit:
             uncertain.append(f"{name} std {worst:.3g}{unit} > {limit}")

@@ -42,10 +42,10 @@ def extrinsic_step(
 
 
 # Motion pairs in one time block (under 2 pair_step s of rotating motion) leave the uncertainty
-# undefined: the covariance is scaled by infinity, and each zero entry becomes 0 x inf = NaN.
+# undefined: the residuals' spread is estimated across blocks, so every covariance entry is NaN.
 UNDEFINED_UNCERTAINTY = (
-    "a null uncertainty entry is undefined (motion pairs in one time block scale the covariance by"
-    " infinity, and 0 x inf is no number)"
+    "a null uncertainty entry is undefined (every motion pair in one time block: the residuals'"
+    " spread across blocks, which the uncertainty is made of, cannot be estimated)"
 )
 
 
