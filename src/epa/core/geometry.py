@@ -407,3 +407,32 @@ def rotate_rows(q_rows, v_rows) -> np.ndarray:
     """R(q) v on component rows ((4, N) quaternions, (3, N) or three scalars), as (3, N) rows:
     quat_rotate's arithmetic."""
     return np.array(_rotate_rows(q_rows, v_rows))
+
+
+def interpolator(t: np.ndarray, p_rows: np.ndarray, q_rows: np.ndarray):
+    """:func:`interpolate` of the same poses at several sets of stamps, on component rows ((3, N)
+    positions, (4, N) quaternions): the slerp's setup of each interval (its normalised ends, their
+    angle and its sine) is made once, and each call ``at(stamps)`` returns (3, M) and (4, M) rows.
+    The same arithmetic as interpolate, element by element: the same bits."""
+    n = len(t)
+    x, y, z, w = q_rows
+    q = q_rows / np.sqrt(x * x + y * y + z * z + w * w)
+    q0, q1 = q[:, :-1], q[:, 1:]
+    dot = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
+    q1 = np.where(dot < 0, -q1, q1)
+    angle = np.arccos(np.clip(np.abs(dot), 0.0, 1.0))
+    small = angle < 1e-12  # the same rotation: either end
+    sine = np.sin(np.where(small, 1.0, angle))
+
+    def at(stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        k = np.clip(np.searchsorted(t, stamps, side="left"), 1, n - 1)
+        lo = k - 1
+        dt = t[k] - t[lo]
+        f = np.clip(np.where(dt > 0, (stamps - t[lo]) / np.where(dt > 0, dt, 1.0), 0.0), 0.0, 1.0)
+        a, s, tiny = angle[lo], sine[lo], small[lo]
+        w0 = np.where(tiny, 1.0 - f, np.sin((1.0 - f) * a) / s)
+        w1 = np.where(tiny, f, np.sin(f * a) / s)
+        p0 = p_rows[:, lo]
+        return p0 + f * (p_rows[:, k] - p0), w0 * q0[:, lo] + w1 * q1[:, lo]
+
+    return at

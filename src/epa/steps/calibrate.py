@@ -103,6 +103,19 @@ class Extrinsic:
         return cast(ExtrinsicRecord, record)
 
 
+def interpolator(ref: Trajectory):
+    """``ref.at`` for several sets of stamps (the same poses, the same bits), the slerp's setup made
+    once; the poses are held as component rows, which the solve reads without copies."""
+    at = geometry.interpolator(ref.t, _rows(ref.p), _rows(ref.q))
+
+    def poses(stamps: np.ndarray) -> Trajectory:
+        stamps = np.asarray(stamps, float)
+        p, q = at(stamps)
+        return Trajectory(stamps, p.T, q.T)
+
+    return poses
+
+
 def _kabsch(h: np.ndarray):
     """R minimising sum |alpha - R beta|^2 from the cross-covariance h = sum beta alpha^T, and h's
     singular values."""
@@ -149,9 +162,9 @@ def solve(
     if cov_rot is None:
         return ext
     if offset_std > 0:
-        ends = []
+        ends, at = [], interpolator(ref)  # the two share each interval's slerp setup
         for sign in (1.0, -1.0):  # only their solutions are used: no covariances
-            shifted = ref.at(ref.t + sign * offset_std)
+            shifted = at(ref.t + sign * offset_std)
             ends.append(_fit(shifted, est, **fit, motions=motions, solution_only=True)[0])
         d_rot = geometry.so3_log(ends[0].R @ ends[1].R.T) / 2
         d_x = (np.r_[ends[0].t, ends[0].scale] - np.r_[ends[1].t, ends[1].scale])[: len(cov_x)] / 2
