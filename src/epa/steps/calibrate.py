@@ -34,6 +34,9 @@ class Step2Status(StrEnum):
     UNCERTAIN = "uncertain"
 
 
+APPLY_BLOCK = 16384  # poses per block in Extrinsic.apply's covariances
+
+
 @dataclass
 class Extrinsic:
     R: np.ndarray = field(default_factory=lambda: np.eye(3))
@@ -63,13 +66,20 @@ class Extrinsic:
         # printed rotation blocks (KITTI) take the same right factor: what the devkit's raw matrices would
         extra = {} if est.r_printed is None else {"r_printed": est.r_printed @ self.R.T}
         if est.cov_rot is not None and est.cov_pos is not None:
-            cov_rot = self.R @ est.cov_rot @ self.R.T
-            lever = np.einsum(
-                "nab,bc->nac", geometry.rot_rows(q).transpose(2, 0, 1), geometry.skew(self.t)
-            )
-            cov_pos = self.scale**2 * est.cov_pos + lever @ cov_rot @ lever.transpose(0, 2, 1)
-            extra.update(cov_rot=cov_rot, cov_pos=cov_pos)
+            extra.update(self._covariances(est, q))
         return Trajectory(est.t, p_b, np.ascontiguousarray(q.T), **extra)
+
+    def _covariances(self, est: Trajectory, q: np.ndarray) -> dict:
+        """apply's covariances, ``q`` the body orientations' rows; in blocks of poses, so that the
+        (N, 3, 3) temporaries stay in cache (each pose's arithmetic is its own: the same bits)."""
+        cov_rot, cov_pos = np.empty_like(est.cov_rot), np.empty_like(est.cov_pos)
+        skew_t = geometry.skew(self.t)
+        for start in range(0, len(est), APPLY_BLOCK):
+            at = slice(start, start + APPLY_BLOCK)
+            cr = cov_rot[at] = self.R @ est.cov_rot[at] @ self.R.T
+            lever = np.einsum("nab,bc->nac", geometry.rot_rows(q[:, at]).transpose(2, 0, 1), skew_t)
+            cov_pos[at] = self.scale**2 * est.cov_pos[at] + lever @ cr @ lever.transpose(0, 2, 1)
+        return {"cov_rot": cov_rot, "cov_pos": cov_pos}
 
     def to_sensor_rp(self, r_b: np.ndarray, p_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The inverse of :meth:`apply` on rotations and positions: body poses -> sensor poses."""
@@ -268,9 +278,7 @@ def _solve_rotation(
     h = _sums(_cols(beta, keep), _cols(alpha, keep))  # sum beta alpha^T
     for _ in range(outlier_iterations + 1):
         r_x, sv = _kabsch(h)
-        c = _rotated(r_x, beta)
-        r = alpha - c
-        resid = np.degrees(np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]))
+        resid = _rotation_residuals(r_x, alpha, beta)
         limit = max(3.0 * _median(resid[keep]), 0.1)
         new_keep = use & (resid <= limit)
         if new_keep.sum() < min_pairs or np.array_equal(new_keep, keep):
@@ -294,7 +302,8 @@ def _solve_rotation(
         return r_x, None, None
     # residual alpha - Exp(d) R beta ~ r + [c]x d with c = R beta, perturbing R on the left (body
     # axes): J = [c]x, so J^T J = |c|^2 I - c c^T and the gradient J^T r = r x c
-    c, r = _cols(c, keep), _cols(r, keep)
+    c = _rotated(r_x, _cols(beta, keep))
+    r = _cols(alpha, keep) - c
     cc = _sums(c, c)
     grad = np.array(
         (r[1] * c[2] - r[2] * c[1], r[2] * c[0] - r[0] * c[2], r[0] * c[1] - r[1] * c[0])
@@ -303,6 +312,15 @@ def _solve_rotation(
         np.trace(cc) * np.eye(3) - cc, grad, block[keep], max_condition
     )
     return r_x, cov_rot, null_rot
+
+
+def _rotation_residuals(r_x: np.ndarray, alpha: np.ndarray, beta: np.ndarray) -> np.ndarray:
+    """|alpha - R_X beta| of every pair, in degrees (in blocks of pairs: temporaries in cache)."""
+    resid = np.empty(alpha.shape[1])
+    for part in geometry.row_blocks(len(resid)):
+        r = alpha[:, part] - _rotated(r_x, beta[:, part])
+        resid[part] = np.degrees(np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]))
+    return resid
 
 
 # the Levi-Civita symbol: (m x v)_b = sum eps[b, c, d] m_c v_d
@@ -513,6 +531,20 @@ def _median(x: np.ndarray) -> float:
     return float(np.mean(order_statistics(x, [h] if x.size % 2 else [h - 1, h])))
 
 
+def _translation_residuals(m: np.ndarray, x: np.ndarray, b: np.ndarray, e: np.ndarray):
+    """m x - b of every pair into the rows ``e``, and its norms (in blocks of pairs)."""
+    resid = np.empty(e.shape[1])
+    for part in geometry.row_blocks(len(resid)):
+        for c in range(3):
+            row = m[c, 0, part] * x[0]
+            for a in range(1, len(x)):
+                row = row + m[c, a, part] * x[a]
+            e[c, part] = row - b[c, part]
+        r = e[:, part]
+        resid[part] = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    return resid
+
+
 def _robust_lstsq(m: np.ndarray, b: np.ndarray, max_condition: float):
     """Least squares on stacked 3-row blocks ((3, n, K) rows m[c, a] and (3, K) rows b), with up to
     two rounds of outlier rejection and truncation of directions the motion does not observe
@@ -522,16 +554,11 @@ def _robust_lstsq(m: np.ndarray, b: np.ndarray, max_condition: float):
     keep = np.ones(k, bool)
     h = np.einsum("cak,cbk->ab", m, m)  # the normal equations over every pair
     g = np.einsum("cak,ck->a", m, b)
+    e = np.empty_like(b)  # every pair's residual rows, written by each round
     for rejection in range(3):
         pinv, null, sv = _pinv(h, max_condition)
         x = pinv @ g
-        e = np.empty_like(b)
-        for c in range(3):  # m x - b, row by row
-            row = m[c, 0] * x[0]
-            for a in range(1, n):
-                row = row + m[c, a] * x[a]
-            e[c] = row - b[c]
-        resid = np.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+        resid = _translation_residuals(m, x, b, e)
         new_keep = resid <= max(3.0 * _median(resid[keep]), 1e-3)
         if rejection == 2 or new_keep.sum() < max(n, k // 2) or np.array_equal(new_keep, keep):
             break
