@@ -66,19 +66,19 @@ class Extrinsic:
         # printed rotation blocks (KITTI) take the same right factor: what the devkit's raw matrices would
         extra = {} if est.r_printed is None else {"r_printed": est.r_printed @ self.R.T}
         if est.cov_rot is not None and est.cov_pos is not None:
-            extra.update(self._covariances(est, q))
+            extra.update(self._covariances(est.cov_rot, est.cov_pos, q))
         return Trajectory(est.t, p_b, np.ascontiguousarray(q.T), **extra)
 
-    def _covariances(self, est: Trajectory, q: np.ndarray) -> dict:
+    def _covariances(self, cov_rot_c: np.ndarray, cov_pos_c: np.ndarray, q: np.ndarray) -> dict:
         """apply's covariances, ``q`` the body orientations' rows; in blocks of poses, so that the
         (N, 3, 3) temporaries stay in cache (each pose's arithmetic is its own: the same bits)."""
-        cov_rot, cov_pos = np.empty_like(est.cov_rot), np.empty_like(est.cov_pos)
+        cov_rot, cov_pos = np.empty_like(cov_rot_c), np.empty_like(cov_pos_c)
         skew_t = geometry.skew(self.t)
-        for start in range(0, len(est), APPLY_BLOCK):
+        for start in range(0, len(cov_rot_c), APPLY_BLOCK):
             at = slice(start, start + APPLY_BLOCK)
-            cr = cov_rot[at] = self.R @ est.cov_rot[at] @ self.R.T
+            cr = cov_rot[at] = self.R @ cov_rot_c[at] @ self.R.T
             lever = np.einsum("nab,bc->nac", geometry.rot_rows(q[:, at]).transpose(2, 0, 1), skew_t)
-            cov_pos[at] = self.scale**2 * est.cov_pos[at] + lever @ cr @ lever.transpose(0, 2, 1)
+            cov_pos[at] = self.scale**2 * cov_pos_c[at] + lever @ cr @ lever.transpose(0, 2, 1)
         return {"cov_rot": cov_rot, "cov_pos": cov_pos}
 
     def to_sensor_rp(self, r_b: np.ndarray, p_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
