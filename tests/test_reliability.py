@@ -240,8 +240,9 @@ def test_pure_translation_without_rotation_has_a_null_drift_valid_ate_with_a_not
 
 
 def test_step2_on_one_time_block_has_null_uncertainty_with_a_note_never_nan(tmp_path):
-    """2.2 s of motion: every motion pair in one 2 s block, so the covariance is scaled by infinity
-    and its zero entries were 0 x inf = NaN (a NaN the JSON writer now refuses)."""
+    """2.2 s of motion: every motion pair in one 2 s block, so the uncertainty is undefined: every
+    entry of both covariances NaN, written as null with a note (never NaN, never a mix of inf and
+    null that rounding-level zeros decided), and the status uncertain."""
     t, p, q = catalogue.motion(45)
     (tmp_path / "ref.txt").write_text(catalogue._rows(t, p, q))
     (tmp_path / "est.txt").write_text(catalogue._rows(t, p, q))
@@ -249,11 +250,14 @@ def test_step2_on_one_time_block_has_null_uncertainty_with_a_note_never_nan(tmp_
     records = chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "out", cfg)
     assert _nan_keys(records) == []
     ext = records["metrics"]["calibrate"]["extrinsic"]
-    assert ext["status"] == "uncertain" and ext["rotation_std_deg"] == [math.inf] * 3
-    assert ext["translation_std_m"] == [None, math.inf, math.inf]
+    assert ext["status"] == "uncertain" and "rotation std undefined" in ext["reason"]
+    assert ext["rotation_std_deg"] == [None] * 3 and ext["translation_std_m"] == [None] * 3
+    for key in ("rotation_covariance_rad2", "translation_covariance"):
+        assert ext[key] == [[None] * 3] * 3
     assert ext["notes"] == [calibrate_stage.UNDEFINED_UNCERTAINTY]
     written = _strict_json(tmp_path / "out/04_calibrate/calibrate.json")["extrinsic"]
-    assert written["translation_std_m"] == [None, "inf", "inf"]
+    assert written["translation_std_m"] == [None] * 3
+    assert written["rotation_covariance_rad2"] == [[None] * 3] * 3
 
 
 def test_write_json_refuses_nan_naming_its_key_and_writes_nothing(tmp_path):

@@ -357,3 +357,125 @@ def path_distances(p: np.ndarray) -> np.ndarray:
         return np.zeros(0)
     steps = norms(np.diff(p, axis=0))
     return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+ROW_BLOCK = (
+    32768  # columns per block in the *_rows functions: temporaries in cache, not fresh pages
+)
+
+
+def row_blocks(n: int):
+    """Slices of ``ROW_BLOCK`` columns covering n (for arithmetic on component rows in blocks)."""
+    return (slice(s, min(s + ROW_BLOCK, n)) for s in range(0, n, ROW_BLOCK))
+
+
+def _part(idx, part: slice):
+    """The part of an index array or slice (of step 1) that the columns ``part`` of its result take."""
+    if isinstance(idx, slice):
+        return slice(idx.start + part.start, idx.start + part.stop)
+    return idx[part]
+
+
+def relative_motion_rows(
+    q_rows: np.ndarray, p_rows: np.ndarray, i, j
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`relative_motions` on component rows ((4, N) quaternions, (3, N) positions), returned
+    as rows, (4, M) and (3, M): its arithmetic, without the (M, 4) arrays' copies, in blocks of
+    pairs. ``i``, ``j``: index arrays or slices (of step 1, with a start)."""
+    m = len(i) if not isinstance(i, slice) else i.stop - i.start
+    q, t = np.empty((4, m)), np.empty((3, m))
+    for part in row_blocks(m):
+        a, b = _part(i, part), _part(j, part)
+        x, y, z, w = q_rows[:, a]
+        inv = (-x, -y, -z, w)  # quat_conj
+        q[:, part] = _mul_rows(inv, q_rows[:, b])
+        t[:, part] = _rotate_rows(inv, p_rows[:, b] - p_rows[:, a])
+    return q, t
+
+
+def log_rows(q_rows: np.ndarray) -> np.ndarray:
+    """quat_log of (4, N) quaternion rows, as (3, N) rows (:func:`quat_log_rows`' arithmetic)."""
+    out = np.empty((3, q_rows.shape[1]))
+    for part in row_blocks(q_rows.shape[1]):
+        x, y, z, w = q_rows[:, part]
+        flip = w < 0  # same rotation, angle in [0, pi]
+        x, y, z, w = (np.where(flip, -c, c) for c in (x, y, z, w))
+        n = np.sqrt(x * x + y * y + z * z)
+        angle = 2 * np.arctan2(n, w)
+        # angle/sin(angle/2) -> 2 as angle -> 0
+        scale = np.where(n > 1e-12, angle / np.where(n > 1e-12, n, 1.0), 2.0)
+        out[:, part] = (x * scale, y * scale, z * scale)
+    return out
+
+
+def rot_rows(q_rows: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """quat_to_rot of (4, N) quaternion rows, as (3, 3, N) rows (the same formulas), written into
+    ``out`` when given."""
+    r = np.empty((3, 3, q_rows.shape[1])) if out is None else out
+    for part in row_blocks(q_rows.shape[1]):
+        x, y, z, w = q_rows[:, part]
+        xx, yy, zz = x * x, y * y, z * z
+        xy, xz, yz = x * y, x * z, y * z
+        wx, wy, wz = w * x, w * y, w * z
+        r[0, 0, part], r[0, 1, part], r[0, 2, part] = (
+            1 - 2 * (yy + zz),
+            2 * (xy - wz),
+            2 * (xz + wy),
+        )
+        r[1, 0, part], r[1, 1, part], r[1, 2, part] = (
+            2 * (xy + wz),
+            1 - 2 * (xx + zz),
+            2 * (yz - wx),
+        )
+        r[2, 0, part], r[2, 1, part], r[2, 2, part] = (
+            2 * (xz - wy),
+            2 * (yz + wx),
+            1 - 2 * (xx + yy),
+        )
+    return r
+
+
+def mul_rows(a_rows, b_rows) -> np.ndarray:
+    """The Hamilton product of component rows ((4, N) or four scalars each), as (4, N) rows:
+    quat_mul's arithmetic."""
+    return np.array(_mul_rows(a_rows, b_rows))
+
+
+def rotate_rows(q_rows, v_rows) -> np.ndarray:
+    """R(q) v on component rows ((4, N) quaternions, (3, N) or three scalars), as (3, N) rows:
+    quat_rotate's arithmetic."""
+    return np.array(_rotate_rows(q_rows, v_rows))
+
+
+def interpolator(t: np.ndarray, p_rows: np.ndarray, q_rows: np.ndarray):
+    """:func:`interpolate` of the same poses at several sets of stamps, on component rows ((3, N)
+    positions, (4, N) quaternions): the slerp's setup of each interval (its normalised ends, their
+    angle and its sine) is made once, and each call ``at(stamps)`` returns (3, M) and (4, M) rows.
+    The same arithmetic as interpolate, element by element: the same bits."""
+    n = len(t)
+    x, y, z, w = q_rows
+    q = q_rows / np.sqrt(x * x + y * y + z * z + w * w)
+    q0, q1 = q[:, :-1], q[:, 1:]
+    dot = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
+    q1 = np.where(dot < 0, -q1, q1)
+    angle = np.arccos(np.clip(np.abs(dot), 0.0, 1.0))
+    small = angle < 1e-12  # the same rotation: either end
+    sine = np.sin(np.where(small, 1.0, angle))
+
+    def at(stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p_at, q_at = np.empty((3, len(stamps))), np.empty((4, len(stamps)))
+        for part in row_blocks(len(stamps)):
+            st = stamps[part]
+            k = np.clip(np.searchsorted(t, st, side="left"), 1, n - 1)
+            lo = k - 1
+            dt = t[k] - t[lo]
+            f = np.clip(np.where(dt > 0, (st - t[lo]) / np.where(dt > 0, dt, 1.0), 0.0), 0.0, 1.0)
+            a, s, tiny = angle[lo], sine[lo], small[lo]
+            w0 = np.where(tiny, 1.0 - f, np.sin((1.0 - f) * a) / s)
+            w1 = np.where(tiny, f, np.sin(f * a) / s)
+            p0 = p_rows[:, lo]
+            p_at[:, part] = p0 + f * (p_rows[:, k] - p0)
+            q_at[:, part] = w0 * q0[:, lo] + w1 * q1[:, lo]
+        return p_at, q_at
+
+    return at

@@ -33,6 +33,9 @@ class Step2Status(StrEnum):
     UNCERTAIN = "uncertain"
 
 
+APPLY_BLOCK = 16384  # poses per block in Extrinsic.apply's covariances
+
+
 @dataclass
 class Extrinsic:
     R: np.ndarray = field(default_factory=lambda: np.eye(3))
@@ -50,18 +53,32 @@ class Extrinsic:
         p_b = s p_c - R_b t_x moves the position error by s dp + R_b [t_x]x d_body. Only the
         orientation and position blocks are known (no cross-covariance), so the lever arm adds
         R_b [t_x]x Cov_rot [t_x]x^T R_b^T to the position block."""
-        n = len(est)
-        # (N, 3, 3) @ (3, 3) as one (3N, 3) BLAS product: each row of R_C times R^T
-        r_b = (est.r.reshape(-1, 3) @ self.R.T).reshape(n, 3, 3)
-        p_b = self.scale * est.p - (r_b.reshape(-1, 3) @ self.t).reshape(n, 3)
+        # R_b = R_c R^T as the quaternion product q_c conj(q_x) (no matrices, no BLAS product on
+        # (3N, 3) rows), normalised with w >= 0 as rot_to_quat gives it
+        qx = geometry.rot_to_quat(self.R)
+        q_c = _rows(est.q)
+        q = geometry.mul_rows(q_c, (-qx[0], -qx[1], -qx[2], qx[3]))
+        norm = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        q /= np.where(q[3] < 0, -norm, norm)
+        # R_b t = R_c (R^T t)
+        p_b = self.scale * est.p - geometry.rotate_rows(q_c, self.R.T @ self.t).T
         # printed rotation blocks (KITTI) take the same right factor: what the devkit's raw matrices would
         extra = {} if est.r_printed is None else {"r_printed": est.r_printed @ self.R.T}
         if est.cov_rot is not None and est.cov_pos is not None:
-            cov_rot = self.R @ est.cov_rot @ self.R.T
-            lever = (r_b.reshape(-1, 3) @ geometry.skew(self.t)).reshape(n, 3, 3)
-            cov_pos = self.scale**2 * est.cov_pos + lever @ cov_rot @ lever.transpose(0, 2, 1)
-            extra.update(cov_rot=cov_rot, cov_pos=cov_pos)
-        return Trajectory.from_rp(est.t, r_b, p_b, **extra)
+            extra.update(self._covariances(est.cov_rot, est.cov_pos, q))
+        return Trajectory(est.t, p_b, np.ascontiguousarray(q.T), **extra)
+
+    def _covariances(self, cov_rot_c: np.ndarray, cov_pos_c: np.ndarray, q: np.ndarray) -> dict:
+        """apply's covariances, ``q`` the body orientations' rows; in blocks of poses, so that the
+        (N, 3, 3) temporaries stay in cache (each pose's arithmetic is its own: the same bits)."""
+        cov_rot, cov_pos = np.empty_like(cov_rot_c), np.empty_like(cov_pos_c)
+        skew_t = geometry.skew(self.t)
+        for start in range(0, len(cov_rot_c), APPLY_BLOCK):
+            at = slice(start, start + APPLY_BLOCK)
+            cr = cov_rot[at] = self.R @ cov_rot_c[at] @ self.R.T
+            lever = np.einsum("nab,bc->nac", geometry.rot_rows(q[:, at]).transpose(2, 0, 1), skew_t)
+            cov_pos[at] = self.scale**2 * cov_pos_c[at] + lever @ cr @ lever.transpose(0, 2, 1)
+        return {"cov_rot": cov_rot, "cov_pos": cov_pos}
 
     def to_sensor_rp(self, r_b: np.ndarray, p_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The inverse of :meth:`apply` on rotations and positions: body poses -> sensor poses."""
@@ -94,6 +111,19 @@ class Extrinsic:
         }
         # info's keys are the solve's, gathered as far as it got: ExtrinsicRecord's NotRequired ones
         return cast(ExtrinsicRecord, record)
+
+
+def interpolator(ref: Trajectory):
+    """``ref.at`` for several sets of stamps (the same poses, the same bits), the slerp's setup made
+    once; the poses are held as component rows, which the solve reads without copies."""
+    at = geometry.interpolator(ref.t, _rows(ref.p), _rows(ref.q))
+
+    def poses(stamps: np.ndarray) -> Trajectory:
+        stamps = np.asarray(stamps, float)
+        p, q = at(stamps)
+        return Trajectory(stamps, p.T, q.T)
+
+    return poses
 
 
 def _kabsch(h: np.ndarray):
@@ -142,9 +172,9 @@ def solve(
     if cov_rot is None:
         return ext
     if offset_std > 0:
-        ends = []
+        ends, at = [], interpolator(ref)  # the two share each interval's slerp setup
         for sign in (1.0, -1.0):  # only their solutions are used: no covariances
-            shifted = ref.at(ref.t + sign * offset_std)
+            shifted = at(ref.t + sign * offset_std)
             ends.append(_fit(shifted, est, **fit, motions=motions, solution_only=True)[0])
         d_rot = geometry.so3_log(ends[0].R @ ends[1].R.T) / 2
         d_x = (np.r_[ends[0].t, ends[0].scale] - np.r_[ends[1].t, ends[1].scale])[: len(cov_x)] / 2
@@ -177,28 +207,26 @@ def _fit(
 ):
     """The solve, and the covariances and unobservable directions of rotation and translation (all
     None when too little motion left nothing to solve, or not asked for: ``solution_only``).
-    ``motions`` keeps the estimate's motion pairs from one call to the next: the same pairs give the
-    same motions, so they are computed once."""
-    i, j = closest_pairs(ref.t - ref.t[0], pair_step, 0.25 * pair_step, strict=False, skip=1)
+    ``motions`` keeps the motion pairs and the estimate's motions from one call to the next: the
+    same relative times give the same pairs, and the same pairs the same motions, so each is
+    computed once. Every per-pair quantity is held as component rows ((3, K) and (3, 3, K)), and
+    the sums over pairs are einsum's, not BLAS products (whose threads spin and would be counted)."""
+    motions = {} if motions is None else motions
+    i, j = _motion_pairs(ref.t - ref.t[0], pair_step, motions)
     info: dict = {"pairs": int(len(i)), "pair_step_s": pair_step}
     if len(i) < min_pairs:
         return _too_little(f"only {len(i)} motion pairs ({min_pairs} needed)", info)
-    qa, ta = geometry.relative_motions(ref.q, ref.p, i, j)
-    kept = None if motions is None else motions.get("pairs")
-    if (
-        motions is not None
-        and kept is not None
-        and np.array_equal(kept[0], i)
-        and np.array_equal(kept[1], j)
-    ):
-        qb, tb, beta = motions["estimate"]
+    at = (_index(i), _index(j))  # runs of consecutive poses as slices: views, not gathers
+    qa, ta = geometry.relative_motion_rows(_rows(ref.q), _rows(ref.p), *at)
+    kept = motions.get("estimate")
+    if kept is not None and (kept[0] is i or np.array_equal(kept[0], i)):
+        qb, tb, beta = kept[1]
     else:
-        qb, tb = geometry.relative_motions(est.q, est.p, i, j)
-        beta = geometry.quat_log(qb)
-        if motions is not None:
-            motions.update(pairs=(i, j), estimate=(qb, tb, beta))
-    alpha = geometry.quat_log(qa)
-    angle = np.degrees(geometry.norms(alpha))
+        qb, tb = geometry.relative_motion_rows(_rows(est.q), _rows(est.p), *at)
+        beta = geometry.log_rows(qb)
+        motions["estimate"] = (i, (qb, tb, beta))
+    alpha = geometry.log_rows(qa)
+    angle = np.degrees(np.sqrt(alpha[0] * alpha[0] + alpha[1] * alpha[1] + alpha[2] * alpha[2]))
     use = angle >= min_rotation_deg
     info["rotation_pairs"] = int(use.sum())
     info["excitation_rms_deg"] = float(np.sqrt(np.mean(angle[use] ** 2))) if use.any() else 0.0
@@ -209,25 +237,29 @@ def _fit(
             info,
         )
     # Pairs overlap in time, so the residuals are grouped in blocks (see _sandwich).
-    block = np.floor((ref.t[i] - ref.t[0]) / (2.0 * pair_step)).astype(int)
+    block = (
+        None if solution_only else np.floor((ref.t[i] - ref.t[0]) / (2.0 * pair_step)).astype(int)
+    )
     r_x, cov_rot, null_rot = _solve_rotation(
         alpha, beta, use, block, min_pairs, outlier_iterations, max_condition, info, solution_only
     )
-    # the translation equations need (R_A - I) as matrices
     x, cov_x, null_x = _solve_translation(
-        geometry.quat_to_rot(qa),
-        ta,
-        tb,
-        r_x,
-        cov_rot,
-        block,
-        scale,
-        max_condition,
-        info,
-        solution_only,
+        qa, ta, tb, r_x, cov_rot, block, scale, max_condition, info, solution_only
     )
     s = float(x[3]) if scale else 1.0
     return Extrinsic(R=r_x, t=x[:3], scale=s, info=info), cov_rot, null_rot, cov_x, null_x
+
+
+def _motion_pairs(d: np.ndarray, pair_step: float, motions: dict):
+    """The motion pairs of relative times ``d``, those of the previous call when ``d`` is the same
+    (a reference moved by a constant rounds its relative times differently: then they are found
+    again)."""
+    kept = motions.get("times")
+    if kept is not None and np.array_equal(kept[0], d):
+        return kept[1]
+    pairs = closest_pairs(d, pair_step, 0.25 * pair_step, strict=False, skip=1)
+    motions["times"] = (d, pairs)
+    return pairs
 
 
 def _too_little(reason: str, info: dict):
@@ -238,21 +270,25 @@ def _too_little(reason: str, info: dict):
 def _solve_rotation(
     alpha, beta, use, block, min_pairs, outlier_iterations, max_condition, info, solution_only=False
 ):
-    """R_X from the rotation vectors of the motion pairs (alpha = R_X beta) by Kabsch, rejecting
-    pairs beyond 3 median residuals; its covariance and unobservable directions (None, None with
-    ``solution_only``)."""
+    """R_X from the rotation vectors of the motion pairs ((3, K) rows, alpha = R_X beta) by Kabsch,
+    rejecting pairs beyond 3 median residuals; its covariance and unobservable directions (None,
+    None with ``solution_only``)."""
     keep = use.copy()
-    h = beta[keep].T @ alpha[keep]
+    h = _sums(_cols(beta, keep), _cols(alpha, keep))  # sum beta alpha^T
     for _ in range(outlier_iterations + 1):
         r_x, sv = _kabsch(h)
-        resid = np.degrees(geometry.norms(alpha - beta @ r_x.T))
-        limit = max(3.0 * np.median(resid[keep]), 0.1)
+        resid = _rotation_residuals(r_x, alpha, beta)
+        limit = max(3.0 * _median(resid[keep]), 0.1)
         new_keep = use & (resid <= limit)
         if new_keep.sum() < min_pairs or np.array_equal(new_keep, keep):
             break
         # the next round's cross-covariance: only the pairs that left or came back change it
         out, back = keep & ~new_keep, new_keep & ~keep
-        h = h - beta[out].T @ alpha[out] + beta[back].T @ alpha[back]
+        h = (
+            h
+            - _sums(_cols(beta, out), _cols(alpha, out))
+            + _sums(_cols(beta, back), _cols(alpha, back))
+        )
         keep = new_keep
     rot_rms = float(np.sqrt(np.mean(resid[keep] ** 2)))
     info.update(
@@ -263,39 +299,63 @@ def _solve_rotation(
     )
     if solution_only:
         return r_x, None, None
-    # residual alpha - Exp(d) R beta ~ r + [R beta]x d, perturbing R on the left (body axes)
-    jac_r = geometry.skew(beta[keep] @ r_x.T)
+    # residual alpha - Exp(d) R beta ~ r + [c]x d with c = R beta, perturbing R on the left (body
+    # axes): J = [c]x, so J^T J = |c|^2 I - c c^T and the gradient J^T r = r x c
+    c = _rotated(r_x, _cols(beta, keep))
+    r = _cols(alpha, keep) - c
+    cc = _sums(c, c)
+    grad = np.array(
+        (r[1] * c[2] - r[2] * c[1], r[2] * c[0] - r[0] * c[2], r[0] * c[1] - r[1] * c[0])
+    )
     cov_rot, null_rot, _ = _sandwich(
-        jac_r, alpha[keep] - beta[keep] @ r_x.T, block[keep], max_condition
+        np.trace(cc) * np.eye(3) - cc, grad, block[keep], max_condition
     )
     return r_x, cov_rot, null_rot
 
 
+def _rotation_residuals(r_x: np.ndarray, alpha: np.ndarray, beta: np.ndarray) -> np.ndarray:
+    """|alpha - R_X beta| of every pair, in degrees (in blocks of pairs: temporaries in cache)."""
+    resid = np.empty(alpha.shape[1])
+    for part in geometry.row_blocks(len(resid)):
+        r = alpha[:, part] - _rotated(r_x, beta[:, part])
+        resid[part] = np.degrees(np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]))
+    return resid
+
+
+# the Levi-Civita symbol: (m x v)_b = sum eps[b, c, d] m_c v_d
+_EPS = np.zeros((3, 3, 3))
+_EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
+_EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
+
+
 def _solve_translation(
-    ra, ta, tb, r_x, cov_rot, block, scale, max_condition, info, solution_only=False
+    qa, ta, tb, r_x, cov_rot, block, scale, max_condition, info, solution_only=False
 ):
     """t_X (and the scale) from every pair, the rotation now known: (R_A - I) t_X = R_X t_B - t_A
     (with scale: s R_X t_B). Its covariance carries the rotation's uncertainty (None, None with
-    ``solution_only``)."""
-    m = ra - np.eye(3)  # (K, 3, 3)
-    rtb = tb @ r_x.T  # R_X t_B
+    ``solution_only``). The equations' matrices are (3, n, K) rows: m[c, a] of every pair."""
+    rtb = _rotated(r_x, tb)  # R_X t_B
+    m = np.empty((3, 4 if scale else 3, qa.shape[1]))
+    geometry.rot_rows(qa, out=m[:, :3])
+    for k in range(3):
+        m[k, k] -= 1.0  # R_A - I
     if scale:
-        m = np.concatenate([m, -rtb[:, :, None]], axis=2)
+        m[:, 3] = -rtb
         b = -ta
     else:
         b = rtb - ta
-    x, keep_t, tinfo = _robust_lstsq(m, b, max_condition)
+    x, keep_t, h, e, tinfo = _robust_lstsq(m, b, max_condition)
     info.update(tinfo)
     if solution_only:
         return x, None, None
     s = float(x[3]) if scale else 1.0
-    m_kept = m[keep_t]
-    cov_x, null_x, h_pinv = _sandwich(
-        m_kept, (_rows(m_kept) @ x).reshape(-1, 3) - b[keep_t], block[keep_t], max_condition
-    )
-    # the rotation's own uncertainty moves R_X t_B: d(residual)/d(rotation) = s [R_X t_B]x
-    lever = geometry.skew(s * rtb[keep_t])
-    gain = h_pinv @ (_rows(m_kept).T @ _rows(lever))
+    m_kept, e = _cols(m, keep_t), _cols(e, keep_t)
+    grad = np.einsum("cak,ck->ak", m_kept, e)  # J^T r of every pair
+    cov_x, null_x, h_pinv = _sandwich(h, grad, block[keep_t], max_condition)
+    # the rotation's own uncertainty moves R_X t_B: d(residual)/d(rotation) = [v]x, v = s R_X t_B;
+    # sum m^T [v]x has rows sum m[:, a] x v, from the sums of m[c, a] v_d
+    t = np.einsum("cak,dk->cad", m_kept, s * _cols(rtb, keep_t))
+    gain = h_pinv @ np.einsum("bcd,cad->ab", _EPS, t)
     return x, cov_x + gain @ cov_rot @ gain.T, null_x
 
 
@@ -334,7 +394,9 @@ def _verdict(
         ("relative scale", relative_scale_std, max_scale_std, ""),
     ):
         known = [v for v in std if v is not None]
-        if not all(np.isfinite(known)):  # NaN compares false: never read as within the limit
+        if any(np.isnan(known)):  # NaN compares false: never read as within the limit
+            uncertain.append(f"{name} std undefined (motion pairs in one time block)")
+        elif not all(np.isfinite(known)):
             uncertain.append(f"{name} std not finite")
         elif (worst := max(known, default=0.0)) > limit:
             uncertain.append(f"{name} std {worst:.3g}{unit} > {limit}")
@@ -380,27 +442,38 @@ def _pinv(h: np.ndarray, max_condition: float):
     return pinv, (null / np.linalg.norm(null, axis=1, keepdims=True) if len(null) else null), sv
 
 
-def _sandwich(jac: np.ndarray, resid: np.ndarray, block: np.ndarray, max_condition: float):
-    """Covariance of a least-squares solution, H^+ S H^+ with H = sum J^T J, from residuals that are
-    correlated in time: S sums the outer products of the gradient J^T r over time blocks and of
-    each block with the next (overlapping motion pairs correlate only across neighbouring blocks),
-    scaled by G/(G-1) for G blocks. No noise level is assumed: it comes from the residuals.
-    Returns the covariance, the unobservable directions and H^+."""
-    rows = _rows(jac)
-    h_pinv, null, _ = _pinv(rows.T @ rows, max_condition)
-    grad = jac[:, 0] * resid[:, 0:1] + jac[:, 1] * resid[:, 1:2] + jac[:, 2] * resid[:, 2:3]
-    ids, inverse = np.unique(block, return_inverse=True)
-    per_block = np.zeros((len(ids), jac.shape[2]))
-    np.add.at(per_block, inverse, grad)
-    s = per_block.T @ per_block
+def _sandwich(h: np.ndarray, grad: np.ndarray, block: np.ndarray, max_condition: float):
+    """Covariance of a least-squares solution, H^+ S H^+ with H = sum J^T J (given), from residuals
+    that are correlated in time: S sums the outer products of the gradient J^T r (``grad``, (n, K)
+    rows) over time blocks and of each block with the next (overlapping motion pairs correlate only
+    across neighbouring blocks), scaled by G/(G-1) for G blocks. No noise level is assumed: it comes
+    from the residuals, so with a single block it is undefined (all NaN). Returns the covariance,
+    the unobservable directions and H^+."""
+    h_pinv, null, _ = _pinv(h, max_condition)
+    per_block, ids = _block_sums(grad, block)
+    g = len(ids)
+    if g < 2:
+        return np.full(h.shape, np.nan), null, h_pinv
+    s = _sums(per_block, per_block)
     adjacent = np.flatnonzero(np.diff(ids) == 1)
-    cross = per_block[adjacent].T @ per_block[adjacent + 1]
+    cross = _sums(per_block[:, adjacent], per_block[:, adjacent + 1])
     s = s + cross + cross.T
     eig, v = np.linalg.eigh(s)
     s = (v * np.clip(eig, 0, None)) @ v.T  # the cross terms can leave it slightly indefinite
-    g = len(ids)
-    cov = h_pinv @ s @ h_pinv * (g / (g - 1) if g > 1 else np.inf)
+    cov = h_pinv @ s @ h_pinv * (g / (g - 1))
     return cov, null, h_pinv
+
+
+def _block_sums(grad: np.ndarray, block: np.ndarray):
+    """The sums of ``grad``'s columns over each block id, as (n, G) rows, and the ids (ascending).
+    The pairs' blocks come sorted (pairs in time order): runs summed by reduceat."""
+    if len(block) == 0:
+        return np.zeros((len(grad), 0)), block
+    if (np.diff(block) < 0).any():
+        order = np.argsort(block, kind="stable")
+        grad, block = grad[:, order], block[order]
+    starts = np.flatnonzero(np.r_[True, block[1:] != block[:-1]])
+    return np.add.reduceat(grad, starts, axis=1), block[starts]
 
 
 def _uncertainty(cov_rot, null_rot, cov_x, null_x, scale: bool) -> dict:
@@ -422,37 +495,86 @@ def _uncertainty(cov_rot, null_rot, cov_x, null_x, scale: bool) -> dict:
     }
 
 
-def _rows(blocks: np.ndarray) -> np.ndarray:
-    """(K, 3, n) blocks of equations as (3K, n) rows, so that sums over them are BLAS products."""
-    return np.ascontiguousarray(blocks).reshape(-1, blocks.shape[-1])
+def _rows(a: np.ndarray) -> np.ndarray:
+    """(N, k) -> its k component rows, contiguous."""
+    return np.ascontiguousarray(np.asarray(a, dtype=float).T)
+
+
+def _index(i: np.ndarray):
+    """Indices as a slice when they are a run of consecutive ones."""
+    return slice(int(i[0]), int(i[-1]) + 1) if geometry.consecutive(i) else i
+
+
+def _cols(rows: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The pairs (last axis) of ``mask``; no copy when it keeps them all."""
+    return rows if mask.all() else np.compress(mask, rows, axis=-1)  # 4x a boolean index
+
+
+def _sums(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """sum_k a[:, k] b[:, k]^T of (p, K) and (q, K) rows: einsum's loops, not a BLAS product (whose
+    threads spin on such thin shapes, and whose sums depend on their number)."""
+    return np.einsum("ik,jk->ij", a, b)
+
+
+def _rotated(r: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """r v for a 3x3 ``r`` and (3, K) rows ``v``."""
+    return np.array([r[a, 0] * v[0] + r[a, 1] * v[1] + r[a, 2] * v[2] for a in range(3)])
+
+
+def _median(x: np.ndarray) -> float:
+    """np.median (the same value: the mean of the middle one or two) by one partition, without
+    np.median's import of numpy.ma on first use; NaN where there is one, or no value."""
+    if x.size == 0 or np.isnan(x).any():
+        return float("nan")
+    h = x.size // 2
+    ranks = [h] if x.size % 2 else [h - 1, h]
+    return float(np.mean(np.partition(x, ranks)[ranks]))
+
+
+def _translation_residuals(m: np.ndarray, x: np.ndarray, b: np.ndarray, e: np.ndarray):
+    """m x - b of every pair into the rows ``e``, and its norms (in blocks of pairs)."""
+    resid = np.empty(e.shape[1])
+    for part in geometry.row_blocks(len(resid)):
+        for c in range(3):
+            row = m[c, 0, part] * x[0]
+            for a in range(1, len(x)):
+                row = row + m[c, a, part] * x[a]
+            e[c, part] = row - b[c, part]
+        r = e[:, part]
+        resid[part] = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    return resid
 
 
 def _robust_lstsq(m: np.ndarray, b: np.ndarray, max_condition: float):
-    """Least squares on stacked 3-row blocks, with up to two rounds of outlier rejection and
-    truncation of directions the motion does not observe (reported, and left at zero rather than
-    fitted to noise). Returns the solution, the rows kept and the record."""
-    k, _, n = m.shape
+    """Least squares on stacked 3-row blocks ((3, n, K) rows m[c, a] and (3, K) rows b), with up to
+    two rounds of outlier rejection and truncation of directions the motion does not observe
+    (reported, and left at zero rather than fitted to noise). Returns the solution, the pairs kept,
+    their normal matrix, every pair's residual rows and the record."""
+    _, n, k = m.shape
     keep = np.ones(k, bool)
-    rows = _rows(m)  # every 3-row block an equation: the sums over them are BLAS products
-    h, g = rows.T @ rows, rows.T @ b.reshape(-1)  # the normal equations over every pair
+    h = np.einsum("cak,cbk->ab", m, m)  # the normal equations over every pair
+    g = np.einsum("cak,ck->a", m, b)
+    e = np.empty_like(b)  # every pair's residual rows, written by each round
     for rejection in range(3):
         pinv, null, sv = _pinv(h, max_condition)
         x = pinv @ g
-        resid = geometry.norms((rows @ x).reshape(k, 3) - b)
-        new_keep = resid <= max(3.0 * np.median(resid[keep]), 1e-3)
+        resid = _translation_residuals(m, x, b, e)
+        new_keep = resid <= max(3.0 * _median(resid[keep]), 1e-3)
         if rejection == 2 or new_keep.sum() < max(n, k // 2) or np.array_equal(new_keep, keep):
             break
         # the next round's normal equations: only the pairs that left or came back change them
         for sign, changed in ((-1.0, keep & ~new_keep), (1.0, new_keep & ~keep)):
-            rows_c = _rows(m[changed])
-            h = h + sign * (rows_c.T @ rows_c)
-            g = g + sign * (rows_c.T @ b[changed].reshape(-1))
+            m_c = _cols(m, changed)
+            h = h + sign * np.einsum("cak,cbk->ab", m_c, m_c)
+            g = g + sign * np.einsum("cak,ck->a", m_c, _cols(b, changed))
         keep = new_keep
     unobs_t = [d[:3].tolist() for d in null if np.linalg.norm(d[:3]) > 0.5]
     scale_unobs = bool(n == 4 and any(abs(d[3]) > 0.5 for d in null))
     return (
         x,
         keep,
+        h,
+        e,
         {
             "translation_singular_values": sv.tolist(),
             "translation_condition": float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"),

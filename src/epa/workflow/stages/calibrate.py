@@ -42,10 +42,10 @@ def extrinsic_step(
 
 
 # Motion pairs in one time block (under 2 pair_step s of rotating motion) leave the uncertainty
-# undefined: the covariance is scaled by infinity, and each zero entry becomes 0 x inf = NaN.
+# undefined: the residuals' spread is estimated across blocks, so every covariance entry is NaN.
 UNDEFINED_UNCERTAINTY = (
-    "a null uncertainty entry is undefined (motion pairs in one time block scale the covariance by"
-    " infinity, and 0 x inf is no number)"
+    "a null uncertainty entry is undefined (every motion pair in one time block: the residuals'"
+    " spread across blocks, which the uncertainty is made of, cannot be estimated)"
 )
 
 
@@ -102,7 +102,11 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict, croppe
         # Step 2 compares each estimate pose with the reference at its very instant: a matched
         # reference pose may be up to max_diff away, which biases the lever arm (1 cm at 8 m/s and a
         # 50 Hz reference). Step 1's uncertainty is carried into Step 2's (a configured offset is exact).
-        ref_at = cropped()[0].at(est.t + sync_info["offset_s"]) if cropped is not None else ref
+        ref_at = (
+            calibration.interpolator(cropped()[0])(est.t + sync_info["offset_s"])
+            if cropped is not None
+            else ref
+        )
         ext = extrinsic_step(
             ref_at, est, cfg, (step1_record.get("std") or 0.0) if step1_record.get("used") else 0.0
         )
