@@ -287,6 +287,32 @@ def test_write_json_keeps_its_bytes_for_every_other_value(tmp_path):
     )
 
 
+def test_write_json_writes_json_dumps_text_for_every_kind_of_value(tmp_path):
+    """The fast indented writer against json.dumps(indent=2) of the plain values, on the values
+    stage records hold (and on those it hands back to json.dumps)."""
+    values = [
+        {},
+        [],
+        (),
+        {"a": {}, "b": [], "c": [[], {}], "d": ()},
+        {"x": [1, 2.5, -0.0, 1e300, 5e-324, True, False, None, 'é\n"', np.float32(0.1)]},
+        {"nested": {"deeper": [{"k": np.arange(3)}, np.zeros((2, 2)), np.array([True, False])]}},
+        {"ints": [np.int32(-4), np.uint8(7), 10**30], "f16": np.float16(1.5), "s": np.str_("x")},
+        {"inf": [np.inf, -np.float32(np.inf)], "scalar0d": np.array(2.0), "tuple": (1, (2, 3))},
+        {1: "int key", None: "none key", 2.5: "float key"},  # keys json.dumps turns into strings
+        {"path": Path("a/b")},  # no JSON value: json.dumps' TypeError either way
+    ]
+    for k, value in enumerate(values):
+        try:
+            expected = json.dumps(files._jsonable(value), indent=2, allow_nan=False)
+        except TypeError:
+            with pytest.raises(TypeError):
+                files.write_json(tmp_path / f"{k}.json", value)
+            continue
+        files.write_json(tmp_path / f"{k}.json", value)
+        assert (tmp_path / f"{k}.json").read_text() == expected, value
+
+
 # ----------------------------------------------------------------------------- killed writes
 def test_a_sigkilled_write_leaves_only_a_temporary_which_the_cleanup_removes(tmp_path):
     """A real SIGKILL in the middle of an atomic write: no xcorr.csv, a `.xcorr.csv.<random>`."""

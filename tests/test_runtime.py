@@ -7,7 +7,7 @@ import pytest
 
 from epa.artifacts import case
 from epa.core import runtime
-from epa.outputs import figures
+from epa.outputs import figures, provenance
 from epa.outputs.tables import cells
 from epa.workflow import jobs
 from epa.workflow.stages import load, metrics
@@ -24,6 +24,7 @@ def test_reset_empties_every_cache():
         "workflow.jobs.inside",
         "workflow.jobs.pool",
         "workflow.jobs.spawn_patch",
+        "outputs.provenance.hashed",
     }
     original = spawn.get_preparation_data
     epa_log = logging.getLogger("epa")
@@ -39,6 +40,7 @@ def test_reset_empties_every_cache():
     case._WRITTEN["source"] = "path"
     load._LOADED["source"] = "trajectory"
     metrics._PRINTED["source"] = "trajectory"
+    provenance._HASHED["key"] = "digest"
     figures._KEPT[("kind",)] = "figure"
     cells.ok_runs([], "alg")  # indexes this grid
     jobs._POOL = Pool()
@@ -49,7 +51,7 @@ def test_reset_empties_every_cache():
     runtime.reset()
 
     assert not case._PARSED and not case._WRITTEN and not load._LOADED and not metrics._PRINTED
-    assert not figures._KEPT and not cells._INDEX
+    assert not figures._KEPT and not cells._INDEX and not provenance._HASHED
     assert jobs._POOL is None and Pool.closed
     assert spawn.get_preparation_data is original
     assert jobs._INSIDE["n"] == 0 and (epa_log.propagate, epa_log.level) == before
@@ -91,3 +93,30 @@ def test_the_load_stage_reads_ahead_only_a_large_text_with_a_spare_core(tmp_path
         assert load.read_ahead(big) is not None
     finally:
         runtime.reset()
+
+
+def test_a_kept_cache_holds_small_values_beyond_cache_max_and_large_ones_up_to_its_bytes(
+    monkeypatch,
+):
+    """A large grid's batch visits each of its datasets in turn: more references than CACHE_MAX,
+    each small, stay parsed; large ones are let go beyond CACHE_MAX once they pass CACHE_BYTES."""
+    import numpy as np
+
+    monkeypatch.setattr(case, "CACHE_MAX", 2)
+    monkeypatch.setattr(case, "CACHE_MOST", 5)
+    monkeypatch.setattr(case, "CACHE_BYTES", 1000)
+    kept = case.Kept()
+    for k in range(4):
+        case.remember(kept, k, np.zeros(10))  # 80 bytes each
+    assert list(kept) == [0, 1, 2, 3]
+    for k in range(4, 8):
+        case.remember(kept, k, np.zeros(10))
+    assert list(kept) == [3, 4, 5, 6, 7]  # CACHE_MOST
+    case.remember(kept, "large", (np.zeros(200), None))  # 1600 bytes: only CACHE_MAX stay
+    assert list(kept) == [7, "large"] and set(kept.sizes) == {7, "large"}
+    plain = case.OrderedDict()  # another cache: CACHE_MAX entries
+    for k in range(4):
+        case.remember(plain, k, np.zeros(10))
+    assert list(plain) == [2, 3]
+    kept.clear()
+    assert not kept and not kept.sizes

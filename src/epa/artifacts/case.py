@@ -78,20 +78,59 @@ def plain_name(name: str) -> bool:
 # Every case of a dataset holds the same reference. A worker writes it once and hard-links it into
 # the other cases, and parses a file once per inode (an atomic rewrite makes a new inode, so a
 # cached parse is never stale). Measured: this halves the workflow's cost on 200 Hz references.
+class Kept(OrderedDict):
+    """A least-recently-used cache (:func:`remember`) that knows the array bytes it holds."""
+
+    def __init__(self):
+        super().__init__()
+        self.sizes: dict = {}
+
+    def clear(self) -> None:
+        super().clear()
+        self.sizes.clear()
+
+
 # (device, inode, mtime, size) -> Trajectory
-_PARSED: OrderedDict = runtime.register("artifacts.case.parsed", OrderedDict())
-CACHE_MAX = 64  # a few hundred MB at most for 200 Hz references, far less for most grids
+_PARSED: Kept = runtime.register("artifacts.case.parsed", Kept())
+# At least CACHE_MAX entries are kept (a few hundred MB at most for 200 Hz references); beyond, up
+# to CACHE_MOST as long as they hold at most CACHE_BYTES: a large grid's batch visits each of its
+# datasets in turn (10,000 cases: 100 datasets, a few hundred files between two cases of one), and
+# with 64 entries every reference was read and parsed again by each stage (load, sync on).
+CACHE_MAX = 64
+CACHE_MOST = 1024
+CACHE_BYTES = 128 << 20
 # reference source -> the file this process wrote it to
 _WRITTEN: dict = runtime.register("artifacts.case.written", {})
 
 
 def remember(cache: OrderedDict, key, value):
-    """Keep ``value`` in a least-recently-used ``cache`` of at most CACHE_MAX entries."""
+    """Keep ``value`` in a least-recently-used ``cache``: CACHE_MAX entries, and more (see there) in
+    a :class:`Kept`."""
     cache[key] = value
     cache.move_to_end(key)
-    while len(cache) > CACHE_MAX:
-        cache.popitem(last=False)
+    sizes = getattr(cache, "sizes", None)
+    if sizes is None:
+        while len(cache) > CACHE_MAX:
+            cache.popitem(last=False)
+        return value
+    sizes[key] = nbytes(value)
+    while len(cache) > CACHE_MAX and (len(cache) > CACHE_MOST or sum(sizes.values()) > CACHE_BYTES):
+        sizes.pop(cache.popitem(last=False)[0], None)
     return value
+
+
+def nbytes(value) -> int:
+    """The bytes of the arrays in a cached value (a trajectory, a tuple holding some)."""
+    if isinstance(value, np.ndarray):
+        return value.nbytes
+    if isinstance(value, (tuple, list)):
+        return sum(nbytes(v) for v in value)
+    if isinstance(value, Trajectory):
+        return sum(
+            nbytes(getattr(value, f))
+            for f in ("t", "p", "q", "cov_rot", "cov_pos", "cov_ros", "r_printed")
+        )
+    return 0
 
 
 def read_tum_cached(path) -> Trajectory:

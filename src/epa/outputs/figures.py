@@ -79,11 +79,16 @@ def _json(obj) -> str:
         if not np.isfinite(obj).all():
             text = _NOT_FINITE.sub("null", text)
         return "[" + text + "]"
-    if isinstance(obj, dict):
-        return "{" + ",".join(f"{json.dumps(str(k))}:{_json(v)}" for k, v in obj.items()) + "}"
+    if isinstance(obj, dict):  # keys as json.dumps(str(k)) writes them, without its per-call cost
+        return "{" + ",".join([_ESCAPE(str(k)) + ":" + _json(v) for k, v in obj.items()]) + "}"
     if isinstance(obj, list):
-        return "[" + ",".join(_json(v) for v in obj) + "]"
+        return "[" + ",".join([_json(v) for v in obj]) + "]"
+    if type(obj) is float and obj - obj == 0:  # finite: json.dumps' text
+        return float.__repr__(obj)
     return json.dumps(obj)
+
+
+_ESCAPE = json.encoder.encode_basestring_ascii
 
 
 def bundle(kind: str, title: str, data: dict, **meta) -> dict:

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from epa import __version__
+from epa.core import runtime
 
 FORMAT = 1
 PROVENANCE = "provenance.json"
@@ -72,14 +73,26 @@ def file_record(path, roots: dict[str, str] | None = None) -> dict:
     """An input file as recorded: its path (as the config gives it), the config folder it came from
     and its path relative to that folder (so that it can be found again under a new root), its size
     and sha256; or missing."""
-    p = Path(path)
     place = {"path": str(path), **where(path, roots or {})}
     try:
-        if not stat.S_ISREG(p.stat().st_mode):  # a device or a FIFO is never read here
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode):  # a device or a FIFO is never read here
             return {**place, "missing": True, "not_a_file": True}
-        return {**place, "size": p.stat().st_size, "sha256": sha256(p)}
+        # a dataset's reference is an input of each of its cases: hashed once per version of it
+        key = (st.st_dev, st.st_ino, st.st_mtime_ns, st.st_size)
+        digest = _HASHED.get(key)
+        if digest is None:
+            digest = _HASHED[key] = sha256(path)
+            while len(_HASHED) > HASHED_MAX:
+                del _HASHED[next(iter(_HASHED))]
+        return {**place, "size": st.st_size, "sha256": digest}
     except (OSError, ValueError):
         return {**place, "missing": True}
+
+
+# (device, inode, mtime, size) -> sha256 of a file_record's file (as the parsed-file cache's key)
+_HASHED: dict = runtime.register("outputs.provenance.hashed", {})
+HASHED_MAX = 4096
 
 
 def where(path, roots: dict[str, str]) -> dict:

@@ -136,6 +136,7 @@ def run_cases(
     raises for a case's failure. ``upstream``: key -> reason for cases whose previous stage failed.
     Returns key -> status."""
     status: dict[str, dict] = {}
+    artifacts, data_class = chain.BY_NAME[stage].artifacts, chain.CaseData  # once, not per case
     for c in cases:
         key = c["key"]
         inputs = ("truth", "estimate", "truth_source", "estimate_source")
@@ -146,7 +147,7 @@ def run_cases(
             continue
         reason = upstream.get(key)
         with case_log(case.log(stage)):
-            stale = case.remove_temporaries(stage, chain.BY_NAME[stage].artifacts)
+            stale = case.remove_temporaries(stage, artifacts)
             if stale:
                 log.info("removed what a killed run left: %s", ", ".join(stale))
             if reason is not None:
@@ -155,7 +156,7 @@ def run_cases(
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("always")  # every case logs its own warnings
-                        chain.run_stage(stage, chain.CaseData(case), cfg)
+                        chain.run_stage(stage, data_class(case), cfg)
                 except EpaError as exc:
                     reason = f"{stage}: {exc.one_line()}"
                     log.error("case failed: %s", reason)

@@ -4,11 +4,10 @@
 from __future__ import annotations
 
 import os
-from collections import OrderedDict
 from pathlib import Path
 
 from epa import readers
-from epa.artifacts.case import Both, CaseData, Columns, Record, remember
+from epa.artifacts.case import Both, CaseData, Columns, Kept, Record, remember
 from epa.artifacts.stage import Stage, Value
 from epa.core import runtime
 from epa.core.errors import EpaError
@@ -19,7 +18,7 @@ from epa.readers import timing as timing_files
 NAME = "load"
 
 # reference source -> (Trajectory, notes) parsed from the user's file, shared by a dataset's cases
-_LOADED: OrderedDict = runtime.register("workflow.stages.load.loaded", OrderedDict())
+_LOADED: Kept = runtime.register("workflow.stages.load.loaded", Kept())
 
 
 def c_parser_min_bytes() -> int:

@@ -6,9 +6,8 @@ from __future__ import annotations
 
 import logging
 import os
-from collections import OrderedDict
 
-from epa.artifacts.case import Case, CaseData, Columns, Record, remember
+from epa.artifacts.case import Case, CaseData, Columns, Kept, Record, remember
 from epa.artifacts.stage import Stage, Value
 from epa.core import geometry, runtime
 from epa.core.errors import EpaError
@@ -24,7 +23,7 @@ NAME = "metrics"
 BASE_ARRAYS = ("ape.csv", "rpe_segments.csv", "rpe_time.csv")
 
 # reference source -> its quaternions as printed (the ETH3D protocol's), shared by a dataset's cases
-_PRINTED: OrderedDict = runtime.register("workflow.stages.metrics.printed", OrderedDict())
+_PRINTED: Kept = runtime.register("workflow.stages.metrics.printed", Kept())
 
 # A matched reference shorter than this has no distance metrics (RPE per metre, drift rate,
 # distance success rate would all be 0/0).
