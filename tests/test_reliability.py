@@ -313,6 +313,16 @@ def test_write_json_writes_json_dumps_text_for_every_kind_of_value(tmp_path):
         assert (tmp_path / f"{k}.json").read_text() == expected, value
 
 
+def test_write_json_of_a_numpy_infinity_warns_nothing(tmp_path):
+    """np.float64(inf) - itself warns in numpy: a warning would land in a case's log as new text."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        files.write_json(tmp_path / "r.json", {"peak_ratio": np.float64("inf")})
+    assert (tmp_path / "r.json").read_text() == '{\n  "peak_ratio": "inf"\n}'
+
+
 # ----------------------------------------------------------------------------- killed writes
 def test_a_sigkilled_write_leaves_only_a_temporary_which_the_cleanup_removes(tmp_path):
     """A real SIGKILL in the middle of an atomic write: no xcorr.csv, a `.xcorr.csv.<random>`."""

@@ -3,6 +3,7 @@
 import logging
 from multiprocessing import spawn
 
+import numpy as np
 import pytest
 
 from epa.artifacts import case
@@ -93,6 +94,37 @@ def test_the_load_stage_reads_ahead_only_a_large_text_with_a_spare_core(tmp_path
         assert load.read_ahead(big) is not None
     finally:
         runtime.reset()
+
+
+def test_epa_eval_of_a_bad_reference_leaves_no_read_ahead_thread(tmp_path, capsys):
+    """The estimate's parse started beside the reference ends with the load stage, even when the
+    reference is refused first (else its thread would parse on, its outcome dropped)."""
+    import threading
+
+    from epa.cli.main import main
+
+    (tmp_path / "ref.txt").write_text("0 0 0 0 0 0 0 1\nnot a number\n")
+    rows = np.arange(80_000) * 0.01
+    big = "".join(f"{t:.2f} {t:.6f} 0 0 0 0 0 1\n" for t in rows)
+    assert len(big) > load.text.ARROW_MIN_BYTES
+    (tmp_path / "est.txt").write_text(big)
+    try:
+        assert (
+            main(
+                [
+                    "eval",
+                    str(tmp_path / "ref.txt"),
+                    str(tmp_path / "est.txt"),
+                    "--out",
+                    str(tmp_path / "out"),
+                ]
+            )
+            == 2
+        )
+    finally:
+        runtime.reset()
+    assert "ref.txt" in capsys.readouterr().err
+    assert not [t for t in threading.enumerate() if t.name == "epa-read-ahead"]
 
 
 def test_a_kept_cache_holds_small_values_beyond_cache_max_and_large_ones_up_to_its_bytes(

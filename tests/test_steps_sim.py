@@ -117,3 +117,37 @@ def test_quaternion_helpers_match_matrix_algebra(rng):
     assert np.allclose(geometry.quat_to_rot(geometry.quat_mul(a, b)), ra @ rb, atol=1e-12)
     assert np.allclose(geometry.quat_rotate(a, v), np.einsum("nab,nb->na", ra, v), atol=1e-12)
     assert np.allclose(geometry.quat_angle(a), geometry.rotation_angle(ra), atol=1e-12)
+
+
+def test_step2_interpolator_of_a_single_pose_is_trajectory_at():
+    """One reference pose has no interval to set up: every stamp gets that pose, as Trajectory.at."""
+    ref = Trajectory.from_rp(np.array([5.0]), geometry.rot_z(0.3)[None], np.array([[1.0, 2, 3]]))
+    stamps = np.array([4.0, 5.0, 6.5])
+    got, want = calibration.interpolator(ref)(stamps), ref.at(stamps)
+    assert np.array_equal(got.t, want.t)
+    assert np.array_equal(got.p, want.p) and np.array_equal(got.q, want.q)
+
+
+def test_step2_takes_the_kept_estimate_motions_only_for_the_same_pairs():
+    """The +-offset_std re-solves find their pairs again; one whose i are the same but a j moved (a
+    tie broken the other way) must not take the estimate's motions of the other pairs."""
+    ref, est, _, _ = case(noise=0.002)
+    ir, ie = sync.associate(ref, est, offset=0.037)
+    ref, est = ref.select(ir), est.select(ie)
+    fit = dict(
+        pair_step=1.0,
+        min_rotation_deg=2.0,
+        scale=False,
+        max_condition=100.0,
+        min_pairs=20,
+        outlier_iterations=3,
+        solution_only=True,
+    )
+    motions: dict = {}
+    fresh = calibration._fit(ref, est, **fit, motions=motions)[0]
+    (i, j), kept = motions["estimate"]
+    moved = j.copy()
+    moved[0] += 1
+    motions["estimate"] = ((i, moved), tuple(np.zeros_like(a) for a in kept))
+    again = calibration._fit(ref, est, **fit, motions=motions)[0]
+    assert np.array_equal(again.R, fresh.R) and np.array_equal(again.t, fresh.t)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import errno
 import json
+import math
 import os
 import random
 import re
@@ -198,7 +199,7 @@ def _indented(obj, nl: str) -> str:
     scalars and arrays (NaN included), which the caller hands to json.dumps."""
     t = type(obj)
     if t is float or t is np.float64:
-        if obj - obj == 0:  # finite
+        if math.isfinite(obj):  # (inf - inf would warn: numpy scalars)
             return float.__repr__(float(obj))
         if obj != obj:
             raise _Unusual

@@ -79,18 +79,19 @@ def file_record(path, roots: dict[str, str] | None = None) -> dict:
         if not stat.S_ISREG(st.st_mode):  # a device or a FIFO is never read here
             return {**place, "missing": True, "not_a_file": True}
         # a dataset's reference is an input of each of its cases: hashed once per version of it
-        key = (st.st_dev, st.st_ino, st.st_mtime_ns, st.st_size)
+        # (ctime too: a copy that keeps mtime and size, `cp -p`, cannot set it back)
+        key = (st.st_dev, st.st_ino, st.st_mtime_ns, st.st_ctime_ns, st.st_size)
         digest = _HASHED.get(key)
         if digest is None:
             digest = _HASHED[key] = sha256(path)
-            while len(_HASHED) > HASHED_MAX:
-                del _HASHED[next(iter(_HASHED))]
+            while len(_HASHED) > HASHED_MAX:  # (pop: jobs in threads of one process may race)
+                _HASHED.pop(next(iter(_HASHED), None), None)
         return {**place, "size": st.st_size, "sha256": digest}
     except (OSError, ValueError):
         return {**place, "missing": True}
 
 
-# (device, inode, mtime, size) -> sha256 of a file_record's file (as the parsed-file cache's key)
+# (device, inode, mtime, ctime, size) -> sha256 of a file_record's file (as the parsed-file cache's key)
 _HASHED: dict = runtime.register("outputs.provenance.hashed", {})
 HASHED_MAX = 4096
 

@@ -162,6 +162,10 @@ class TableAhead:
         except BaseException as exc:  # raised in the caller's thread, by result()
             self._done.extend((None, exc))
 
+    def join(self) -> None:
+        """Wait for the parse (its error, if any, is raised only by :meth:`result`)."""
+        self._thread.join()
+
     def result(self) -> Table:
         self._thread.join()
         if self._done[0] is None:

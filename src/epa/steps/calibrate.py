@@ -116,6 +116,8 @@ class Extrinsic:
 def interpolator(ref: Trajectory):
     """``ref.at`` for several sets of stamps (the same poses, the same bits), the slerp's setup made
     once; the poses are held as component rows, which the solve reads without copies."""
+    if len(ref) < 2:  # no interval to set up: Trajectory.at gives the one pose at every stamp
+        return ref.at
     at = geometry.interpolator(ref.t, _rows(ref.p), _rows(ref.q))
 
     def poses(stamps: np.ndarray) -> Trajectory:
@@ -219,12 +221,13 @@ def _fit(
     at = (_index(i), _index(j))  # runs of consecutive poses as slices: views, not gathers
     qa, ta = geometry.relative_motion_rows(_rows(ref.q), _rows(ref.p), *at)
     kept = motions.get("estimate")
-    if kept is not None and (kept[0] is i or np.array_equal(kept[0], i)):
+    # both ends compared: re-found pairs of a shifted reference can keep i and change a j at a tie
+    if kept is not None and all(a is b or np.array_equal(a, b) for a, b in zip(kept[0], (i, j))):
         qb, tb, beta = kept[1]
     else:
         qb, tb = geometry.relative_motion_rows(_rows(est.q), _rows(est.p), *at)
         beta = geometry.log_rows(qb)
-        motions["estimate"] = (i, (qb, tb, beta))
+        motions["estimate"] = ((i, j), (qb, tb, beta))
     alpha = geometry.log_rows(qa)
     angle = np.degrees(np.sqrt(alpha[0] * alpha[0] + alpha[1] * alpha[1] + alpha[2] * alpha[2]))
     use = angle >= min_rotation_deg

@@ -45,9 +45,11 @@ def read_ahead(path) -> text.TableAhead | None:
     if not runtime.spare_thread() or bags.is_bag(path):
         return None
     try:
-        if os.stat(path).st_size < text.ARROW_MIN_BYTES:
-            return None
+        size = os.stat(path).st_size
     except OSError:  # the reader says what is wrong with it, in its words
+        return None
+    # without pyarrow the parse would hold the GIL: nothing to gain beside the reference
+    if size < text.ARROW_MIN_BYTES or "arrow" not in text.parsers_for(size, c_parser_min_bytes()):
         return None
     return text.TableAhead(Path(path), c_parser_min_bytes())
 
@@ -124,19 +126,23 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     except OSError:  # the reader says what is wrong with it, in its words
         st = None
     source = st and (os.path.abspath(case.truth), st.st_mtime_ns, st.st_size, repr(ref_opts))
-    est_table = None
-    if source and source not in _LOADED:
-        est_table = read_ahead(case.estimate)
-        remember(_LOADED, source, load_reference(case.truth, cfg, ref_opts))
-    ref, est, info, timing = compute(
-        case.truth,
-        case.estimate,
-        cfg,
-        reference=_LOADED.get(source) if source else None,
-        ref_opts=ref_opts,
-        est_opts=est_opts,
-        est_table=est_table,
-    )
+    parse_reference = bool(source) and source not in _LOADED
+    est_table = read_ahead(case.estimate) if parse_reference else None
+    try:
+        if parse_reference:
+            remember(_LOADED, source, load_reference(case.truth, cfg, ref_opts))
+        ref, est, info, timing = compute(
+            case.truth,
+            case.estimate,
+            cfg,
+            reference=_LOADED.get(source) if source else None,
+            ref_opts=ref_opts,
+            est_opts=est_opts,
+            est_table=est_table,
+        )
+    finally:  # an error before the estimate's table was taken: its thread ends here, not later
+        if est_table is not None:
+            est_table.join()
     data.loaded, data.load_record, data.timing = (ref, est), info, timing
     if write_arrays:
         # the efficiency stage reads the run's timing from here, never from the user's folder
