@@ -91,7 +91,9 @@ def test_the_load_stage_reads_ahead_only_a_large_text_with_a_spare_core(tmp_path
     runtime.use_spare_thread()
     try:
         assert load.read_ahead(tmp_path / "missing.txt") is None
-        assert load.read_ahead(big) is not None
+        ahead = load.read_ahead(big)
+        assert ahead is not None
+        ahead.join()  # its thread ends here, not during a later test
     finally:
         runtime.reset()
 

@@ -35,7 +35,7 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def _components(a: np.ndarray) -> np.ndarray:
+def component_rows(a: np.ndarray) -> np.ndarray:
     """The columns of an (N, k) array as k contiguous rows: elementwise arithmetic on them runs 2-3x
     faster than on strided columns, with the same operations and so the same bits."""
     return np.ascontiguousarray(np.asarray(a, dtype=float).T)
@@ -72,20 +72,31 @@ def normalize_quat(q: np.ndarray) -> np.ndarray:
 def quat_to_rot(q: np.ndarray) -> np.ndarray:
     """(..., 4) unit quaternions (x, y, z, w) -> (..., 3, 3) rotation matrices."""
     x, y, z, w = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
+    r = np.empty(np.shape(x) + (3, 3))
+    for (a, b), entry in zip(_MATRIX_ENTRIES, _rot_entries(x, y, z, w)):
+        r[..., a, b] = entry
+    return r
+
+
+_MATRIX_ENTRIES = [(a, b) for a in range(3) for b in range(3)]
+
+
+def _rot_entries(x, y, z, w) -> tuple:
+    """The nine entries of R(q), row by row, of quaternions given as component rows."""
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
-    r = np.empty(np.shape(x) + (3, 3))
-    r[..., 0, 0] = 1 - 2 * (yy + zz)
-    r[..., 0, 1] = 2 * (xy - wz)
-    r[..., 0, 2] = 2 * (xz + wy)
-    r[..., 1, 0] = 2 * (xy + wz)
-    r[..., 1, 1] = 1 - 2 * (xx + zz)
-    r[..., 1, 2] = 2 * (yz - wx)
-    r[..., 2, 0] = 2 * (xz - wy)
-    r[..., 2, 1] = 2 * (yz + wx)
-    r[..., 2, 2] = 1 - 2 * (xx + yy)
-    return r
+    return (
+        1 - 2 * (yy + zz),
+        2 * (xy - wz),
+        2 * (xz + wy),
+        2 * (xy + wz),
+        1 - 2 * (xx + zz),
+        2 * (yz - wx),
+        2 * (xz - wy),
+        2 * (yz + wx),
+        1 - 2 * (xx + yy),
+    )
 
 
 ROT_TO_QUAT_BLOCK = 65536  # matrices per block in rot_to_quat
@@ -165,7 +176,11 @@ def quat_log(q: np.ndarray) -> np.ndarray:
 def quat_log_rows(q: np.ndarray) -> tuple:
     """quat_log of (N, 4) quaternions as its three component rows (the same arithmetic, on
     contiguous components)."""
-    x, y, z, w = _components(q)
+    return _log_components(*component_rows(q))
+
+
+def _log_components(x, y, z, w) -> tuple:
+    """quat_log of quaternions given as component rows: the rotation vector's three rows."""
     flip = w < 0  # same rotation, angle in [0, pi]
     x, y, z, w = (np.where(flip, -c, c) for c in (x, y, z, w))
     n = np.sqrt(x * x + y * y + z * z)
@@ -210,7 +225,7 @@ def rot_z(yaw: float) -> np.ndarray:
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of (..., 4) quaternions (x, y, z, w): R(a) R(b)."""
     if a.ndim == 2 and a.shape == b.shape:  # one product per row: on contiguous components
-        return np.stack(_mul_rows(_components(a), _components(b)), axis=-1)
+        return np.stack(_mul_rows(component_rows(a), component_rows(b)), axis=-1)
     av, aw = a[..., :3], a[..., 3:]
     bv, bw = b[..., :3], b[..., 3:]
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))
@@ -223,7 +238,7 @@ def relative_angles(q: np.ndarray, step: int) -> np.ndarray:
     """Rotation angle (rad) of q_i^-1 q_{i+step} for every i: quat_angle of relative_motions'
     rotation, the same operations on each component row once (3x cheaper than the (N, 4) arrays'
     conjugate, product and angle; Step 1's angular speed)."""
-    x, y, z, w = _components(q)
+    x, y, z, w = component_rows(q)
     rx, ry, rz, rw = _mul_rows(
         (-x[:-step], -y[:-step], -z[:-step], w[:-step]), (c[step:] for c in (x, y, z, w))
     )
@@ -247,7 +262,7 @@ def rows_angle(x, y, z, w) -> np.ndarray:
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """R(q) v for (..., 4) unit quaternions and (..., 3) vectors."""
     if q.ndim == 2 and v.ndim == 2 and len(q) == len(v):  # on contiguous components
-        return np.stack(_rotate_rows(_components(q), _components(v)), axis=-1)
+        return np.stack(_rotate_rows(component_rows(q), component_rows(v)), axis=-1)
     u, w = q[..., :3], q[..., 3:]
     uv = cross(u, v)
     return v + 2 * (w * uv + cross(u, uv))
@@ -261,10 +276,24 @@ def slerp(q0: np.ndarray, q1: np.ndarray, f: np.ndarray) -> np.ndarray:
     q1 = np.where(dot < 0, -q1, q1)
     angle = np.arccos(np.clip(np.abs(dot), 0.0, 1.0))
     small = angle < 1e-12  # the same rotation: either end
-    s = np.sin(np.where(small, 1.0, angle))
-    w0 = np.where(small, 1.0 - f, np.sin((1.0 - f) * angle) / s)
-    w1 = np.where(small, f, np.sin(f * angle) / s)
+    w0, w1 = _slerp_weights(f, angle, small, np.sin(np.where(small, 1.0, angle)))
     return w0 * q0 + w1 * q1
+
+
+def _slerp_weights(f, angle, small, sine) -> tuple:
+    """slerp's weights of its two ends at fractions f, from the ends' angle and its sine."""
+    w0 = np.where(small, 1.0 - f, np.sin((1.0 - f) * angle) / sine)
+    w1 = np.where(small, f, np.sin(f * angle) / sine)
+    return w0, w1
+
+
+def _bracket(t: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each stamp of ``at``: the index k of the pose after it (k - 1 before it, clamped to the
+    first and last interval) and its fraction of the interval, in [0, 1]."""
+    k = np.clip(np.searchsorted(t, at, side="left"), 1, len(t) - 1)
+    dt = t[k] - t[k - 1]
+    f = np.clip(np.where(dt > 0, (at - t[k - 1]) / np.where(dt > 0, dt, 1.0), 0.0), 0.0, 1.0)
+    return k, f
 
 
 def interpolate(
@@ -272,9 +301,7 @@ def interpolate(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Poses at stamps ``at``: positions linear, orientations slerp between the neighbouring poses;
     clamped to the first and last pose outside the stamps (as evo's interpolate)."""
-    k = np.clip(np.searchsorted(t, at, side="left"), 1, len(t) - 1)
-    dt = t[k] - t[k - 1]
-    f = np.clip(np.where(dt > 0, (at - t[k - 1]) / np.where(dt > 0, dt, 1.0), 0.0), 0.0, 1.0)
+    k, f = _bracket(t, at)
     return p[k - 1] + f[:, None] * (p[k] - p[k - 1]), slerp(q[k - 1], q[k], f)
 
 
@@ -301,7 +328,7 @@ def pair_rows(d: np.ndarray | None, p_ref: np.ndarray, p_est: np.ndarray, *, q=N
     estimate quaternions), pose_discrepancy's arithmetic written straight into the rows."""
     rows = np.empty((10, len(p_ref)))
     if d is None:
-        ref, est = _components(q[0]), _components(q[1])
+        ref, est = component_rows(q[0]), component_rows(q[1])
         est[:3] *= -1  # conj(q_est)
         for k, row in enumerate(_mul_rows(ref, est)):
             rows[k] = row
@@ -397,14 +424,7 @@ def log_rows(q_rows: np.ndarray) -> np.ndarray:
     """quat_log of (4, N) quaternion rows, as (3, N) rows (:func:`quat_log_rows`' arithmetic)."""
     out = np.empty((3, q_rows.shape[1]))
     for part in row_blocks(q_rows.shape[1]):
-        x, y, z, w = q_rows[:, part]
-        flip = w < 0  # same rotation, angle in [0, pi]
-        x, y, z, w = (np.where(flip, -c, c) for c in (x, y, z, w))
-        n = np.sqrt(x * x + y * y + z * z)
-        angle = 2 * np.arctan2(n, w)
-        # angle/sin(angle/2) -> 2 as angle -> 0
-        scale = np.where(n > 1e-12, angle / np.where(n > 1e-12, n, 1.0), 2.0)
-        out[:, part] = (x * scale, y * scale, z * scale)
+        out[:, part] = _log_components(*q_rows[:, part])
     return out
 
 
@@ -413,25 +433,8 @@ def rot_rows(q_rows: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     ``out`` when given."""
     r = np.empty((3, 3, q_rows.shape[1])) if out is None else out
     for part in row_blocks(q_rows.shape[1]):
-        x, y, z, w = q_rows[:, part]
-        xx, yy, zz = x * x, y * y, z * z
-        xy, xz, yz = x * y, x * z, y * z
-        wx, wy, wz = w * x, w * y, w * z
-        r[0, 0, part], r[0, 1, part], r[0, 2, part] = (
-            1 - 2 * (yy + zz),
-            2 * (xy - wz),
-            2 * (xz + wy),
-        )
-        r[1, 0, part], r[1, 1, part], r[1, 2, part] = (
-            2 * (xy + wz),
-            1 - 2 * (xx + zz),
-            2 * (yz - wx),
-        )
-        r[2, 0, part], r[2, 1, part], r[2, 2, part] = (
-            2 * (xz - wy),
-            2 * (yz + wx),
-            1 - 2 * (xx + yy),
-        )
+        for (a, b), entry in zip(_MATRIX_ENTRIES, _rot_entries(*q_rows[:, part])):
+            r[a, b, part] = entry
     return r
 
 
@@ -452,7 +455,6 @@ def interpolator(t: np.ndarray, p_rows: np.ndarray, q_rows: np.ndarray):
     positions, (4, N) quaternions): the slerp's setup of each interval (its normalised ends, their
     angle and its sine) is made once, and each call ``at(stamps)`` returns (3, M) and (4, M) rows.
     The same arithmetic as interpolate, element by element: the same bits."""
-    n = len(t)
     x, y, z, w = q_rows
     q = q_rows / np.sqrt(x * x + y * y + z * z + w * w)
     q0, q1 = q[:, :-1], q[:, 1:]
@@ -465,14 +467,9 @@ def interpolator(t: np.ndarray, p_rows: np.ndarray, q_rows: np.ndarray):
     def at(stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         p_at, q_at = np.empty((3, len(stamps))), np.empty((4, len(stamps)))
         for part in row_blocks(len(stamps)):
-            st = stamps[part]
-            k = np.clip(np.searchsorted(t, st, side="left"), 1, n - 1)
+            k, f = _bracket(t, stamps[part])
             lo = k - 1
-            dt = t[k] - t[lo]
-            f = np.clip(np.where(dt > 0, (st - t[lo]) / np.where(dt > 0, dt, 1.0), 0.0), 0.0, 1.0)
-            a, s, tiny = angle[lo], sine[lo], small[lo]
-            w0 = np.where(tiny, 1.0 - f, np.sin((1.0 - f) * a) / s)
-            w1 = np.where(tiny, f, np.sin(f * a) / s)
+            w0, w1 = _slerp_weights(f, angle[lo], small[lo], sine[lo])
             p0 = p_rows[:, lo]
             p_at[:, part] = p0 + f * (p_rows[:, k] - p0)
             q_at[:, part] = w0 * q0[:, lo] + w1 * q1[:, lo]

@@ -5,7 +5,7 @@ empty it, and :func:`reset` empties them all, e.g. between two grids in one proc
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Generic, TypeVar
 
 T = TypeVar("T")
 U = TypeVar("U")
@@ -73,30 +73,45 @@ def spare_thread() -> bool:
 register("core.runtime.spare_thread", reset=lambda: use_spare_thread(False))
 
 
+class Background(Generic[T]):
+    """``f()`` started in a thread of its own; :meth:`result` waits for it and gives its value, or
+    raises its error in the caller's thread, where a call of ``f`` would have raised it."""
+
+    def __init__(self, f: Callable[[], T], name: str) -> None:
+        import threading  # (imported by every process that gets here: provenance's thread)
+
+        self._done: list = []  # [value] or [None, the exception]
+        self._thread = threading.Thread(target=self._run, args=(f,), name=name, daemon=True)
+        self._thread.start()
+
+    def _run(self, f: Callable[[], T]) -> None:
+        try:
+            self._done.append(f())
+        except BaseException as exc:  # raised in the caller's thread, by result()
+            self._done.extend((None, exc))
+
+    def join(self) -> None:
+        """Wait for ``f`` (its error, if any, is raised only by :meth:`result`)."""
+        self._thread.join()
+
+    def result(self) -> T:
+        self._thread.join()
+        if len(self._done) == 2:
+            raise self._done[1]
+        return self._done[0]
+
+
 def both(f: Callable[[], T], g: Callable[[], U]) -> tuple[T, U]:
     """(f(), g()); g in a second thread where :func:`spare_thread` allows (both should release the
     GIL for most of their time: else a second thread only adds its switches)."""
     if not spare_thread():
         return f(), g()
-    done: list = []
-
-    def second() -> None:
-        try:
-            done.append(g())
-        except BaseException as exc:  # raised in the caller's thread, below
-            done.extend((None, exc))
-
-    import threading  # (imported by every process that gets here: provenance's thread)
-
-    thread = threading.Thread(target=second, name="epa-second", daemon=True)
-    thread.start()
+    second = Background(g, "epa-second")
     try:
         first = f()
     finally:
-        thread.join()
-    if len(done) == 2:
-        raise done[1]
-    return first, done[0]
+        second.join()
+    return first, second.result()
 
 
 def names() -> tuple[str, ...]:

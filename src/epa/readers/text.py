@@ -20,7 +20,6 @@ import importlib.util
 import logging
 import stat
 import sys
-import threading
 import warnings
 from pathlib import Path
 from typing import NoReturn
@@ -141,7 +140,7 @@ def read_table(path: Path, *, c_parser_min_bytes: int = C_PARSER_MIN_BYTES) -> T
     return _read_body(path, text, raw, found, raw_bytes, parsers=() if refused else parsers)
 
 
-class TableAhead:
+class TableAhead(runtime.Background[Table]):
     """:func:`read_table` of a file started in a thread, for a caller with a spare core
     (:func:`epa.core.runtime.spare_thread`): reading the bytes, pyarrow's parse and numpy's copies
     release the GIL, so it runs beside the caller's own work (`epa eval`: the estimate's 15 MB parse
@@ -150,27 +149,9 @@ class TableAhead:
 
     def __init__(self, path: Path, c_parser_min_bytes: int = C_PARSER_MIN_BYTES) -> None:
         self.path = path
-        self._done: list = []  # [table] or [None, the exception]
-        self._thread = threading.Thread(
-            target=self._read, args=(c_parser_min_bytes,), name="epa-read-ahead", daemon=True
+        super().__init__(
+            lambda: read_table(path, c_parser_min_bytes=c_parser_min_bytes), "epa-read-ahead"
         )
-        self._thread.start()
-
-    def _read(self, c_parser_min_bytes: int) -> None:
-        try:
-            self._done.append(read_table(self.path, c_parser_min_bytes=c_parser_min_bytes))
-        except BaseException as exc:  # raised in the caller's thread, by result()
-            self._done.extend((None, exc))
-
-    def join(self) -> None:
-        """Wait for the parse (its error, if any, is raised only by :meth:`result`)."""
-        self._thread.join()
-
-    def result(self) -> Table:
-        self._thread.join()
-        if self._done[0] is None:
-            raise self._done[1]
-        return self._done[0]
 
 
 # whether pyarrow is installed: looked up once (0.1 ms), imported only when a file needs it

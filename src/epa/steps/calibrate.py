@@ -56,7 +56,7 @@ class Extrinsic:
         # R_b = R_c R^T as the quaternion product q_c conj(q_x) (no matrices, no BLAS product on
         # (3N, 3) rows), normalised with w >= 0 as rot_to_quat gives it
         qx = geometry.rot_to_quat(self.R)
-        q_c = _rows(est.q)
+        q_c = geometry.component_rows(est.q)
         q = geometry.mul_rows(q_c, (-qx[0], -qx[1], -qx[2], qx[3]))
         norm = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
         q /= np.where(q[3] < 0, -norm, norm)
@@ -118,7 +118,9 @@ def interpolator(ref: Trajectory):
     once; the poses are held as component rows, which the solve reads without copies."""
     if len(ref) < 2:  # no interval to set up: Trajectory.at gives the one pose at every stamp
         return ref.at
-    at = geometry.interpolator(ref.t, _rows(ref.p), _rows(ref.q))
+    at = geometry.interpolator(
+        ref.t, geometry.component_rows(ref.p), geometry.component_rows(ref.q)
+    )
 
     def poses(stamps: np.ndarray) -> Trajectory:
         stamps = np.asarray(stamps, float)
@@ -219,13 +221,17 @@ def _fit(
     if len(i) < min_pairs:
         return _too_little(f"only {len(i)} motion pairs ({min_pairs} needed)", info)
     at = (_index(i), _index(j))  # runs of consecutive poses as slices: views, not gathers
-    qa, ta = geometry.relative_motion_rows(_rows(ref.q), _rows(ref.p), *at)
+    qa, ta = geometry.relative_motion_rows(
+        geometry.component_rows(ref.q), geometry.component_rows(ref.p), *at
+    )
     kept = motions.get("estimate")
     # both ends compared: re-found pairs of a shifted reference can keep i and change a j at a tie
     if kept is not None and all(a is b or np.array_equal(a, b) for a, b in zip(kept[0], (i, j))):
         qb, tb, beta = kept[1]
     else:
-        qb, tb = geometry.relative_motion_rows(_rows(est.q), _rows(est.p), *at)
+        qb, tb = geometry.relative_motion_rows(
+            geometry.component_rows(est.q), geometry.component_rows(est.p), *at
+        )
         beta = geometry.log_rows(qb)
         motions["estimate"] = ((i, j), (qb, tb, beta))
     alpha = geometry.log_rows(qa)
@@ -496,11 +502,6 @@ def _uncertainty(cov_rot, null_rot, cov_x, null_x, scale: bool) -> dict:
         "rotation_covariance_rad2": cov_rot.tolist(),
         "translation_covariance": cov_x.tolist(),
     }
-
-
-def _rows(a: np.ndarray) -> np.ndarray:
-    """(N, k) -> its k component rows, contiguous."""
-    return np.ascontiguousarray(np.asarray(a, dtype=float).T)
 
 
 def _index(i: np.ndarray):

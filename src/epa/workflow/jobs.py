@@ -136,7 +136,7 @@ def run_cases(
     raises for a case's failure. ``upstream``: key -> reason for cases whose previous stage failed.
     Returns key -> status."""
     status: dict[str, dict] = {}
-    artifacts, data_class = chain.BY_NAME[stage].artifacts, chain.CaseData  # once, not per case
+    artifacts = chain.BY_NAME[stage].artifacts
     for c in cases:
         key = c["key"]
         inputs = ("truth", "estimate", "truth_source", "estimate_source")
@@ -156,7 +156,7 @@ def run_cases(
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("always")  # every case logs its own warnings
-                        chain.run_stage(stage, data_class(case), cfg)
+                        chain.run_stage(stage, chain.CaseData(case), cfg)
                 except EpaError as exc:
                     reason = f"{stage}: {exc.one_line()}"
                     log.error("case failed: %s", reason)
