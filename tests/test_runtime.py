@@ -1,6 +1,9 @@
 """The process's caches are gathered in epa.core.runtime, and reset() empties every one of them."""
 
 import logging
+import platform
+import subprocess
+import sys
 from multiprocessing import spawn
 
 import numpy as np
@@ -154,3 +157,38 @@ def test_a_kept_cache_holds_small_values_beyond_cache_max_and_large_ones_up_to_i
     assert list(plain) == [2, 3]
     kept.clear()
     assert not kept and not kept.sizes
+
+
+_RSS_AFTER_FREE = """
+import sys
+import numpy as np
+from epa.core import runtime
+applied = runtime.keep_freed_memory() if sys.argv[1] == "keep" else False
+def rss_mb():
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * 4096 / 1e6
+before = rss_mb()
+a = np.ones(80_000_000 // 8)
+del a
+print(applied, rss_mb() - before)
+"""
+
+
+@pytest.mark.skipif(
+    not sys.platform.startswith("linux") or platform.libc_ver()[0] != "glibc",
+    reason="glibc's malloc only",
+)
+def test_keep_freed_memory_keeps_a_freed_large_array_for_reuse():
+    """Without it glibc returns an 80 MB temporary to the system at once (the next one comes as
+    fresh pages, zeroed by the kernel); with it the pages stay in the process for the next one."""
+    out = {
+        mode: subprocess.run(
+            [sys.executable, "-c", _RSS_AFTER_FREE, mode],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.split()
+        for mode in ("keep", "default")
+    }
+    assert out["keep"][0] == "True" and float(out["keep"][1]) > 70
+    assert out["default"][0] == "False" and float(out["default"][1]) < 10

@@ -4,6 +4,7 @@ empty it, and :func:`reset` empties them all, e.g. between two grids in one proc
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
@@ -71,6 +72,32 @@ def spare_thread() -> bool:
 
 
 register("core.runtime.spare_thread", reset=lambda: use_spare_thread(False))
+
+
+# glibc's malloc gives freed memory back to the system at once above its thresholds (the trim
+# threshold grows only to 64 MB): a stage's temporaries of 1M poses (8-24 MB each, dozens a stage)
+# then come as fresh pages, each zeroed by the kernel on its first touch. Keeping up to 1 GB of
+# freed memory in the heap for reuse took the 1M pair's system time from 2-4 s to 1.0-1.5 s, and
+# its peak from 1.32 to 1.24-1.25 GB (docs/performance.md). Values in a C int: mallopt's type.
+_KEEP_FREED_BYTES = 1 << 30
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # glibc's malloc.h
+
+
+def keep_freed_memory() -> bool:
+    """Let this process's malloc keep freed memory for reuse (glibc only; elsewhere a no-op, and
+    the same bits either way: where memory comes from changes no arithmetic). Whether it applied."""
+    if not sys.platform.startswith("linux"):
+        return False
+    import ctypes
+
+    try:
+        mallopt = ctypes.CDLL(None).mallopt  # absent from musl's libc
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
+    return all(
+        mallopt(option, _KEEP_FREED_BYTES) == 1 for option in (_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD)
+    )
 
 
 class Background(Generic[T]):

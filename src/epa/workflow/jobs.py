@@ -264,7 +264,9 @@ def _pool(workers: int):
         if _POOL is None or getattr(_POOL, "_broken", False):
             from concurrent.futures import ProcessPoolExecutor
 
-            _POOL = ProcessPoolExecutor(max_workers=workers, mp_context=_context())
+            _POOL = ProcessPoolExecutor(
+                max_workers=workers, mp_context=_context(), initializer=runtime.keep_freed_memory
+            )
         return _POOL
 
 
