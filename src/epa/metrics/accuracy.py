@@ -94,13 +94,19 @@ def stats(x: np.ndarray) -> dict:
     x = np.asarray(x, float).ravel()
     if x.size == 0:
         return {"n": 0, **dict.fromkeys(STATISTICS)}
-    mean = np.mean(x)
+    # np.mean's and np.std's arithmetic (the sum divided by n; the mean of the squared deviations
+    # from that mean), the mean summed once and the squares in one scratch array
+    mean = np.add.reduce(x) / x.size
+    work = np.multiply(x, x)
+    rmse = np.sqrt(np.add.reduce(work) / x.size)
+    np.subtract(x, mean, out=work)
+    std = np.sqrt(np.add.reduce(np.multiply(work, work, out=work)) / x.size)
     return {
         "n": int(x.size),
-        "rmse": float(np.sqrt(np.mean(x * x))),
+        "rmse": float(rmse),
         "mean": float(mean),
         "median": float(np.median(x) if np.isnan(mean) else _median(x)),
-        "std": float(np.std(x)),
+        "std": float(std),
         "min": float(np.min(x)),
         "max": float(np.max(x)),
     }
@@ -130,8 +136,9 @@ def order_statistics(x: np.ndarray, ranks: list[int]) -> np.ndarray:
     margin = 4 * int(np.sqrt(m)) + 2  # some 8 standard deviations of a sample rank
     lo = sample[max(ranks[0] * m // n - margin, 0)]
     hi = sample[min(ranks[-1] * m // n + margin, m - 1)]
-    below = int(np.count_nonzero(x < lo))
-    inside = x[(x >= lo) & (x <= hi)]
+    within = x >= lo
+    below = n - int(np.count_nonzero(within))  # no NaN: x < lo is not x >= lo
+    inside = x[np.logical_and(within, x <= hi, out=within)]
     if below <= ranks[0] and ranks[-1] < below + inside.size:
         at = [r - below for r in ranks]
         return np.partition(inside, at)[at]
