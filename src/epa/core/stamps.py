@@ -47,8 +47,6 @@ def closest_pairs(
     found = closest_pair_blocks(d, delta, tol, strict=strict, skip=skip, starts=starts)
     if len(found) == 1:
         return found[0]
-    if not found:
-        return np.zeros(0, np.intp), np.zeros(0, np.intp)
     return np.concatenate([i for i, _ in found]), np.concatenate([j for _, j in found])
 
 
@@ -56,10 +54,12 @@ def closest_pair_blocks(
     d: np.ndarray, delta: float, tol: float, *, strict: bool, skip: int, starts=None
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """:func:`closest_pairs` as consecutive blocks of starts, (i, j) each, for a caller that
-    joins several sets of pairs (one copy instead of two)."""
+    joins several sets of pairs (one copy instead of two). At least one block, empty without d."""
     n = len(d)
+    if n == 0:
+        return [(np.zeros(0, np.intp), np.zeros(0, np.intp))]
     starts = run_starts(d) if starts is None else starts
-    if n and not (np.isfinite(d[0]) and np.isfinite(d[-1]) and not np.isnan(d).any()):
+    if not (np.isfinite(d[0]) and np.isfinite(d[-1]) and not np.isnan(d).any()):
         return [_closest_whole(d, delta, tol, strict=strict, skip=skip, starts=starts)]
     # in blocks of starts: a block's partners lie between those of its first and last start, so
     # its search merges it with that stretch of d only, and its temporaries stay in cache
