@@ -3,6 +3,8 @@ Used by Step 1's association, Step 2's motion pairs, the RPE pairs and the timin
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 
 
@@ -44,7 +46,7 @@ def closest_pairs(
     compute_comparison_indices_length and evo's filter_pairs_by_path(all_pairs=True), in O(N log N).
     ``starts``: :func:`run_starts` of ``d``, made once for several deltas.
     """
-    found = closest_pair_blocks(d, delta, tol, strict=strict, skip=skip, starts=starts)
+    found = list(closest_pair_blocks(d, delta, tol, strict=strict, skip=skip, starts=starts))
     if len(found) == 1:
         return found[0]
     return np.concatenate([i for i, _ in found]), np.concatenate([j for _, j in found])
@@ -52,26 +54,27 @@ def closest_pairs(
 
 def closest_pair_blocks(
     d: np.ndarray, delta: float, tol: float, *, strict: bool, skip: int, starts=None
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """:func:`closest_pairs` as consecutive blocks of starts, (i, j) each, for a caller that
-    joins several sets of pairs (one copy instead of two). At least one block, empty without d."""
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """:func:`closest_pairs` as consecutive blocks of starts, (i, j) each, made as they are taken:
+    a caller joining several sets of pairs copies each block once, while it is in cache. At least
+    one block, empty without d."""
     n = len(d)
     if n == 0:
-        return [(np.zeros(0, np.intp), np.zeros(0, np.intp))]
+        yield np.zeros(0, np.intp), np.zeros(0, np.intp)
+        return
     starts = run_starts(d) if starts is None else starts
-    if not (np.isfinite(d[0]) and np.isfinite(d[-1]) and not np.isnan(d).any()):
-        return [_closest_whole(d, delta, tol, strict=strict, skip=skip, starts=starts)]
+    if not (np.isfinite(d[0]) and np.isfinite(d[-1] + delta) and not np.isnan(d).any()):
+        yield _closest_whole(d, delta, tol, strict=strict, skip=skip, starts=starts)
+        return
     # in blocks of starts: a block's partners lie between those of its first and last start, so
     # its search merges it with that stretch of d only, and its temporaries stay in cache
-    return [
-        _closest_block(d, d[s : s + PAIR_BLOCK] + delta, s, tol, strict, skip, starts)
-        for s in range(0, n, PAIR_BLOCK)
-    ]
+    for s in range(0, n, PAIR_BLOCK):
+        yield _closest_block(d, d[s : s + PAIR_BLOCK] + delta, s, tol, strict, skip, starts)
 
 
 def _closest_block(d, target, s: int, tol, strict, skip, starts):
-    """closest_pairs of the starts s, s + 1, ... whose d + delta is ``target``, on a finite ``d``:
-    :func:`_closest_whole`'s choices, where no error can be NaN."""
+    """closest_pairs of the starts s, s + 1, ... whose d + delta is ``target``, on a finite ``d``
+    (and ``target``): :func:`_closest_whole`'s choices, where no error can be NaN."""
     n = len(d)
     a = int(np.searchsorted(d, target[0], side="left"))
     b = int(np.searchsorted(d, target[-1], side="left"))
@@ -104,7 +107,8 @@ def _closest_block(d, target, s: int, tol, strict, skip, starts):
 
 
 def _closest_whole(d, delta, tol, *, strict: bool, skip: int, starts):
-    """closest_pairs of every start at once, for a ``d`` holding NaN or an infinity."""
+    """closest_pairs of every start at once, for a ``d`` holding NaN or an infinity (or reaching
+    one at d + delta)."""
     n = len(d)
     target = d + delta
     first = np.arange(skip, n + skip)

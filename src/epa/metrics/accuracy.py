@@ -330,15 +330,8 @@ def segment_rpe(
     ``rows``: geometry.pair_rows of the matched poses."""
     lengths = [float(length) for length in segments]
     starts = run_starts(dist)
-    # each length's pairs in blocks, all joined once
-    pairs = [
-        closest_pair_blocks(dist, length, tol, strict=True, skip=0, starts=starts)
-        for length in lengths
-    ]
-    blocks = [block for one in pairs for block in one]
-    i, j = (np.concatenate(k) for k in zip(*blocks)) if blocks else (np.zeros(0), np.zeros(0))
+    i, j, sizes = _joined_pairs(dist, lengths, tol, starts)
     er, et = geometry.pair_errors(rows, i, j)
-    sizes = [sum(len(k) for k, _ in one) for one in pairs]
     rpe, drift = {}, {}
     for length, end, size in zip(lengths, np.cumsum(sizes, dtype=int), sizes):
         key, one = segment_key(length), slice(end - size, end)
@@ -352,6 +345,24 @@ def segment_rpe(
         "trans_m": et,
     }
     return rpe, drift, table
+
+
+def _joined_pairs(dist: np.ndarray, lengths: list[float], tol: float, starts: np.ndarray):
+    """Every length's segment pairs, joined (i, j), and each length's count: each block of pairs
+    copied once as it is made, into arrays of room for every start of every length (the room
+    never written is never touched)."""
+    room = len(lengths) * len(dist)
+    i, j = np.empty(room, np.intp), np.empty(room, np.intp)
+    sizes, end = [], 0
+    for length in lengths:
+        begin = end
+        for a, b in closest_pair_blocks(dist, length, tol, strict=True, skip=0, starts=starts):
+            i[end : end + len(a)], j[end : end + len(a)] = a, b
+            end += len(a)
+        sizes.append(end - begin)
+    if not lengths:
+        return np.zeros(0), np.zeros(0), sizes
+    return i[:end], j[:end], sizes
 
 
 def _repeat(values: list[float], sizes: list[int]) -> np.ndarray:
