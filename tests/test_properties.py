@@ -318,7 +318,7 @@ def test_pair_errors_give_the_previous_bits():
     previous formula's bit for bit: on random, repeated, reversed and run-like index sets longer
     than a block, with the identity, its negative and equal orientations among the poses."""
     rng = np.random.default_rng(341)
-    n = 3 * geometry.PAIR_BLOCK + 17
+    n = geometry.ROW_BLOCK + 3 * geometry.PAIR_BLOCK + 17  # pair_rows in two blocks too
     q_ref, q_est = (rng.normal(size=(n, 4)) for _ in range(2))
     q_ref /= np.linalg.norm(q_ref, axis=1, keepdims=True)
     q_est /= np.linalg.norm(q_est, axis=1, keepdims=True)
@@ -346,6 +346,30 @@ def test_pair_errors_give_the_previous_bits():
             assert all(np.array_equal(a, b) for a, b in zip(before, after))
 
 
+def test_ate_2d_gives_the_previous_bits():
+    """ATE 2D's yaw in blocks, only the z of the log, is the whole arrays' quat_mul, quat_conj and
+    quat_log_rows' bit for bit (more poses than a block; the identity and its negative among them)."""
+    from epa.core.trajectory import Trajectory
+    from epa.metrics import ate_2d
+
+    rng = np.random.default_rng(343)
+    n = geometry.ROW_BLOCK + 17
+    q_ref, q_est = (rng.normal(size=(n, 4)) for _ in range(2))
+    q_ref /= np.linalg.norm(q_ref, axis=1, keepdims=True)
+    q_est /= np.linalg.norm(q_est, axis=1, keepdims=True)
+    q_est[:100] = q_ref[:100]
+    q_ref[5], q_est[5] = [0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, -1.0]
+    t = np.arange(n) * 0.01
+    ref, est = (
+        Trajectory(t, rng.normal(size=(n, 3)), q_ref),
+        Trajectory(t, rng.normal(size=(n, 3)), q_est),
+    )
+    before = np.degrees(
+        geometry.quat_log_rows(geometry.quat_mul(est.q, geometry.quat_conj(ref.q)))[2]
+    )
+    assert np.array_equal(ate_2d.errors(ref, est)[0], before)
+
+
 def test_run_starts_and_order_statistics_are_the_searches_they_replace():
     """run_starts is searchsorted(d, d, 'left') on non-decreasing d (ties, NaN); the median from
     order_statistics is np.median bit for bit (ties, zeros of both signs, inf, sorted and periodic
@@ -368,5 +392,13 @@ def test_run_starts_and_order_statistics_are_the_searches_they_replace():
             np.where(np.arange(n) % 97 == 0, np.inf, x),
         ):
             with np.errstate(invalid="ignore"):  # the std of a sample with inf
-                a, b = np.median(sample), accuracy.stats(sample)["median"]
-            assert a == b and np.signbit(a) == np.signbit(b), (n, a, b)
+                got = accuracy.stats(sample)
+                want = {
+                    "median": np.median(sample),
+                    "mean": np.mean(sample),
+                    "rmse": np.sqrt(np.mean(sample * sample)),
+                    "std": np.std(sample),
+                }
+            for key, a in want.items():  # numpy's statistics bit for bit
+                b = got[key]
+                assert str(a) == str(b) and np.signbit(a) == np.signbit(b), (n, key, a, b)

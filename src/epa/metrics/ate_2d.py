@@ -29,8 +29,13 @@ def errors(ref: Trajectory, est: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     -------
     yaw_deg, trans_xy_m : ndarray
     """
-    error = geometry.quat_mul(est.q, geometry.quat_conj(ref.q))
-    yaw = np.degrees(geometry.quat_log_rows(error)[2])
+    yaw = np.empty(len(ref))
+    # quat_mul(est.q, quat_conj(ref.q)) and quat_log's z, in blocks: the temporaries in cache
+    for part in geometry.row_blocks(len(ref)):
+        conj = geometry.component_rows(ref.q[part])
+        conj[:3] *= -1
+        error = geometry.mul_rows(geometry.component_rows(est.q[part]), conj)
+        yaw[part] = np.degrees(geometry.log_rows(error)[2])
     return yaw, geometry.norms(ref.p[:, :2] - est.p[:, :2])
 
 
