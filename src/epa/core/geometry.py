@@ -413,10 +413,10 @@ def relative_motion_rows(
     q, t = np.empty((4, m)), np.empty((3, m))
     for part in row_blocks(m):
         a, b = _part(i, part), _part(j, part)
-        x, y, z, w = q_rows[:, a]
+        x, y, z, w = _take(q_rows, a)
         inv = (-x, -y, -z, w)  # quat_conj
-        q[:, part] = _mul_rows(inv, q_rows[:, b])
-        t[:, part] = _rotate_rows(inv, p_rows[:, b] - p_rows[:, a])
+        q[:, part] = _mul_rows(inv, _take(q_rows, b))
+        t[:, part] = _rotate_rows(inv, _take(p_rows, b) - _take(p_rows, a))
     return q, t
 
 
@@ -468,11 +468,25 @@ def interpolator(t: np.ndarray, p_rows: np.ndarray, q_rows: np.ndarray):
         p_at, q_at = np.empty((3, len(stamps))), np.empty((4, len(stamps)))
         for part in row_blocks(len(stamps)):
             k, f = _bracket(t, stamps[part])
-            lo = k - 1
-            w0, w1 = _slerp_weights(f, angle[lo], small[lo], sine[lo])
-            p0 = p_rows[:, lo]
-            p_at[:, part] = p0 + f * (p_rows[:, k] - p0)
-            q_at[:, part] = w0 * q0[:, lo] + w1 * q1[:, lo]
+            lo, hi = _runs(k - 1, k)
+            w0, w1 = _slerp_weights(f, _take(angle, lo), _take(small, lo), _take(sine, lo))
+            p0 = _take(p_rows, lo)
+            p_at[:, part] = p0 + f * (_take(p_rows, hi) - p0)
+            q_at[:, part] = w0 * _take(q0, lo) + w1 * _take(q1, lo)
         return p_at, q_at
 
     return at
+
+
+def _runs(lo: np.ndarray, hi: np.ndarray):
+    """The intervals' ends (k - 1, k) as slices when they are runs of consecutive indices (stamps at
+    the poses' own rate mostly are: one interval after the other), else as they are."""
+    if consecutive(lo):
+        return slice(int(lo[0]), int(lo[-1]) + 1), slice(int(hi[0]), int(hi[-1]) + 1)
+    return lo, hi
+
+
+def _take(rows: np.ndarray, k) -> np.ndarray:
+    """rows[..., k] of a slice (a view) or indices (np.take: 3-5x faster than fancy indexing over
+    the last axis of (n, N) rows)."""
+    return rows[..., k] if isinstance(k, slice) else np.take(rows, k, axis=-1)
