@@ -291,9 +291,25 @@ def _bracket(t: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For each stamp of ``at``: the index k of the pose after it (k - 1 before it, clamped to the
     first and last interval) and its fraction of the interval, in [0, 1]."""
     k = np.clip(np.searchsorted(t, at, side="left"), 1, len(t) - 1)
-    dt = t[k] - t[k - 1]
-    f = np.clip(np.where(dt > 0, (at - t[k - 1]) / np.where(dt > 0, dt, 1.0), 0.0), 0.0, 1.0)
-    return k, f
+    return k, _fraction(t[k - 1], t[k], at)
+
+
+def _fraction(t0: np.ndarray, t1: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """The fraction of each stamp of ``at`` in its interval (t0, t1], in [0, 1]."""
+    dt = t1 - t0
+    return np.clip(np.where(dt > 0, (at - t0) / np.where(dt > 0, dt, 1.0), 0.0), 0.0, 1.0)
+
+
+def _intervals(t: np.ndarray, at: np.ndarray):
+    """:func:`_bracket` as (k - 1, k, fraction), the ends slices when the stamps fall one per
+    interval in order (stamps at the poses' own rate mostly do: checked against the interval's
+    ends, with one search instead of one per stamp), else index arrays."""
+    n, k0 = len(at), int(np.searchsorted(t, at[0], side="left"))
+    lo, hi = slice(k0 - 1, k0 - 1 + n), slice(k0, k0 + n)
+    if k0 >= 1 and k0 + n <= len(t) and (t[lo] < at).all() and (at <= t[hi]).all():
+        return lo, hi, _fraction(t[lo], t[hi], at)
+    k, f = _bracket(t, at)
+    return *_runs(k - 1, k), f
 
 
 def interpolate(
@@ -467,8 +483,7 @@ def interpolator(t: np.ndarray, p_rows: np.ndarray, q_rows: np.ndarray):
     def at(stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         p_at, q_at = np.empty((3, len(stamps))), np.empty((4, len(stamps)))
         for part in row_blocks(len(stamps)):
-            k, f = _bracket(t, stamps[part])
-            lo, hi = _runs(k - 1, k)
+            lo, hi, f = _intervals(t, stamps[part])
             w0, w1 = _slerp_weights(f, _take(angle, lo), _take(small, lo), _take(sine, lo))
             p0 = _take(p_rows, lo)
             p_at[:, part] = p0 + f * (_take(p_rows, hi) - p0)
