@@ -505,3 +505,18 @@ def _take(rows: np.ndarray, k) -> np.ndarray:
     """rows[..., k] of a slice (a view) or indices (np.take: 3-5x faster than fancy indexing over
     the last axis of (n, N) rows)."""
     return rows[..., k] if isinstance(k, slice) else np.take(rows, k, axis=-1)
+
+
+def matrix_rows(m: np.ndarray) -> np.ndarray:
+    """(B, 3, 3) matrices as (3, 3, B) component rows."""
+    return np.ascontiguousarray(m.transpose(1, 2, 0))
+
+
+def matmul_rows(a, b) -> list:
+    """a b of 3x3 matrices given as component rows (entries indexed [i][k]: rows of B matrices, or
+    the scalars of one matrix), as a 3x3 list of rows: the products written out, 3-4x faster than
+    numpy's stacked matmul, which calls BLAS once per 3x3 matrix."""
+    return [
+        [a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j] for j in range(3)]
+        for i in range(3)
+    ]

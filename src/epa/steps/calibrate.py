@@ -76,12 +76,14 @@ class Extrinsic:
         skew_t, s2 = geometry.skew(self.t), self.scale**2
         for start in range(0, len(cov_rot_c), APPLY_BLOCK):
             at = slice(start, start + APPLY_BLOCK)
-            cr = _mm(_mm(self.R, _rows(cov_rot_c[at])), self.R.T)
-            lever = _mm(geometry.rot_rows(q[:, at]), skew_t)  # R_b [t_x]x
+            cr = geometry.matmul_rows(
+                geometry.matmul_rows(self.R, geometry.matrix_rows(cov_rot_c[at])), self.R.T
+            )
+            lever = geometry.matmul_rows(geometry.rot_rows(q[:, at]), skew_t)  # R_b [t_x]x
             lever_t = [[lever[b][a] for b in range(3)] for a in range(3)]
-            pos = _mm(_mm(lever, cr), lever_t)
+            pos = geometry.matmul_rows(geometry.matmul_rows(lever, cr), lever_t)
             c_pos = cov_pos_c[at]
-            for a, b in geometry._MATRIX_ENTRIES:
+            for a, b in np.ndindex(3, 3):
                 cov_rot[at, a, b] = cr[a][b]
                 cov_pos[at, a, b] = s2 * c_pos[:, a, b] + pos[a][b]
         return {"cov_rot": cov_rot, "cov_pos": cov_pos}
@@ -117,20 +119,6 @@ class Extrinsic:
         }
         # info's keys are the solve's, gathered as far as it got: ExtrinsicRecord's NotRequired ones
         return cast(ExtrinsicRecord, record)
-
-
-def _rows(m: np.ndarray) -> np.ndarray:
-    """(B, 3, 3) matrices as (3, 3, B) component rows."""
-    return np.ascontiguousarray(m.transpose(1, 2, 0))
-
-
-def _mm(a, b) -> list:
-    """a b of 3x3 matrices given as component rows (entries indexed [i][k]: rows of poses, or the
-    scalars of one matrix), as a 3x3 list of rows."""
-    return [
-        [a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j] for j in range(3)]
-        for i in range(3)
-    ]
 
 
 def interpolator(ref: Trajectory):
