@@ -428,7 +428,7 @@ def relative_motion_rows(
     m = len(i) if not isinstance(i, slice) else i.stop - i.start
     q, t = np.empty((4, m)), np.empty((3, m))
     for part in row_blocks(m):
-        a, b = _part(i, part), _part(j, part)
+        a, b = _run(_part(i, part)), _run(_part(j, part))
         x, y, z, w = _take(q_rows, a)
         inv = (-x, -y, -z, w)  # quat_conj
         q[:, part] = _mul_rows(inv, _take(q_rows, b))
@@ -499,6 +499,14 @@ def _runs(lo: np.ndarray, hi: np.ndarray):
     if consecutive(lo):
         return slice(int(lo[0]), int(lo[-1]) + 1), slice(int(hi[0]), int(hi[-1]) + 1)
     return lo, hi
+
+
+def _run(k):
+    """Indices as a slice where they are a run of consecutive ones (a block of pairs mostly is:
+    pairs a fixed number of poses apart), else as they are."""
+    if isinstance(k, slice) or not consecutive(k):
+        return k
+    return slice(int(k[0]), int(k[-1]) + 1)
 
 
 def _take(rows: np.ndarray, k) -> np.ndarray:
