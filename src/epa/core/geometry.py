@@ -528,3 +528,12 @@ def matmul_rows(a, b) -> list:
         [a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j] for j in range(3)]
         for i in range(3)
     ]
+
+
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b of (3, N) component rows, as (3, N) rows."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    np.subtract(a[1] * b[2], a[2] * b[1], out=out[0])
+    np.subtract(a[2] * b[0], a[0] * b[2], out=out[1])
+    np.subtract(a[0] * b[1], a[1] * b[0], out=out[2])
+    return out

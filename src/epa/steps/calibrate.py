@@ -612,6 +612,34 @@ def _translation_residuals(qa, ta, rtb, scale: bool, x: np.ndarray) -> np.ndarra
     return resid
 
 
+def _normal_equations(qa, ta, rtb, scale: bool):
+    """sum m^T m and sum m^T b of the translation equations (:func:`_equations`) of pairs given as
+    rows, from the quaternions q_A = (u, w) without R_A's entries (2-6x faster): R_A = I + 2w [u]x
+    + 2 [u]x^2, so (R_A - I)^T (R_A - I) = 4 (|u|^2 I - u u^T) and (R_A - I)^T v = 2 u x (u x v)
+    - 2w u x v. In blocks of pairs."""
+    n = 4 if scale else 3
+    h, g = np.zeros((n, n)), np.zeros(n)
+    for part in geometry.row_blocks(qa.shape[1]):
+        u, w, rtb_p, ta_p = qa[:3, part], qa[3, part], rtb[:, part], ta[:, part]
+        uu = _sums(u, u)
+        h[:3, :3] += 4.0 * (np.trace(uu) * np.eye(3) - uu)
+        b = -ta_p if scale else rtb_p - ta_p
+        g[:3] += _transposed_motion(u, w, b).sum(axis=1)
+        if scale:  # the column -R_X t_B
+            column = _transposed_motion(u, w, rtb_p).sum(axis=1)
+            h[:3, 3] -= column
+            h[3, :3] -= column
+            h[3, 3] += np.einsum("ck,ck->", rtb_p, rtb_p)
+            g[3] -= np.einsum("ck,ck->", rtb_p, b)
+    return h, g
+
+
+def _transposed_motion(u: np.ndarray, w: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(R_A - I)^T v of every pair, as 2 u x (u x v) - 2w u x v, on (3, B) rows."""
+    c = geometry.cross_rows(u, v)
+    return 2.0 * geometry.cross_rows(u, c) - (2.0 * w) * c
+
+
 def _robust_lstsq(qa, ta, rtb, scale: bool, max_condition: float):
     """Least squares on the translation equations of every pair (:func:`_equations`), with up to
     two rounds of outlier rejection and truncation of directions the motion does not observe
@@ -619,11 +647,7 @@ def _robust_lstsq(qa, ta, rtb, scale: bool, max_condition: float):
     their normal matrix and the record."""
     n, k = 4 if scale else 3, qa.shape[1]
     keep = np.ones(k, bool)
-    h, g = np.zeros((n, n)), np.zeros(n)
-    for part in geometry.row_blocks(k):  # the normal equations over every pair
-        m, b = _equations(qa[:, part], ta[:, part], rtb[:, part], scale)
-        h += np.einsum("cak,cbk->ab", m, m)
-        g += np.einsum("cak,ck->a", m, b)
+    h, g = _normal_equations(qa, ta, rtb, scale)  # over every pair
     for rejection in range(3):
         pinv, null, sv = _pinv(h, max_condition)
         x = pinv @ g
@@ -633,9 +657,10 @@ def _robust_lstsq(qa, ta, rtb, scale: bool, max_condition: float):
             break
         # the next round's normal equations: only the pairs that left or came back change them
         for sign, changed in ((-1.0, keep & ~new_keep), (1.0, new_keep & ~keep)):
-            m, b = _equations(_cols(qa, changed), _cols(ta, changed), _cols(rtb, changed), scale)
-            h = h + sign * np.einsum("cak,cbk->ab", m, m)
-            g = g + sign * np.einsum("cak,ck->a", m, b)
+            dh, dg = _normal_equations(
+                _cols(qa, changed), _cols(ta, changed), _cols(rtb, changed), scale
+            )
+            h, g = h + sign * dh, g + sign * dg
         keep = new_keep
     unobs_t = [d[:3].tolist() for d in null if np.linalg.norm(d[:3]) > 0.5]
     scale_unobs = bool(n == 4 and any(abs(d[3]) > 0.5 for d in null))
