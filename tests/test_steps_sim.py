@@ -128,6 +128,42 @@ def test_step2_interpolator_of_a_single_pose_is_trajectory_at():
     assert np.array_equal(got.p, want.p) and np.array_equal(got.q, want.q)
 
 
+def test_interpolator_is_interpolate_bit_for_bit(rng):
+    """Stamps one per interval (the slices' path), with repeats, outside the poses, unsorted and
+    across blocks: the same bits as interpolate's search at every stamp."""
+    t = np.cumsum(rng.uniform(0.5, 1.5, 3000))
+    p, q = rng.normal(size=(3000, 3)), geometry.normalize_quat(rng.normal(size=(3000, 4)))
+    at = geometry.interpolator(t, geometry.component_rows(p), geometry.component_rows(q))
+    mid = (t[:-1] + t[1:]) / 2
+    for stamps in (
+        mid,  # one per interval
+        mid[5:] + 1e-9,
+        t[1:],  # on the poses
+        np.r_[t[0] - 1, mid],  # one before the first
+        np.r_[mid, t[-1] + 3],
+        np.repeat(mid[:50], 2),
+        rng.uniform(t[0] - 2, t[-1] + 2, 2000),
+        np.tile(mid[:100], 700),  # blocks of both kinds
+    ):
+        (pa, qa), (pb, qb) = at(stamps), geometry.interpolate(t, p, q, stamps)
+        assert np.array_equal(pa.T, pb) and np.array_equal(qa.T, qb)
+
+
+def test_step2_median_is_numpy_median(rng):
+    """The bracketed selection gives np.median's value: ties, sorted and skewed values, sizes
+    either side of the sample's threshold, and samples whose bounds miss (the whole partitioned)."""
+    cases = [rng.integers(0, 5, n).astype(float) for n in (1, 2, 4095, 4096, 70001)]
+    cases += [np.abs(rng.standard_t(3, n)) for n in (4097, 100000, 100001)]
+    x = rng.normal(size=200000)
+    cases += [np.sort(x), np.sort(x)[::-1], np.r_[np.zeros(100000), np.ones(100001)]]
+    skewed = np.zeros(200000)
+    skewed[::64] = 1.0  # the sample sees only ones: its bounds miss the median
+    cases.append(skewed)
+    for x in cases:
+        assert calibration._median(x) == np.median(x)
+    assert np.isnan(calibration._median(np.r_[x, np.nan])) and np.isnan(calibration._median(x[:0]))
+
+
 def test_step2_takes_the_kept_estimate_motions_only_for_the_same_pairs():
     """The +-offset_std re-solves find their pairs again; one whose i are the same but a j moved (a
     tie broken the other way) must not take the estimate's motions of the other pairs."""
