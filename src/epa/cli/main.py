@@ -581,8 +581,7 @@ def _eval(args) -> None:
     from epa.artifacts.case import CaseFolder
     from epa.workflow import chain
 
-    runtime.use_spare_thread()  # one case in this process: its stages may use a second core
-    runtime.keep_freed_memory()  # and its temporaries reuse freed memory (large pairs)
+    runtime.one_case_alone()  # a second core for its stages, freed memory kept for reuse
     cfg = _eval_config(args)
     out = CaseFolder(args.out)
     chain.clear_arrays(out)

@@ -100,6 +100,13 @@ def keep_freed_memory() -> bool:
     )
 
 
+def one_case_alone() -> None:
+    """This process runs one case alone (`epa eval`): its stages may use a second thread, and its
+    temporaries reuse freed memory."""
+    use_spare_thread()
+    keep_freed_memory()
+
+
 class Background(Generic[T]):
     """``f()`` started in a thread of its own; :meth:`result` waits for it and gives its value, or
     raises its error in the caller's thread, where a call of ``f`` would have raised it."""
