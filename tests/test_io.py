@@ -334,10 +334,12 @@ def test_artifact_rows_by_pyarrow_read_back_as_the_same_doubles(tmp_path):
     files.write_csv(tmp_path / "c.csv", {"a": np.zeros(0), "b": np.zeros(0)})
     assert (tmp_path / "c.csv").read_text() == "a,b\n"
     f32 = np.float32(0.1)
-    assert (
-        files.exact_rows(np.array([[f32]], dtype=np.float32), " ")
-        == repr(float(f32)).encode() + b"\n"
-    )
+    rows = files.exact_rows(np.array([[f32]], dtype=np.float32), " ")
+    assert rows is not None and b"".join(rows) == repr(float(f32)).encode() + b"\n"
+    big = rng.normal(size=(2 * files.ARROW_ROWS_PER_BLOCK + 5, 2))  # written in three blocks
+    files.write_csv(tmp_path / "d.csv", {"a": big[:, 0], "b": big[:, 1]})
+    got = files.read_csv(tmp_path / "d.csv")
+    assert np.array_equal(np.column_stack([got["a"], got["b"]]), big)
 
 
 def test_artifact_numbers_keep_negative_zero_next_to_a_missing_value(tmp_path):
