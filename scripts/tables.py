@@ -13,14 +13,18 @@ import os
 import sys
 from pathlib import Path
 
-import pandas  # noqa: F401 - imported for its C parser, chosen below (runtime.use_pandas_parser)
-
 from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.outputs import provenance, tables
 
+try:  # pyarrow's reader parses every artifact from 32 KB on once it is imported (epa.artifacts.files)
+    import pyarrow.csv  # noqa: F401 - 0.05 s to import, where pandas took 0.3-0.5 s of the serial tail
+except ImportError:
+    import pandas  # noqa: F401 - its C parser instead
+
 WORKFLOW_DIR = Path(__file__).resolve().parents[1]
-# every case's artifacts are read by pandas' C parser (3-4x loadtxt on large tables, the same doubles)
+# a large artifact pyarrow declines (a value that is not finite) is read by pandas' C parser (3-4x
+# loadtxt on large tables, imported only then); the same doubles whichever parses
 runtime.use_pandas_parser()
 
 

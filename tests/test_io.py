@@ -307,6 +307,41 @@ def test_artifact_text_is_np_savetxt_byte_for_byte():
             assert written.getvalue() == expected.getvalue().decode()
 
 
+def test_artifact_rows_by_pyarrow_read_back_as_the_same_doubles(tmp_path):
+    """Stage artifacts (write_tum, write_csv) are written by pyarrow's CSV writer where installed:
+    every number the shortest text of its double. Each parser the readers use (pyarrow's, pandas' C
+    parser, np.loadtxt) must read back the very doubles, -0, nan, inf, subnormals and the extremes
+    included; a float32 column is written as its double."""
+    pytest.importorskip("pyarrow")
+    rng = np.random.default_rng(3)
+    edge = [0.0, -0.0, 5e-324, 2.2250738585072014e-308, 1.7976931348623157e308, 2.0**53 + 2, 0.1]
+    table = rng.normal(size=(3000, 5)) * 10.0 ** rng.integers(-300, 300, size=(3000, 5))
+    table[:, 1] = np.round(rng.normal(size=3000) * 1e3, 3)  # short decimals
+    table[:40, 2] = rng.choice([*edge, np.nan, np.inf, -np.inf], 40)
+    table[:, 3] = rng.normal(size=3000).astype(np.float32)
+    files.write_csv(tmp_path / "a.csv", {f"c{k}": table[:, k] for k in range(5)})
+    text_ = (tmp_path / "a.csv").read_text()
+    assert text_.startswith("c0,c1,c2,c3,c4\n") and "0.10000000000000001" not in text_
+    body = np.loadtxt(tmp_path / "a.csv", delimiter=",", skiprows=1)
+    got = files.read_csv(tmp_path / "a.csv")  # pyarrow declines the non-finite: another parser
+    for rows in (body, np.column_stack([got[f"c{k}"] for k in range(5)])):
+        assert np.array_equal(rows, table, equal_nan=True)
+        assert np.array_equal(np.signbit(rows), np.signbit(table))
+    finite = np.isfinite(table).all(axis=1)
+    files.write_csv(tmp_path / "b.csv", {f"c{k}": table[finite, k] for k in range(5)})
+    got = files.read_csv(tmp_path / "b.csv")  # pyarrow's parse
+    assert np.array_equal(np.column_stack([got[f"c{k}"] for k in range(5)]), table[finite])
+    files.write_csv(tmp_path / "c.csv", {"a": np.zeros(0), "b": np.zeros(0)})
+    assert (tmp_path / "c.csv").read_text() == "a,b\n"
+    f32 = np.float32(0.1)
+    rows = files.exact_rows(np.array([[f32]], dtype=np.float32), " ")
+    assert rows is not None and b"".join(rows) == repr(float(f32)).encode() + b"\n"
+    big = rng.normal(size=(2 * files.ARROW_ROWS_PER_BLOCK + 5, 2))  # written in three blocks
+    files.write_csv(tmp_path / "d.csv", {"a": big[:, 0], "b": big[:, 1]})
+    got = files.read_csv(tmp_path / "d.csv")
+    assert np.array_equal(np.column_stack([got["a"], got["b"]]), big)
+
+
 def test_artifact_numbers_keep_negative_zero_next_to_a_missing_value(tmp_path):
     """An artifact column of whole numbers with -0 and a missing value: files._numbers (pandas' C
     parser) must give np.loadtxt's doubles, sign of zero included (a parse that infers the column

@@ -212,6 +212,37 @@ def test_normalised_correlation_is_the_direct_formula(n, data):
         assert abs(corr[i] * np.sqrt(energy) - num) <= 1e-12 * np.sqrt(np.sum(a**2) * np.sum(b**2))
 
 
+def test_kept_reference_spectrum_gives_the_same_bits():
+    """A process evaluating many cases keeps the reference signal's spectrum: a case with the same
+    reference signal gets the bits a fresh transform gives, one with another signal (the same
+    length, span and sampled values) is never given it, and the kept spectrum stays unwritten."""
+    from epa.core import runtime
+
+    runtime.reset()
+    rng = np.random.default_rng(7)
+    n, span_a, span_b = 400, (20, 380), (100, 300)
+    a, b1, b2 = (_signal_on(n, s, rng) for s in (span_a, span_b, span_b))
+    fresh = [sync._normalised_correlation(a, span_a, b, span_b)[0] for b in (b1, b2)]
+    runtime.reset()
+    for b, expected in zip((b1, b2, b1), (*fresh, fresh[0])):
+        assert np.array_equal(sync._normalised_correlation(a, span_a, b, span_b)[0], expected)
+    assert len(sync._SPECTRA) == 1
+    ((kept_a, kept_spectrum),) = sync._SPECTRA.values()
+    assert np.array_equal(kept_spectrum, np.fft.rfft(a, len(kept_spectrum) * 2 - 2))
+    other = a.copy()
+    other[span_a[0] + 1] += 1.0  # not one of the samples the key looks at
+    got = sync._normalised_correlation(other, span_a, b1, span_b)[0]
+    runtime.reset()
+    assert np.array_equal(got, sync._normalised_correlation(other, span_a, b1, span_b)[0])
+    runtime.reset()
+    runtime.use_spare_thread()  # one case in the process (`epa eval`): nothing kept
+    try:
+        sync._normalised_correlation(a, span_a, b1, span_b)
+        assert not sync._SPECTRA
+    finally:
+        runtime.reset()
+
+
 @settings(max_examples=80, deadline=None)
 @given(st.integers(1, 40), st.integers(-50, 50), st.integers(0, 45), st.integers(1, 60))
 def test_window_sums_and_circular_runs_by_slices(n, lo, width, count):

@@ -4,6 +4,7 @@ and the writers of every trajectory format the readers take (:mod:`epa.readers`)
 from __future__ import annotations
 
 import errno
+import itertools
 import json
 import math
 import os
@@ -11,6 +12,7 @@ import random
 import re
 import tempfile
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -36,12 +38,15 @@ def _atomic_write(path, write) -> None:
     except OSError as exc:
         raise EpaError(f"cannot write: {_why(exc, path)}", path=str(path)) from None
     try:
-        if isinstance(write, (str, bytes)):  # the whole file at once, without a Python file object
+        if isinstance(write, (str, bytes, Iterator)):  # without a Python file object
             try:
                 os.fchmod(fd, _MODE)
-                data = memoryview(write.encode("utf-8") if isinstance(write, str) else write)
-                while data:
-                    data = data[os.write(fd, data) :]
+                # the whole text at once, or its blocks (bytes-like) one after another
+                blocks = [write] if isinstance(write, (str, bytes)) else write
+                for block in blocks:
+                    data = memoryview(block.encode("utf-8") if isinstance(block, str) else block)
+                    while data:
+                        data = data[os.write(fd, data) :]
             finally:
                 os.close(fd)
         else:
@@ -264,9 +269,41 @@ COV_HEADER = [
 ]
 
 
-# Stage artifacts are lossless (%.17g round-trips a float64 exactly): the next stage reads exactly
-# what this one computed, so the workflow and the in-memory `epa eval` give identical results.
+# Stage artifacts are lossless (each number's text reads back as the same double: pyarrow's
+# shortest text where installed, exact_rows; else %.17g): the next stage reads exactly what this one
+# computed, so the workflow and the in-memory `epa eval` give identical results.
 EXACT = "%.17g"
+
+
+def exact_rows(data: np.ndarray, delimiter: str) -> Iterator | None:
+    """The rows of a 2-D float table as text by pyarrow's CSV writer, in blocks (bytes-like; a
+    million rows are not held as text at once): each number the shortest text that reads back as
+    the same double (``0.1``, not ``%.17g``'s ``0.10000000000000001``), ``nan``, ``inf`` and ``-0``
+    as ``%.17g`` writes them. 3-5x faster than formatting with ``%`` (a quarter of the workflow's
+    stage time was that formatting) and shorter to read; None without pyarrow or for a table
+    without columns (the caller formats with ``%.17g``: the same doubles)."""
+    data = np.asarray(data, dtype=float)  # a float32 column's shortest text is not its double's
+    if data.ndim != 2 or data.shape[1] == 0:
+        return None
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+    except ImportError:
+        return None
+    options = pacsv.WriteOptions(include_header=False, delimiter=delimiter, quoting_style="none")
+
+    def blocks():
+        for lo in range(0, len(data), ARROW_ROWS_PER_BLOCK):
+            block = data[lo : lo + ARROW_ROWS_PER_BLOCK]
+            sink = pa.BufferOutputStream()
+            table = pa.table({f"c{k}": block[:, k] for k in range(block.shape[1])})
+            pacsv.write_csv(table, sink, write_options=options)
+            yield sink.getvalue()
+
+    return blocks()
+
+
+ARROW_ROWS_PER_BLOCK = 65536  # about 10-25 MB of text at a time
 
 
 def savetxt(fh, data, fmt: str = EXACT, delimiter: str = " ", header: str = "", comments="# "):
@@ -316,7 +353,11 @@ def write_tum(path, traj: Trajectory) -> None:
         + ([] if cov is None else COV_HEADER)
         + ([] if printed is None else PRINTED_HEADER)
     )
-    _atomic_write(path, lambda fh: savetxt(fh, data, header=header))
+    rows = exact_rows(data, " ")
+    if rows is None:
+        _atomic_write(path, lambda fh: savetxt(fh, data, header=header))
+    else:
+        _atomic_write(path, itertools.chain([b"# " + header.encode() + b"\n"], rows))
 
 
 def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
@@ -470,12 +511,14 @@ def write_csv(path, columns: dict[str, np.ndarray], fmt: str = EXACT) -> None:
         if names
         else np.zeros((0, 0))
     )
-    _atomic_write(
-        path,
-        lambda fh: savetxt(
-            fh, data.reshape(-1, len(names)), fmt, ",", header=",".join(names), comments=""
-        ),
-    )
+    data = data.reshape(-1, len(names))
+    rows = exact_rows(data, ",") if fmt == EXACT else None
+    if rows is None:
+        _atomic_write(
+            path, lambda fh: savetxt(fh, data, fmt, ",", header=",".join(names), comments="")
+        )
+    else:
+        _atomic_write(path, itertools.chain([",".join(names).encode() + b"\n"], rows))
 
 
 def read_csv(path) -> dict[str, np.ndarray]:
