@@ -29,6 +29,7 @@ import numpy as np
 
 from epa import simulate
 from epa.artifacts import files
+from epa.core import runtime
 from epa.core.trajectory import Trajectory
 from epa.steps.calibrate import Extrinsic
 from epa.workflow import chain, settings
@@ -150,6 +151,7 @@ def main() -> None:
     if args.example:
         return example_stage_costs()
     sizes = [int(s) for s in args.sizes.split(",")]
+    runtime.keep_freed_memory()  # as `epa eval` runs its one case (its second thread: CPU counts it)
     cfg = settings.defaults()
     cfg["report"]["per_case"] = False
     results: dict[int, dict[str, float]] = {}
