@@ -358,6 +358,6 @@ def test_closest_pairs_is_the_first_closest_by_scan(steps, delta, strict, skip, 
                 best, err = j, e
         if best >= 0 and (err < tol if strict else err <= tol):
             want.append((i, best))
-    with mock.patch.object(stamps, "PAIR_BLOCK", block or stamps.PAIR_BLOCK):
+    with mock.patch.object(stamps, "STARTS_PER_BLOCK", block or stamps.STARTS_PER_BLOCK):
         i, j = stamps.closest_pairs(d, delta, tol, strict=strict, skip=skip)
     assert list(zip(i.tolist(), j.tolist())) == want

@@ -1,12 +1,13 @@
 """Property tests: readers never raise anything but the documented error, and write -> read round trips."""
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given
 from hypothesis import settings as hsettings
 from hypothesis import strategies as st
 
 from epa.artifacts import files
-from epa.core import geometry, stamps
+from epa.core import geometry, ranks, stamps
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.metrics import accuracy
@@ -379,7 +380,7 @@ def test_run_starts_and_order_statistics_are_the_searches_they_replace():
         steps = np.where(rng.random(n) < 0.4, 0.0, rng.random(n))
         for d in (np.cumsum(steps), np.zeros(n), np.r_[np.cumsum(steps)[:-1], np.nan]):
             assert np.array_equal(stamps.run_starts(d), np.searchsorted(d, d, side="left"))
-    size = 4 * accuracy.SELECT_SAMPLE
+    size = 4 * ranks.SELECT_SAMPLE
     for n in (1, 2, 3, size, size + 1, size + 2, 50_001, 100_000):
         x = rng.normal(size=n)
         for sample in (
@@ -402,3 +403,16 @@ def test_run_starts_and_order_statistics_are_the_searches_they_replace():
             for key, a in want.items():  # numpy's statistics bit for bit
                 b = got[key]
                 assert str(a) == str(b) and np.signbit(a) == np.signbit(b), (n, key, a, b)
+
+
+def test_pair_errors_refuses_a_pair_index_out_of_range():
+    """Its gathers clip (for speed), so a bad index must fail before them, not pair a pose with
+    the last or the first one."""
+    rng = np.random.default_rng(7)
+    q = rng.normal(size=(3, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    rows = geometry.pair_rows(q, rng.normal(size=(3, 3)), rng.normal(size=(3, 3)))
+    assert len(geometry.pair_errors(rows, [0, 1], [1, 2])[0]) == 2
+    for i, j in (([0, 2], [1, 7]), ([0, 2], [-1, 2]), ([3], [0])):
+        with pytest.raises(IndexError, match="out of range for 3 poses"):
+            geometry.pair_errors(rows, i, j)

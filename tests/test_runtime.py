@@ -168,7 +168,7 @@ def rss_mb():
     with open("/proc/self/statm") as fh:
         return int(fh.read().split()[1]) * 4096 / 1e6
 before = rss_mb()
-a = np.ones(80_000_000 // 8)
+a = np.ones(24_000_000 // 8)  # a 1M-pose (N, 3) temporary
 del a
 print(applied, rss_mb() - before)
 """
@@ -179,8 +179,9 @@ print(applied, rss_mb() - before)
     reason="glibc's malloc only",
 )
 def test_keep_freed_memory_keeps_a_freed_large_array_for_reuse():
-    """Without it glibc returns an 80 MB temporary to the system at once (the next one comes as
-    fresh pages, zeroed by the kernel); with it the pages stay in the process for the next one."""
+    """Without it glibc returns a 24 MB temporary to the system at once (the next one comes as
+    fresh pages, zeroed by the kernel); with it the pages stay in the process for the next one
+    (also where an older glibc caps the mmap threshold at 32 MiB)."""
     out = {
         mode: subprocess.run(
             [sys.executable, "-c", _RSS_AFTER_FREE, mode],
@@ -190,5 +191,5 @@ def test_keep_freed_memory_keeps_a_freed_large_array_for_reuse():
         ).stdout.split()
         for mode in ("keep", "default")
     }
-    assert out["keep"][0] == "True" and float(out["keep"][1]) > 70
-    assert out["default"][0] == "False" and float(out["default"][1]) < 10
+    assert out["keep"][0] == "True" and float(out["keep"][1]) > 20
+    assert out["default"][0] == "False" and float(out["default"][1]) < 4

@@ -370,6 +370,9 @@ def pair_errors(rows: np.ndarray, i, j) -> tuple[np.ndarray, np.ndarray]:
     ``rows`` (made once for several sets of pairs): quat_mul, quat_angle, quat_rotate and norms'
     arithmetic, each pair on its own, so the same bits whatever the rows or blocks."""
     i, j = np.asarray(i, dtype=np.intp), np.asarray(j, dtype=np.intp)
+    # checked once: the gathers clip (np.take with an out and mode="raise" copies first)
+    if len(i) and (min(i.min(), j.min()) < 0 or max(i.max(), j.max()) >= rows.shape[1]):
+        raise IndexError(f"pair index out of range for {rows.shape[1]} poses")
     angle, trans = np.empty(len(i)), np.empty(len(i))
     # in blocks, every temporary in reused scratch rows: a few hundred kB, in cache
     size = min(len(i), PAIR_BLOCK)
@@ -432,7 +435,7 @@ def _gather(rows: np.ndarray, k: np.ndarray, out: np.ndarray) -> np.ndarray:
     gathering of a set of pairs."""
     if consecutive(k) and 0 <= k[0] and k[-1] < rows.shape[1]:
         return rows[:, k[0] : k[-1] + 1]
-    return np.take(rows, k, axis=1, out=out[:, : len(k)], mode="clip")  # k is in range
+    return np.take(rows, k, axis=1, out=out[:, : len(k)], mode="clip")  # in range: pair_errors
 
 
 def consecutive(k: np.ndarray) -> bool:
@@ -542,7 +545,7 @@ def interpolator(t: np.ndarray, p_rows: np.ndarray, q_rows: np.ndarray):
 def _runs(lo: np.ndarray, hi: np.ndarray):
     """The intervals' ends (k - 1, k) as slices when they are runs of consecutive indices (stamps at
     the poses' own rate mostly are: one interval after the other), else as they are."""
-    if consecutive(lo):
+    if consecutive(lo) and lo[0] >= 0:  # a negative run is not its slice
         return slice(int(lo[0]), int(lo[-1]) + 1), slice(int(hi[0]), int(hi[-1]) + 1)
     return lo, hi
 
@@ -550,7 +553,7 @@ def _runs(lo: np.ndarray, hi: np.ndarray):
 def _run(k):
     """Indices as a slice where they are a run of consecutive ones (a block of pairs mostly is:
     pairs a fixed number of poses apart), else as they are."""
-    if isinstance(k, slice) or not consecutive(k):
+    if isinstance(k, slice) or not consecutive(k) or k[0] < 0:  # a negative run is not its slice
         return k
     return slice(int(k[0]), int(k[-1]) + 1)
 

@@ -80,12 +80,17 @@ register("core.runtime.spare_thread", reset=lambda: use_spare_thread(False))
 # freed memory in the heap for reuse took the 1M pair's system time from 2-4 s to 1.0-1.5 s, and
 # its peak from 1.32 to 1.24-1.25 GB (docs/performance.md). Values in a C int: mallopt's type.
 _KEEP_FREED_BYTES = 1 << 30
+# older glibc refuses an mmap threshold above 32 MiB (HEAP_MAX_SIZE / 2): the 8-24 MB temporaries
+# then still come from the heap
+_MMAP_THRESHOLD_CAP = 32 << 20
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # glibc's malloc.h
 
 
 def keep_freed_memory() -> bool:
     """Let this process's malloc keep freed memory for reuse (glibc only; elsewhere a no-op, and
-    the same bits either way: where memory comes from changes no arithmetic). Whether it applied."""
+    the same bits either way: where memory comes from changes no arithmetic). Whether it applied.
+    The mmap threshold first: setting either fixes both (no more dynamic threshold), and a trim
+    threshold kept beside a refused mmap threshold would leave the temporaries mmapped."""
     if not sys.platform.startswith("linux"):
         return False
     import ctypes
@@ -95,9 +100,11 @@ def keep_freed_memory() -> bool:
     except (OSError, AttributeError):
         return False
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
-    return all(
-        mallopt(option, _KEEP_FREED_BYTES) == 1 for option in (_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD)
-    )
+    if not any(
+        mallopt(_M_MMAP_THRESHOLD, size) == 1 for size in (_KEEP_FREED_BYTES, _MMAP_THRESHOLD_CAP)
+    ):
+        return False
+    return mallopt(_M_TRIM_THRESHOLD, _KEEP_FREED_BYTES) == 1
 
 
 def one_case_alone() -> None:

@@ -32,7 +32,9 @@ def run_starts(d: np.ndarray) -> np.ndarray:
     return np.maximum.accumulate(np.where(new, np.arange(n), 0))
 
 
-PAIR_BLOCK = 32768  # starts per block in closest_pairs: its search and temporaries stay in cache
+STARTS_PER_BLOCK = (
+    32768  # starts per block in closest_pairs: its search and temporaries stay in cache
+)
 
 
 def closest_pairs(
@@ -68,8 +70,8 @@ def closest_pair_blocks(
         return
     # in blocks of starts: a block's partners lie between those of its first and last start, so
     # its search merges it with that stretch of d only, and its temporaries stay in cache
-    for s in range(0, n, PAIR_BLOCK):
-        yield _closest_block(d, d[s : s + PAIR_BLOCK] + delta, s, tol, strict, skip, starts)
+    for s in range(0, n, STARTS_PER_BLOCK):
+        yield _closest_block(d, d[s : s + STARTS_PER_BLOCK] + delta, s, tol, strict, skip, starts)
 
 
 def _closest_block(d, target, s: int, tol, strict, skip, starts):

@@ -14,7 +14,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from epa.core import geometry
+from epa.core import geometry, ranks
 from epa.core.records import ExtrinsicRecord
 from epa.core.stamps import closest_pairs
 from epa.core.trajectory import Trajectory
@@ -552,36 +552,11 @@ def _rotated(r: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
-MEDIAN_STRIDE = 64  # every 64th value brackets the median: the rest is counted, not partitioned
-
-
 def _median(x: np.ndarray) -> float:
-    """np.median (the same value: the mean of the middle one or two), without np.median's import of
-    numpy.ma on first use; NaN where there is one, or no value."""
+    """np.median's value; NaN where there is one, or no value."""
     if x.size == 0 or np.isnan(x).any():
         return float("nan")
-    h = x.size // 2
-    ranks = [h] if x.size % 2 else [h - 1, h]
-    return float(np.mean(_ranked(x, ranks)))
-
-
-def _ranked(x: np.ndarray, ranks: list[int]) -> np.ndarray:
-    """The values of ``ranks`` in sorted ``x`` (no NaN). A strided sample's order statistics 4
-    standard deviations either side bound them: only the values between those bounds are
-    partitioned (4x faster at 1M values), the count below them shifts the ranks; where the bounds
-    miss (checked), the whole is partitioned."""
-    sample = x[::MEDIAN_STRIDE]
-    if len(sample) >= 64:
-        m, c = len(sample), int(4 * np.sqrt(len(sample))) + 1
-        k = int(ranks[0] * m / x.size)
-        bounds = [max(k - c, 0), min(k + c, m - 1)]
-        lo, hi = np.partition(sample, bounds)[bounds]
-        below = int(np.count_nonzero(x < lo))
-        mid = x[(x >= lo) & (x <= hi)]
-        if below <= ranks[0] and ranks[-1] < below + len(mid):
-            shifted = [r - below for r in ranks]
-            return np.partition(mid, shifted)[shifted]
-    return np.partition(x, ranks)[ranks]
+    return ranks.median(x)
 
 
 def _residual_rows(m: np.ndarray, x: np.ndarray, b: np.ndarray) -> np.ndarray:
