@@ -76,7 +76,8 @@ def ape_steps(t: np.ndarray, ape: np.ndarray, pi: np.ndarray, pj: np.ndarray):
 def knee_threshold(ape: np.ndarray, lo: float = 5.0, hi: float = 30.0) -> dict:
     """Knee of the sorted APE curve (largest gap below the chord, tail above p95 trimmed), else p95;
     clamped. Without a finite APE: mode none, raw_m None and the upper bound."""
-    finite = np.sort(ape[np.isfinite(ape)])
+    finite = ape[np.isfinite(ape)]  # a copy: sorted in place (np.sort would copy it again)
+    finite.sort()
     if finite.size == 0:
         return {
             "threshold_m": hi,
@@ -86,7 +87,7 @@ def knee_threshold(ape: np.ndarray, lo: float = 5.0, hi: float = 30.0) -> dict:
             "bounds_m": [lo, hi],
         }
     p95 = float(np.percentile(finite, 95))
-    y = finite[finite <= p95]
+    y = finite[: np.searchsorted(finite, p95, side="right")]  # sorted: finite[finite <= p95]
     raw, mode = p95, "p95"
     if y.size >= 3 and y[-1] > y[0]:
         x = np.linspace(0.0, 1.0, y.size)
@@ -271,15 +272,16 @@ def valid_metrics(
         "drift_rate_pct": {},
     }
     sv = (
-        pair_valid(viv, seg["i"].astype(int), seg["j"].astype(int))
+        pair_valid(viv, _indices(seg["i"]), _indices(seg["j"]))
         if len(seg["i"])
         else np.zeros(0, bool)
     )
+    every = bool(sv.all())  # the usual case: each length's valid pairs are all of its pairs
     notes = []
     for length in segments:
         key = segment_key(length)
         of_length = seg["length_m"] == float(length)
-        sel = sv & of_length
+        sel = of_length if every else sv & of_length
         known_rpe = k.get("rpe_distance", {}).get(key)
         out["rpe_distance"][key] = _stats_pair(
             seg["trans_m"], seg["rot_deg"], sel, known_rpe, of_length
@@ -294,7 +296,7 @@ def valid_metrics(
                 " rate are empty"
             )
     tv = (
-        pair_valid(viv, tpairs["i"].astype(int), tpairs["j"].astype(int))
+        pair_valid(viv, _indices(tpairs["i"]), _indices(tpairs["j"]))
         if len(tpairs["i"])
         else np.zeros(0, bool)
     )
@@ -314,6 +316,11 @@ def valid_metrics(
     else:
         return out, sv, tv, notes
     return _empty_like(out), np.zeros_like(sv), np.zeros_like(tv), notes
+
+
+def _indices(column) -> np.ndarray:
+    """A table's index column as integers, not copied where it is (6M pairs at 1M poses)."""
+    return np.asarray(column).astype(int, copy=False)
 
 
 def _stats_pair(trans, rot, keep, known, of=None) -> dict:
