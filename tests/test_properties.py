@@ -371,6 +371,32 @@ def test_ate_2d_gives_the_previous_bits():
     assert np.array_equal(ate_2d.errors(ref, est)[0], before)
 
 
+def test_ate_2d_from_pair_rows_gives_its_own_bits():
+    """ATE 2D's yaw and planar error from the metrics stage's pair_rows (D the conjugate of its
+    quaternion) are its own product's bit for bit: signed zeros (equal and axis-aligned
+    orientations), NaN and infinite components, more poses than a block."""
+    from epa.core.trajectory import Trajectory
+    from epa.metrics import ate_2d
+
+    rng = np.random.default_rng(344)
+    n = geometry.ROW_BLOCK + 517
+    q_ref, q_est = (rng.normal(size=(n, 4)) for _ in range(2))
+    q_ref /= np.linalg.norm(q_ref, axis=1, keepdims=True)
+    q_est /= np.linalg.norm(q_est, axis=1, keepdims=True)
+    q_est[:100] = q_ref[:100]
+    signs = [0.0, -0.0, 1.0, -1.0]
+    q_ref[100:300], q_est[100:300] = (rng.choice(signs, size=(200, 4)) for _ in range(2))
+    q_est[300:310], q_ref[310:315, 2] = np.nan, np.inf
+    p_ref, p_est = (rng.normal(size=(n, 3)) for _ in range(2))
+    p_est[:50], p_est[50:55] = p_ref[:50], np.nan
+    t = np.arange(n) * 0.01
+    ref, est = Trajectory(t, p_ref, q_ref), Trajectory(t, p_est, q_est)
+    rows = geometry.pair_rows(None, p_ref, p_est, q=(q_ref, q_est))
+    with np.errstate(invalid="ignore"):
+        for own, shared in zip(ate_2d.errors(ref, est), ate_2d.errors(ref, est, rows)):
+            assert np.array_equal(own.view(np.int64), shared.view(np.int64))
+
+
 def test_run_starts_and_order_statistics_are_the_searches_they_replace():
     """run_starts is searchsorted(d, d, 'left') on non-decreasing d (ties, NaN); the median from
     order_statistics is np.median bit for bit (ties, zeros of both signs, inf, sorted and periodic

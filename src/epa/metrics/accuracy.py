@@ -233,14 +233,17 @@ def evaluate(
     rpe=(),
     discrepancy: np.ndarray | None = None,
     dist: np.ndarray | None = None,
+    rows: np.ndarray | None = None,
 ) -> tuple[AccuracyRecord, dict]:
     """All metrics of one case. Returns (summary dict for metrics.json, per-pose/per-pair tables).
     ``discrepancy``: D = Q P^T of every matched pose when not the poses' own (position-only: I).
-    ``dist``: the reference's path distances (geometry.path_distances), when the caller has them."""
+    ``dist``: the reference's path distances (geometry.path_distances), when the caller has them;
+    ``rows``: geometry.pair_rows of the poses (their own D), when the caller has them."""
     if len(ref) != len(est):
         raise EpaError("reference and estimate must be matched pose for pose")
     # once, shared by every metric below: D = Q P^T and the positions, as rows (geometry.pair_rows)
-    rows = geometry.pair_rows(discrepancy, ref.p, est.p, q=(ref.q, est.q))
+    if rows is None:
+        rows = geometry.pair_rows(discrepancy, ref.p, est.p, q=(ref.q, est.q))
     trans, rot = ape(ref, est, rows=rows)
     dist = geometry.path_distances(ref.p) if dist is None else dist
     summary: dict[str, Any] = {

@@ -56,9 +56,13 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
             " drift rate and success rate are undefined"
         )
     which = position_only(ref, est)  # a side without orientation: every rotation error null
+    # D = Q P^T and the positions as rows, once: every relative error and ATE 2D's yaw
+    rows = None if which else geometry.pair_rows(None, ref.p, est.p, q=(ref.q, est.q))
+    inputs = {**(inputs or {}), "pair_rows": lambda: rows}
     evaluated, tables = (accuracy.evaluate_positions if which else accuracy.evaluate)(
         ref,
         est,
+        rows=rows,  # None for positions: evaluate_positions' D = I
         segments=c["segments"],
         segment_tol=c["segment_tol"],
         time_delta=c["time_delta"],
