@@ -248,10 +248,20 @@ def test_kept_reference_spectrum_gives_the_same_bits():
 def test_window_sums_and_circular_runs_by_slices(n, lo, width, count):
     x = np.random.default_rng(n).normal(size=n)
     want = [x[max(lo + j, 0) : max(lo + j + width, 0)].sum() for j in range(count)]
-    assert np.allclose(sync._window_sums(x, lo, width, count), want, rtol=0, atol=1e-12)
+    got = sync._window_sums(x.copy(), lo, width, count)
+    assert np.allclose(got, want, rtol=0, atol=1e-12)
+    # bit for bit the differences of the padded prefix sum the runs replaced
+    before, after = max(1, 1 - lo), max(0, lo + width + count - 1 - n)
+    c = np.cumsum(x)
+    prefix = np.concatenate([np.zeros(before), c, np.full(after, c[-1])])
+    start = lo - 1 + before
+    padded = prefix[start + width : start + width + count] - prefix[start : start + count]
+    assert np.array_equal(got, padded)
+    assert np.array_equal(sync._window_sums(x.copy(), lo, width, count, in_place=True), padded)
     full = np.arange(n, dtype=float)
     if count <= n:
-        assert sync._circular_run(full, lo, count).tolist() == [(lo + j) % n for j in range(count)]
+        runs = np.concatenate(sync._circular_runs(full, lo, count))
+        assert runs.tolist() == [(lo + j) % n for j in range(count)]
 
 
 def test_coarse_sums_are_the_reshaped_sums_bit_for_bit():

@@ -179,16 +179,36 @@ POLICIES = {Policy.OV_EVAL: 0.02, Policy.EVO: 0.01, Policy.RPG: 0.02}  # default
 JACKKNIFE_BLOCKS = 10
 
 
-def _window_sums(x: np.ndarray, lo: int, width: int, count: int) -> np.ndarray:
+def _window_sums(
+    x: np.ndarray, lo: int, width: int, count: int, *, in_place: bool = False
+) -> np.ndarray:
     """sum(x[lo + j : lo + j + width]) for j in range(count), x taken as zero outside itself:
-    differences of one prefix sum, padded with its first (0) and last values so that both ends of
-    every window are slices of it."""
-    before = max(1, 1 - lo)  # prefix[k] = sum(x[:k]) sits at k - 1 + before
-    after = max(0, lo + width + count - 1 - len(x))
-    c = np.cumsum(x)
-    prefix = np.concatenate([np.zeros(before), c, np.full(after, c[-1] if len(c) else 0.0)])
-    start = lo - 1 + before
-    return prefix[start + width : start + width + count] - prefix[start : start + count]
+    differences of one prefix sum P (P(k) = sum(x[:k]), 0 before x, its total after it). The lags
+    fall into at most five runs where each end of the window is either a slice of the prefix sum or
+    one of those two constants: each run is one subtraction into the result, without a padded copy
+    of the prefix sum (the same differences, so the same bits). ``in_place``: x's buffer becomes
+    its prefix sum."""
+    n = len(x)
+    c = np.cumsum(x, out=x if in_place else None)
+    total = c[-1] if n else 0.0
+    out = np.empty(count)
+    # where the ends k = lo + j and lo + j + width reach 1 and n (the zones' edges)
+    edges = (1 - lo, n - lo, 1 - lo - width, n - lo - width)
+    cuts = sorted({0, count, *(min(max(e, 0), count) for e in edges)})
+    for j0, j1 in zip(cuts[:-1], cuts[1:], strict=True):
+        upper = _prefix_run(c, total, lo + width + j0, j1 - j0)
+        np.subtract(upper, _prefix_run(c, total, lo + j0, j1 - j0), out=out[j0:j1])
+    return out
+
+
+def _prefix_run(c: np.ndarray, total, k: int, count: int):
+    """P(k + j) for j in range(count), a run within one zone: the constant 0.0 (k <= 0), a slice of
+    the prefix sum c (P(k) = c[k - 1]), or the total (k >= len(c))."""
+    if k + count - 1 <= 0:
+        return 0.0
+    if k >= len(c):
+        return total
+    return c[k - 1 : k - 1 + count]
 
 
 def _clip_spikes(w: np.ndarray) -> np.ndarray:
@@ -353,19 +373,31 @@ def _normalised_correlation(a, span_a, b, span_b):
     need = math.ceil(0.5 * (min(a1 - a0, b1 - b0) + 1))  # the overlap is an integer
     # overlap = min(b1, a1 - k) - max(b0, a0 - k) + 1 >= need, term by term
     lo, hi = max(-(n - 1), a0 - b1 - 1 + need), min(n - 1, a1 - b0 + 1 - need)
-    corr = np.full(2 * n - 1, -1.0)
     if lo > hi:
-        return corr, (b0, b1)
+        return np.full(2 * n - 1, -1.0), (b0, b1)
     count = hi - lo + 1
 
     def energies() -> np.ndarray:
-        energy_a = _window_sums(a[a0 : a1 + 1] ** 2, b0 + lo - a0, b1 - b0 + 1, count)
-        energy_b = _window_sums(b[b0 : b1 + 1] ** 2, a0 - hi - b0, a1 - a0 + 1, count)[::-1]
+        # the squares made in their own buffers, which become their prefix sums
+        energy_a = _window_sums(
+            np.square(a[a0 : a1 + 1]), b0 + lo - a0, b1 - b0 + 1, count, in_place=True
+        )
+        energy_b = _window_sums(
+            np.square(b[b0 : b1 + 1]), a0 - hi - b0, a1 - a0 + 1, count, in_place=True
+        )[::-1]
         energy_a *= energy_b  # in place: the same arithmetic, fewer 8-byte-per-lag temporaries
         return np.sqrt(np.maximum(energy_a, 1e-300, out=energy_a), out=energy_a)
 
     full, energy = runtime.both(lambda: np.fft.irfft(spectrum, nfft), energies)
-    np.divide(_circular_run(full, lo, count), energy, out=corr[lo + n - 1 : hi + n])
+    # -1 only where nothing is computed; each run of the circular result divided straight into place
+    corr = np.empty(2 * n - 1)
+    corr[: lo + n - 1] = -1.0
+    corr[hi + n :] = -1.0
+    done = 0
+    for run in _circular_runs(full, lo, count):
+        start = lo + n - 1 + done
+        np.divide(run, energy[done : done + len(run)], out=corr[start : start + len(run)])
+        done += len(run)
     return corr, (b0, b1)
 
 
@@ -413,14 +445,14 @@ def _keep_spectrum(a: np.ndarray, span_a: tuple[int, int], nfft: int, spectrum) 
             _SPECTRA.popitem(last=False)
 
 
-def _circular_run(full: np.ndarray, first: int, count: int) -> np.ndarray:
-    """full[(first + j) % len(full)] for j in range(count) (count <= len(full)), by slices: a
-    circular correlation holds its negative lags at its end."""
+def _circular_runs(full: np.ndarray, first: int, count: int) -> tuple[np.ndarray, ...]:
+    """full[(first + j) % len(full)] for j in range(count) (count <= len(full)) as one or two
+    slices: a circular correlation holds its negative lags at its end."""
     start = first % len(full)
     end = start + count
     if end <= len(full):
-        return full[start:end]
-    return np.concatenate([full[start:], full[: end - len(full)]])
+        return (full[start:end],)
+    return full[start:], full[: end - len(full)]
 
 
 def _main_lobe(corr: np.ndarray, k: int) -> tuple[int, int, float]:
