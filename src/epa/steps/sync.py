@@ -239,7 +239,7 @@ def _peak(curve: np.ndarray) -> tuple[int, float]:
 
 def _block_sums(
     a: tuple[np.ndarray, np.ndarray, np.ndarray],
-    bb: tuple[np.ndarray, np.ndarray],
+    bb: tuple[np.ndarray, np.ndarray, np.ndarray],
     starts: np.ndarray,
     lo: int,
 ) -> np.ndarray:
@@ -247,15 +247,11 @@ def _block_sums(
     two energies under the overlap, a[m + lag]^2 and b[m]^2 where a is defined. (3, blocks).
 
     ``a`` is (a, a^2, a defined) zero-padded so that every lag's shifted support is the slice from
-    ``lo``; ``bb`` is (b, b^2) over b's support: the squares are made once for every lag."""
+    ``lo``; ``bb`` is (b, b^2, the block sums of b^2) over b's support: made once for every lag, and
+    the last is b's energy wherever a is defined under all of it (most lags: the same sums)."""
     seg, seg2, defined = (x[lo : lo + len(bb[0])] for x in a)
-    return np.stack(
-        [
-            np.add.reduceat(seg * bb[0], starts),
-            np.add.reduceat(seg2, starts),
-            np.add.reduceat(np.where(defined, bb[1], 0.0), starts),
-        ]
-    )
+    energy_b = bb[2] if defined.all() else np.add.reduceat(np.where(defined, bb[1], 0.0), starts)
+    return np.stack([np.add.reduceat(seg * bb[0], starts), np.add.reduceat(seg2, starts), energy_b])
 
 
 def _coarse(x: np.ndarray, q: int) -> np.ndarray:
@@ -296,7 +292,8 @@ def _jackknife_std(
     pad = np.zeros(abs(centre) + reach_c + 1)
     a_c = np.concatenate([pad, a_c, pad])
     padded = (a_c, a_c * a_c, a_c != 0.0)  # on_grid leaves a exactly zero outside its support
-    bb = (b_c[b0 : b1 + 1], b_c[b0 : b1 + 1] ** 2)
+    b_sq = b_c[b0 : b1 + 1] ** 2
+    bb = (b_c[b0 : b1 + 1], b_sq, np.add.reduceat(b_sq, starts))
     columns: dict[np.integer, np.ndarray] = {}  # keyed by the lags as numpy gives them
     half = min(16, reach_c)
     while True:
