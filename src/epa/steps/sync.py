@@ -39,7 +39,10 @@ def associate_ov_eval(t_ref: np.ndarray, t_est: np.ndarray, max_diff: float, off
         # smaller one, so a stamp exactly max_difference away is no match
         ok = np.abs(t_ref[j] - x) < max_diff
         jm = np.where(ok, j, -1)
-        prev = np.maximum.accumulate(np.concatenate([[-1], jm[:-1]]))
+        # the last match before each estimate (-1 before the first): jm >= -1, so no concatenated -1
+        prev = np.empty_like(jm)
+        prev[:1] = -1
+        np.maximum.accumulate(jm[:-1], out=prev[1:])
         clash = ok & (j <= prev)
         if not clash.any():
             break
@@ -335,7 +338,7 @@ def _on_grid(grid: np.ndarray, ts: np.ndarray, w: np.ndarray):
     i0 = int(np.searchsorted(grid, ts[0], side="left"))
     i1 = int(np.searchsorted(grid, ts[-1], side="right")) - 1
     s = np.zeros(len(grid))
-    s[i0 : i1 + 1] = np.interp(grid[i0 : i1 + 1], ts, w) - w.mean()
+    np.subtract(np.interp(grid[i0 : i1 + 1], ts, w), w.mean(), out=s[i0 : i1 + 1])
     s /= np.sqrt(np.sum(s * s)) + 1e-300
     return s, (i0, i1)
 
