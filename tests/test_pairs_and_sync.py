@@ -324,6 +324,22 @@ def test_angular_and_linear_speed_are_the_relative_motions():
         assert np.array_equal(v, np.linalg.norm(traj.p[i + step] - traj.p[i], axis=1) / dt)
 
 
+def test_relative_angles_are_the_conjugate_products_angles_bit_for_bit():
+    """relative_angles folds the conjugate's signs into its differences: the same bits as the
+    product of the negated rows, also for repeated and axis-aligned orientations (zero terms)."""
+    rng = np.random.default_rng(5)
+    q = geometry.normalize_quat(rng.normal(size=(400, 4)))
+    q[100:140] = q[100]  # repeated poses: zero relative rotation
+    q[200:240] = [0.0, 0.0, np.sin(0.1), np.cos(0.1)]
+    q[300:340, :3] *= 1e-9  # tiny angles
+    q = geometry.normalize_quat(q)
+    x, y, z, w = geometry.component_rows(q)
+    for step in (1, 3, 17):
+        conj = (-x[:-step], -y[:-step], -z[:-step], w[:-step])
+        want = geometry.rows_angle(*geometry._mul_rows(conj, (c[step:] for c in (x, y, z, w))))
+        assert np.array_equal(geometry.relative_angles(q, step), want)
+
+
 def test_selecting_every_pose_copies_as_the_gather_does():
     """Every pose matched (0, 1, ..., n - 1) takes plain copies: the same values in the same C-ordered
     arrays as the gather gives for any other index array, never views of the source's columns."""
