@@ -248,10 +248,20 @@ def test_kept_reference_spectrum_gives_the_same_bits():
 def test_window_sums_and_circular_runs_by_slices(n, lo, width, count):
     x = np.random.default_rng(n).normal(size=n)
     want = [x[max(lo + j, 0) : max(lo + j + width, 0)].sum() for j in range(count)]
-    assert np.allclose(sync._window_sums(x, lo, width, count), want, rtol=0, atol=1e-12)
+    got = sync._window_sums(x.copy(), lo, width, count)
+    assert np.allclose(got, want, rtol=0, atol=1e-12)
+    # bit for bit the differences of the padded prefix sum the runs replaced
+    before, after = max(1, 1 - lo), max(0, lo + width + count - 1 - n)
+    c = np.cumsum(x)
+    prefix = np.concatenate([np.zeros(before), c, np.full(after, c[-1])])
+    start = lo - 1 + before
+    padded = prefix[start + width : start + width + count] - prefix[start : start + count]
+    assert np.array_equal(got, padded)
+    assert np.array_equal(sync._window_sums(x.copy(), lo, width, count, in_place=True), padded)
     full = np.arange(n, dtype=float)
     if count <= n:
-        assert sync._circular_run(full, lo, count).tolist() == [(lo + j) % n for j in range(count)]
+        runs = np.concatenate(sync._circular_runs(full, lo, count))
+        assert runs.tolist() == [(lo + j) % n for j in range(count)]
 
 
 def test_coarse_sums_are_the_reshaped_sums_bit_for_bit():
@@ -312,6 +322,22 @@ def test_angular_and_linear_speed_are_the_relative_motions():
         assert np.array_equal(w, geometry.quat_angle(rel) / dt)
         _, v = sync.linear_speed(traj, step)
         assert np.array_equal(v, np.linalg.norm(traj.p[i + step] - traj.p[i], axis=1) / dt)
+
+
+def test_relative_angles_are_the_conjugate_products_angles_bit_for_bit():
+    """relative_angles folds the conjugate's signs into its differences: the same bits as the
+    product of the negated rows, also for repeated and axis-aligned orientations (zero terms)."""
+    rng = np.random.default_rng(5)
+    q = geometry.normalize_quat(rng.normal(size=(400, 4)))
+    q[100:140] = q[100]  # repeated poses: zero relative rotation
+    q[200:240] = [0.0, 0.0, np.sin(0.1), np.cos(0.1)]
+    q[300:340, :3] *= 1e-9  # tiny angles
+    q = geometry.normalize_quat(q)
+    x, y, z, w = geometry.component_rows(q)
+    for step in (1, 3, 17):
+        conj = (-x[:-step], -y[:-step], -z[:-step], w[:-step])
+        want = geometry.rows_angle(*geometry._mul_rows(conj, (c[step:] for c in (x, y, z, w))))
+        assert np.array_equal(geometry.relative_angles(q, step), want)
 
 
 def test_selecting_every_pose_copies_as_the_gather_does():

@@ -236,13 +236,40 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def relative_angles(q: np.ndarray, step: int) -> np.ndarray:
     """Rotation angle (rad) of q_i^-1 q_{i+step} for every i: quat_angle of relative_motions'
-    rotation, the same operations on each component row once (3x cheaper than the (N, 4) arrays'
-    conjugate, product and angle; Step 1's angular speed)."""
-    x, y, z, w = component_rows(q)
-    rx, ry, rz, rw = _mul_rows(
-        (-x[:-step], -y[:-step], -z[:-step], w[:-step]), (c[step:] for c in (x, y, z, w))
-    )
-    return rows_angle(rx, ry, rz, rw)
+    rotation, the same values as ``rows_angle(*_mul_rows(conjugate, later))`` on each component row
+    once (3x cheaper than the (N, 4) arrays' conjugate, product and angle; Step 1's angular speed).
+
+    The conjugate's negations are folded into the signs (IEEE rounding is symmetric, so
+    w0 x1 + w1 (-x0) + ((-y0) z1 - (-z0) y1) is exactly (w0 x1 - w1 x0) - (y0 z1 - z0 y1)), and every
+    step writes into a few buffers: the same bits without the negated copies and temporaries."""
+    rows = component_rows(q)
+    (x0, y0, z0, w0), (x1, y1, z1, w1) = rows[:, :-step], rows[:, step:]
+    scratch, inner = np.empty(len(x0)), np.empty(len(x0))
+
+    def part(a, b, c, d, out=None) -> np.ndarray:  # a b - c d
+        out = np.multiply(a, b, out=out)
+        return np.subtract(out, np.multiply(c, d, out=scratch), out=out)
+
+    def component(a0, a1, b0, b1, c0, c1) -> np.ndarray:  # (w0 a1 - w1 a0) - (b0 c1 - c0 b1)
+        out = part(w0, a1, w1, a0)
+        return np.subtract(out, part(b0, c1, c0, b1, inner), out=out)
+
+    rx = component(x0, x1, y0, y1, z0, z1)
+    ry = component(y0, y1, z0, z1, x0, x1)
+    rz = component(z0, z1, x0, x1, y0, y1)
+    # w0 w1 - ((-x0) x1 + (-y0) y1 + (-z0) z1) = w0 w1 + ((x0 x1 + y0 y1) + z0 z1)
+    dot = np.multiply(x0, x1, out=inner)
+    dot += np.multiply(y0, y1, out=scratch)
+    dot += np.multiply(z0, z1, out=scratch)
+    rw = np.multiply(w0, w1)
+    rw += dot
+    # rows_angle's 2 atan2(sqrt(x x + y y + z z), |w|), in place
+    sq = np.multiply(rx, rx, out=rx)
+    sq += np.multiply(ry, ry, out=ry)
+    sq += np.multiply(rz, rz, out=rz)
+    angle = np.arctan2(np.sqrt(sq, out=sq), np.abs(rw, out=rw), out=sq)
+    angle *= 2
+    return angle
 
 
 def quat_conj(q: np.ndarray) -> np.ndarray:

@@ -39,7 +39,10 @@ def associate_ov_eval(t_ref: np.ndarray, t_est: np.ndarray, max_diff: float, off
         # smaller one, so a stamp exactly max_difference away is no match
         ok = np.abs(t_ref[j] - x) < max_diff
         jm = np.where(ok, j, -1)
-        prev = np.maximum.accumulate(np.concatenate([[-1], jm[:-1]]))
+        # the last match before each estimate (-1 before the first): jm >= -1, so no concatenated -1
+        prev = np.empty_like(jm)
+        prev[:1] = -1
+        np.maximum.accumulate(jm[:-1], out=prev[1:])
         clash = ok & (j <= prev)
         if not clash.any():
             break
@@ -179,16 +182,36 @@ POLICIES = {Policy.OV_EVAL: 0.02, Policy.EVO: 0.01, Policy.RPG: 0.02}  # default
 JACKKNIFE_BLOCKS = 10
 
 
-def _window_sums(x: np.ndarray, lo: int, width: int, count: int) -> np.ndarray:
+def _window_sums(
+    x: np.ndarray, lo: int, width: int, count: int, *, in_place: bool = False
+) -> np.ndarray:
     """sum(x[lo + j : lo + j + width]) for j in range(count), x taken as zero outside itself:
-    differences of one prefix sum, padded with its first (0) and last values so that both ends of
-    every window are slices of it."""
-    before = max(1, 1 - lo)  # prefix[k] = sum(x[:k]) sits at k - 1 + before
-    after = max(0, lo + width + count - 1 - len(x))
-    c = np.cumsum(x)
-    prefix = np.concatenate([np.zeros(before), c, np.full(after, c[-1] if len(c) else 0.0)])
-    start = lo - 1 + before
-    return prefix[start + width : start + width + count] - prefix[start : start + count]
+    differences of one prefix sum P (P(k) = sum(x[:k]), 0 before x, its total after it). The lags
+    fall into at most five runs where each end of the window is either a slice of the prefix sum or
+    one of those two constants: each run is one subtraction into the result, without a padded copy
+    of the prefix sum (the same differences, so the same bits). ``in_place``: x's buffer becomes
+    its prefix sum."""
+    n = len(x)
+    c = np.cumsum(x, out=x if in_place else None)
+    total = c[-1] if n else 0.0
+    out = np.empty(count)
+    # where the ends k = lo + j and lo + j + width reach 1 and n (the zones' edges)
+    edges = (1 - lo, n - lo, 1 - lo - width, n - lo - width)
+    cuts = sorted({0, count, *(min(max(e, 0), count) for e in edges)})
+    for j0, j1 in zip(cuts[:-1], cuts[1:], strict=True):
+        upper = _prefix_run(c, total, lo + width + j0, j1 - j0)
+        np.subtract(upper, _prefix_run(c, total, lo + j0, j1 - j0), out=out[j0:j1])
+    return out
+
+
+def _prefix_run(c: np.ndarray, total, k: int, count: int):
+    """P(k + j) for j in range(count), a run within one zone: the constant 0.0 (k <= 0), a slice of
+    the prefix sum c (P(k) = c[k - 1]), or the total (k >= len(c))."""
+    if k + count - 1 <= 0:
+        return 0.0
+    if k >= len(c):
+        return total
+    return c[k - 1 : k - 1 + count]
 
 
 def _clip_spikes(w: np.ndarray) -> np.ndarray:
@@ -219,7 +242,7 @@ def _peak(curve: np.ndarray) -> tuple[int, float]:
 
 def _block_sums(
     a: tuple[np.ndarray, np.ndarray, np.ndarray],
-    bb: tuple[np.ndarray, np.ndarray],
+    bb: tuple[np.ndarray, np.ndarray, np.ndarray],
     starts: np.ndarray,
     lo: int,
 ) -> np.ndarray:
@@ -227,15 +250,11 @@ def _block_sums(
     two energies under the overlap, a[m + lag]^2 and b[m]^2 where a is defined. (3, blocks).
 
     ``a`` is (a, a^2, a defined) zero-padded so that every lag's shifted support is the slice from
-    ``lo``; ``bb`` is (b, b^2) over b's support: the squares are made once for every lag."""
+    ``lo``; ``bb`` is (b, b^2, the block sums of b^2) over b's support: made once for every lag, and
+    the last is b's energy wherever a is defined under all of it (most lags: the same sums)."""
     seg, seg2, defined = (x[lo : lo + len(bb[0])] for x in a)
-    return np.stack(
-        [
-            np.add.reduceat(seg * bb[0], starts),
-            np.add.reduceat(seg2, starts),
-            np.add.reduceat(np.where(defined, bb[1], 0.0), starts),
-        ]
-    )
+    energy_b = bb[2] if defined.all() else np.add.reduceat(np.where(defined, bb[1], 0.0), starts)
+    return np.stack([np.add.reduceat(seg * bb[0], starts), np.add.reduceat(seg2, starts), energy_b])
 
 
 def _coarse(x: np.ndarray, q: int) -> np.ndarray:
@@ -276,7 +295,8 @@ def _jackknife_std(
     pad = np.zeros(abs(centre) + reach_c + 1)
     a_c = np.concatenate([pad, a_c, pad])
     padded = (a_c, a_c * a_c, a_c != 0.0)  # on_grid leaves a exactly zero outside its support
-    bb = (b_c[b0 : b1 + 1], b_c[b0 : b1 + 1] ** 2)
+    b_sq = b_c[b0 : b1 + 1] ** 2
+    bb = (b_c[b0 : b1 + 1], b_sq, np.add.reduceat(b_sq, starts))
     columns: dict[np.integer, np.ndarray] = {}  # keyed by the lags as numpy gives them
     half = min(16, reach_c)
     while True:
@@ -318,7 +338,7 @@ def _on_grid(grid: np.ndarray, ts: np.ndarray, w: np.ndarray):
     i0 = int(np.searchsorted(grid, ts[0], side="left"))
     i1 = int(np.searchsorted(grid, ts[-1], side="right")) - 1
     s = np.zeros(len(grid))
-    s[i0 : i1 + 1] = np.interp(grid[i0 : i1 + 1], ts, w) - w.mean()
+    np.subtract(np.interp(grid[i0 : i1 + 1], ts, w), w.mean(), out=s[i0 : i1 + 1])
     s /= np.sqrt(np.sum(s * s)) + 1e-300
     return s, (i0, i1)
 
@@ -353,19 +373,31 @@ def _normalised_correlation(a, span_a, b, span_b):
     need = math.ceil(0.5 * (min(a1 - a0, b1 - b0) + 1))  # the overlap is an integer
     # overlap = min(b1, a1 - k) - max(b0, a0 - k) + 1 >= need, term by term
     lo, hi = max(-(n - 1), a0 - b1 - 1 + need), min(n - 1, a1 - b0 + 1 - need)
-    corr = np.full(2 * n - 1, -1.0)
     if lo > hi:
-        return corr, (b0, b1)
+        return np.full(2 * n - 1, -1.0), (b0, b1)
     count = hi - lo + 1
 
     def energies() -> np.ndarray:
-        energy_a = _window_sums(a[a0 : a1 + 1] ** 2, b0 + lo - a0, b1 - b0 + 1, count)
-        energy_b = _window_sums(b[b0 : b1 + 1] ** 2, a0 - hi - b0, a1 - a0 + 1, count)[::-1]
+        # the squares made in their own buffers, which become their prefix sums
+        energy_a = _window_sums(
+            np.square(a[a0 : a1 + 1]), b0 + lo - a0, b1 - b0 + 1, count, in_place=True
+        )
+        energy_b = _window_sums(
+            np.square(b[b0 : b1 + 1]), a0 - hi - b0, a1 - a0 + 1, count, in_place=True
+        )[::-1]
         energy_a *= energy_b  # in place: the same arithmetic, fewer 8-byte-per-lag temporaries
         return np.sqrt(np.maximum(energy_a, 1e-300, out=energy_a), out=energy_a)
 
     full, energy = runtime.both(lambda: np.fft.irfft(spectrum, nfft), energies)
-    np.divide(_circular_run(full, lo, count), energy, out=corr[lo + n - 1 : hi + n])
+    # -1 only where nothing is computed; each run of the circular result divided straight into place
+    corr = np.empty(2 * n - 1)
+    corr[: lo + n - 1] = -1.0
+    corr[hi + n :] = -1.0
+    done = 0
+    for run in _circular_runs(full, lo, count):
+        start = lo + n - 1 + done
+        np.divide(run, energy[done : done + len(run)], out=corr[start : start + len(run)])
+        done += len(run)
     return corr, (b0, b1)
 
 
@@ -413,14 +445,14 @@ def _keep_spectrum(a: np.ndarray, span_a: tuple[int, int], nfft: int, spectrum) 
             _SPECTRA.popitem(last=False)
 
 
-def _circular_run(full: np.ndarray, first: int, count: int) -> np.ndarray:
-    """full[(first + j) % len(full)] for j in range(count) (count <= len(full)), by slices: a
-    circular correlation holds its negative lags at its end."""
+def _circular_runs(full: np.ndarray, first: int, count: int) -> tuple[np.ndarray, ...]:
+    """full[(first + j) % len(full)] for j in range(count) (count <= len(full)) as one or two
+    slices: a circular correlation holds its negative lags at its end."""
     start = first % len(full)
     end = start + count
     if end <= len(full):
-        return full[start:end]
-    return np.concatenate([full[start:], full[: end - len(full)]])
+        return (full[start:end],)
+    return full[start:], full[: end - len(full)]
 
 
 def _main_lobe(corr: np.ndarray, k: int) -> tuple[int, int, float]:
