@@ -347,6 +347,15 @@ def test_pair_errors_give_the_previous_bits():
             assert all(np.array_equal(a, b) for a, b in zip(before, after))
 
 
+def _unit_quaternion_pairs(rng, n: int):
+    """n random unit quaternions on each side, the first 100 equal (zero error)."""
+    q_ref, q_est = (rng.normal(size=(n, 4)) for _ in range(2))
+    q_ref /= np.linalg.norm(q_ref, axis=1, keepdims=True)
+    q_est /= np.linalg.norm(q_est, axis=1, keepdims=True)
+    q_est[:100] = q_ref[:100]
+    return q_ref, q_est
+
+
 def test_ate_2d_gives_the_previous_bits():
     """ATE 2D's yaw in blocks, only the z of the log, is the whole arrays' quat_mul, quat_conj and
     quat_log_rows' bit for bit (more poses than a block; the identity and its negative among them)."""
@@ -355,10 +364,7 @@ def test_ate_2d_gives_the_previous_bits():
 
     rng = np.random.default_rng(343)
     n = geometry.ROW_BLOCK + 17
-    q_ref, q_est = (rng.normal(size=(n, 4)) for _ in range(2))
-    q_ref /= np.linalg.norm(q_ref, axis=1, keepdims=True)
-    q_est /= np.linalg.norm(q_est, axis=1, keepdims=True)
-    q_est[:100] = q_ref[:100]
+    q_ref, q_est = _unit_quaternion_pairs(rng, n)
     q_ref[5], q_est[5] = [0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, -1.0]
     t = np.arange(n) * 0.01
     ref, est = (
@@ -380,10 +386,7 @@ def test_ate_2d_from_pair_rows_gives_its_own_bits():
 
     rng = np.random.default_rng(344)
     n = geometry.ROW_BLOCK + 517
-    q_ref, q_est = (rng.normal(size=(n, 4)) for _ in range(2))
-    q_ref /= np.linalg.norm(q_ref, axis=1, keepdims=True)
-    q_est /= np.linalg.norm(q_est, axis=1, keepdims=True)
-    q_est[:100] = q_ref[:100]
+    q_ref, q_est = _unit_quaternion_pairs(rng, n)
     signs = [0.0, -0.0, 1.0, -1.0]
     q_ref[100:300], q_est[100:300] = (rng.choice(signs, size=(200, 4)) for _ in range(2))
     q_est[300:310], q_ref[310:315, 2] = np.nan, np.inf
