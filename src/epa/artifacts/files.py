@@ -326,6 +326,18 @@ def savetxt(fh, data, fmt: str = EXACT, delimiter: str = " ", header: str = "", 
 ROWS_PER_BLOCK = 8192  # a few MB of text at a time
 
 
+def _write_table(path, data, delimiter: str, header: str, comments: str, fmt: str = EXACT) -> None:
+    """A stage's table artifact: its header line, then its rows, exact (:func:`exact_rows`) where
+    pyarrow is installed and ``fmt`` is EXACT, else formatted by :func:`savetxt` (the same header)."""
+    rows = exact_rows(data, delimiter) if fmt == EXACT else None
+    if rows is None:
+        _atomic_write(
+            path, lambda fh: savetxt(fh, data, fmt, delimiter, header=header, comments=comments)
+        )
+    else:
+        _atomic_write(path, itertools.chain([(comments + header + "\n").encode()], rows))
+
+
 def _cov_columns(traj: Trajectory) -> np.ndarray | None:
     """The orientation then position covariance upper triangles (N, 12), or None without covariance."""
     if traj.cov_rot is None or traj.cov_pos is None:
@@ -353,11 +365,7 @@ def write_tum(path, traj: Trajectory) -> None:
         + ([] if cov is None else COV_HEADER)
         + ([] if printed is None else PRINTED_HEADER)
     )
-    rows = exact_rows(data, " ")
-    if rows is None:
-        _atomic_write(path, lambda fh: savetxt(fh, data, header=header))
-    else:
-        _atomic_write(path, itertools.chain([b"# " + header.encode() + b"\n"], rows))
+    _write_table(path, data, " ", header, "# ")
 
 
 def write_trajectory(path, traj: Trajectory, fmt: str) -> None:
@@ -511,14 +519,7 @@ def write_csv(path, columns: dict[str, np.ndarray], fmt: str = EXACT) -> None:
         if names
         else np.zeros((0, 0))
     )
-    data = data.reshape(-1, len(names))
-    rows = exact_rows(data, ",") if fmt == EXACT else None
-    if rows is None:
-        _atomic_write(
-            path, lambda fh: savetxt(fh, data, fmt, ",", header=",".join(names), comments="")
-        )
-    else:
-        _atomic_write(path, itertools.chain([",".join(names).encode() + b"\n"], rows))
+    _write_table(path, data.reshape(-1, len(names)), ",", ",".join(names), "", fmt)
 
 
 def read_csv(path) -> dict[str, np.ndarray]:

@@ -336,7 +336,7 @@ def _intervals(t: np.ndarray, at: np.ndarray):
     if k0 >= 1 and k0 + n <= len(t) and (t[lo] < at).all() and (at <= t[hi]).all():
         return lo, hi, _fraction(t[lo], t[hi], at)
     k, f = _bracket(t, at)
-    return *_runs(k - 1, k), f
+    return run_slice(k - 1), run_slice(k), f
 
 
 def interpolate(
@@ -504,7 +504,7 @@ def relative_motion_rows(
     m = len(i) if not isinstance(i, slice) else i.stop - i.start
     q, t = np.empty((4, m)), np.empty((3, m))
     for part in row_blocks(m):
-        a, b = _run(_part(i, part)), _run(_part(j, part))
+        a, b = run_slice(_part(i, part)), run_slice(_part(j, part))
         x, y, z, w = _take(q_rows, a)
         inv = (-x, -y, -z, w)  # quat_conj
         q[:, part] = _mul_rows(inv, _take(q_rows, b))
@@ -569,17 +569,10 @@ def interpolator(t: np.ndarray, p_rows: np.ndarray, q_rows: np.ndarray):
     return at
 
 
-def _runs(lo: np.ndarray, hi: np.ndarray):
-    """The intervals' ends (k - 1, k) as slices when they are runs of consecutive indices (stamps at
-    the poses' own rate mostly are: one interval after the other), else as they are."""
-    if consecutive(lo) and lo[0] >= 0:  # a negative run is not its slice
-        return slice(int(lo[0]), int(lo[-1]) + 1), slice(int(hi[0]), int(hi[-1]) + 1)
-    return lo, hi
-
-
-def _run(k):
+def run_slice(k):
     """Indices as a slice where they are a run of consecutive ones (a block of pairs mostly is:
-    pairs a fixed number of poses apart), else as they are."""
+    pairs a fixed number of poses apart; stamps at the poses' own rate fall in one interval after
+    the other), else as they are: a slice reads a view where indices would gather."""
     if isinstance(k, slice) or not consecutive(k) or k[0] < 0:  # a negative run is not its slice
         return k
     return slice(int(k[0]), int(k[-1]) + 1)

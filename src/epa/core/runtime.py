@@ -36,42 +36,28 @@ def register(name: str, cache=None, *, reset: Callable[[], None] | None = None):
     return cache
 
 
+def _switch(name: str) -> tuple[Callable[..., None], Callable[[], bool]]:
+    """A process-wide setting, off until its setter is called and again after :func:`reset`: the
+    setter (``on=True``) and the getter."""
+    state = {"on": False}
+
+    def set_on(on: bool = True) -> None:
+        state["on"] = on
+
+    register(name, reset=lambda: set_on(False))
+    return set_on, lambda: state["on"]
+
+
 # Whether this process reads every file with pandas' C parser (it has paid pandas' import on
 # purpose: the workflow's workers and the tables script say so) or only files large enough to
 # repay the import. Either parser gives the same doubles; this is the cost, chosen by the caller.
-_PARSER = {"pandas": False}
-
-
-def use_pandas_parser(on: bool = True) -> None:
-    """Read every file with pandas' C parser from now on (the caller has imported pandas)."""
-    _PARSER["pandas"] = on
-
-
-def pandas_parser() -> bool:
-    """Whether :func:`use_pandas_parser` was called in this process (since the last reset)."""
-    return _PARSER["pandas"]
-
-
-register("core.runtime.parser", reset=lambda: use_pandas_parser(False))
+use_pandas_parser, pandas_parser = _switch("core.runtime.parser")
 
 # Whether this process runs one case alone (`epa eval`), so that a stage may give a second thread
 # work that releases the GIL (the estimate's parse beside the reference's, Step 1's two forward
 # transforms). Off elsewhere: the workflow runs a worker per core, which a second thread would
 # oversubscribe. Either way the same bits: each thread computes what one thread did.
-_SPARE = {"thread": False}
-
-
-def use_spare_thread(on: bool = True) -> None:
-    """Let stages run GIL-releasing work in a second thread from now on (one case, one process)."""
-    _SPARE["thread"] = on
-
-
-def spare_thread() -> bool:
-    """Whether :func:`use_spare_thread` was called in this process (since the last reset)."""
-    return _SPARE["thread"]
-
-
-register("core.runtime.spare_thread", reset=lambda: use_spare_thread(False))
+use_spare_thread, spare_thread = _switch("core.runtime.spare_thread")
 
 
 # glibc's malloc gives freed memory back to the system at once above its thresholds (the trim

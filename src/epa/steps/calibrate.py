@@ -228,7 +228,7 @@ def _fit(
     info: dict = {"pairs": int(len(i)), "pair_step_s": pair_step}
     if len(i) < min_pairs:
         return _too_little(f"only {len(i)} motion pairs ({min_pairs} needed)", info)
-    at = (_index(i), _index(j))  # runs of consecutive poses as slices: views, not gathers
+    at = (geometry.run_slice(i), geometry.run_slice(j))  # runs of poses: views, not gathers
     qa, ta = geometry.relative_motion_rows(
         geometry.component_rows(ref.q), geometry.component_rows(ref.p), *at
     )
@@ -524,11 +524,6 @@ def _uncertainty(cov_rot, null_rot, cov_x, null_x, scale: bool) -> dict:
         "rotation_covariance_rad2": cov_rot.tolist(),
         "translation_covariance": cov_x.tolist(),
     }
-
-
-def _index(i: np.ndarray):
-    """Indices as a slice when they are a run of consecutive ones."""
-    return slice(int(i[0]), int(i[-1]) + 1) if geometry.consecutive(i) else i
 
 
 def _cols(rows: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -411,17 +411,20 @@ SPECTRA_MAX = 8  # entries (datasets); with SPECTRUM_BYTES, at most about 100 MB
 SPECTRUM_BYTES = 12 << 20  # a larger one (a reference over about 5 minutes) is not kept
 
 
-def _spectrum_key(a: np.ndarray, span_a: tuple[int, int], nfft: int) -> tuple:
-    """Where a kept spectrum may be (a few samples tell most signals apart; equality decides)."""
+def _spectrum_key(a: np.ndarray, span_a: tuple[int, int], nfft: int) -> tuple | None:
+    """Where a kept spectrum may be (a few samples tell most signals apart; equality decides); None
+    where nothing is shared: one case in this process (`epa eval`), or a signal without support."""
     a0, a1 = span_a
+    if runtime.spare_thread() or not 0 <= a0 <= a1 < len(a):
+        return None
     return (nfft, len(a), a0, a1, float(a[a0]), float(a[(a0 + a1) // 2]), float(a[a1]))
 
 
 def _kept_spectrum(a: np.ndarray, span_a: tuple[int, int], nfft: int) -> np.ndarray | None:
     """The kept np.fft.rfft(a, nfft) (not to be written to), or None."""
-    if runtime.spare_thread() or not 0 <= span_a[0] <= span_a[1] < len(a):
-        return None  # one case in this process (`epa eval`): nothing to share
     key = _spectrum_key(a, span_a, nfft)
+    if key is None:
+        return None
     with _SPECTRA_LOCK:
         kept = _SPECTRA.get(key)
         if kept is None or not np.array_equal(kept[0], a):
@@ -432,11 +435,9 @@ def _kept_spectrum(a: np.ndarray, span_a: tuple[int, int], nfft: int) -> np.ndar
 
 def _keep_spectrum(a: np.ndarray, span_a: tuple[int, int], nfft: int, spectrum) -> None:
     """Keep ``spectrum`` (of ``a``) for the next case with the same reference signal."""
-    if runtime.spare_thread() or not 0 <= span_a[0] <= span_a[1] < len(a):
-        return
-    if a.nbytes + spectrum.nbytes > SPECTRUM_BYTES:
-        return
     key = _spectrum_key(a, span_a, nfft)
+    if key is None or a.nbytes + spectrum.nbytes > SPECTRUM_BYTES:
+        return
     spectrum.flags.writeable = False
     with _SPECTRA_LOCK:
         _SPECTRA[key] = (a.copy(), spectrum)
