@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from grid import tool  # (benchmarks/grid.py: each tool started the same way)
 
 from epa import simulate
 from epa.artifacts import files
@@ -45,14 +46,14 @@ def main():
     tmp = Path(tempfile.mkdtemp())
     ref, est = big_pair(tmp)
     epa_s = timed(
-        ["epa", "eval", str(tmp / "ref.txt"), str(tmp / "est.txt"), "--out", str(tmp / "o")]
+        [tool("epa"), "eval", str(tmp / "ref.txt"), str(tmp / "est.txt"), "--out", str(tmp / "o")]
     )
     print(f"epa eval, 100k poses: {epa_s:.2f} s")
     if "--skip-evo" not in sys.argv:
-        evo_s = timed(["evo_ape", "tum", str(tmp / "ref.txt"), str(tmp / "est.txt"), "-a"])
+        evo_s = timed([tool("evo_ape"), "tum", str(tmp / "ref.txt"), str(tmp / "est.txt"), "-a"])
         evo_s += timed(
             [
-                "evo_rpe",
+                tool("evo_rpe"),
                 "tum",
                 str(tmp / "ref.txt"),
                 str(tmp / "est.txt"),
@@ -84,7 +85,7 @@ def main():
             "/usr/bin/time",
             "-f",
             "%e s %M KB",
-            "epa",
+            tool("epa"),
             "eval",
             str(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt"),
             str(data / "aau-cns_cnspy_trajectory_evaluation/test/sample_data/MH01_ov_est.csv"),

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from epa.core import geometry
+from epa.core import geometry, ranks
 from epa.core.trajectory import Trajectory
 from epa.metrics.spec import Metric, Table
 from epa.steps.align import Similarity
@@ -89,8 +89,8 @@ def evaluate(
         "convention": "local orientation error, R_true = R_est Exp(e); errors in the estimate's frames",
         "nees_pos_mean": float(np.mean(nees_pos[valid])) if n else None,
         "nees_rot_mean": float(np.mean(nees_rot[valid])) if n else None,
-        "nees_pos_median": float(np.median(nees_pos[valid])) if n else None,
-        "nees_rot_median": float(np.median(nees_rot[valid])) if n else None,
+        "nees_pos_median": ranks.median(nees_pos[valid]) if n else None,
+        "nees_rot_median": ranks.median(nees_rot[valid]) if n else None,
         # mean over the six axes of the share of poses outside ±3σ (0.27 % for a consistent Gaussian)
         "outside_3sigma_pct": float(100 * outside.mean()) if n else None,
         "outside_3sigma_pct_by_axis": dict(zip(axes, (100 * outside.mean(axis=0)).tolist()))
@@ -123,7 +123,7 @@ def across_runs(runs: dict[str, dict]) -> tuple[dict, dict]:
 
     stamps = {k: np.asarray(r["t"], float) for k, r in runs.items()}
     grid = stamps[min(stamps)]
-    tol = 0.5 * float(np.median(np.diff(grid))) if len(grid) > 1 else 0.0
+    tol = 0.5 * ranks.median(np.diff(grid)) if len(grid) > 1 else 0.0
     keep = np.ones(len(grid), bool)
     sel = {}
     for k, t in stamps.items():

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from epa.core import ranks
 from epa.metrics.accuracy import drift_rate, segment_key, stats, time_rpe_key
 
 
@@ -22,7 +23,7 @@ def thresholds(settings: dict, ref_t: np.ndarray, ref_dist: np.ndarray, time_pai
     th["mode"] = settings["mode"]
     if settings["mode"] == "scale_aware":
         i, j = time_pairs
-        step = np.median(ref_dist[j] - ref_dist[i]) if len(i) else 0.0
+        step = ranks.median(ref_dist[j] - ref_dist[i]) if len(i) else 0.0
         length = ref_dist[-1] if len(ref_dist) else 0.0
         th["rpe_trans_max_m"] = max(settings["scale_rpe_factor"] * step, 0.1)
         th["jump_rise_m"] = th["jump_hold_m"] = max(settings["scale_jump_factor"] * length, 0.5)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from epa.core import geometry
+from epa.core import geometry, ranks
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.readers.checks import MAX_POSITION_M, Unordered, beyond_reach, in_order
@@ -83,7 +83,7 @@ def _seconds(tab: Table, t: np.ndarray, time_unit: str, header_ns: bool) -> np.n
     if time_unit == "sec_nsec":
         return _sec_nsec(tab)
     if time_unit == "ns" or (
-        time_unit == "auto" and (header_ns or np.median(np.abs(t)) > NS_THRESHOLD)
+        time_unit == "auto" and (header_ns or ranks.median(np.abs(t)) > NS_THRESHOLD)
     ):
         if time_unit == "auto" and not header_ns:  # decided by the median: all must agree
             _check_one_unit(tab, t, ns=True)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from epa.core import ranks
 from epa.core.errors import EpaError
 from epa.readers import text
 
@@ -39,7 +40,7 @@ def read_timing(
             f" 'total'; found {rows.shape[1]} columns",
             path=str(path),
         )
-    if np.median(np.abs(t)) > text.NS_THRESHOLD:
+    if ranks.median(np.abs(t)) > text.NS_THRESHOLD:
         t, what = t / 1e9, what + ", stamps in ns"
     if (ms < 0).any():
         k = int(np.argmax(ms < 0))

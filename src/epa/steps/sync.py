@@ -14,7 +14,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from epa.core import geometry, runtime
+from epa.core import geometry, ranks, runtime
 from epa.core.errors import EpaError
 from epa.core.records import Step1Record
 from epa.core.stamps import nearest_from
@@ -217,8 +217,8 @@ def _prefix_run(c: np.ndarray, total, k: int, count: int):
 def _clip_spikes(w: np.ndarray) -> np.ndarray:
     # Initialisation jumps (identity placeholder poses, resets) give one huge sample that would
     # dominate the correlation; cap at a robust multiple of the typical speed.
-    med = np.median(w)
-    mad = np.median(np.abs(w - med)) + 1e-12
+    med = ranks.median(w)
+    mad = ranks.median(np.abs(w - med)) + 1e-12
     return np.minimum(w, med + 20 * mad)
 
 
@@ -324,7 +324,7 @@ def _speed_signals(ref: Trajectory, est: Trajectory, speed_interval: float, spee
     of a mean rate is not the mean of magnitudes), and over at least ``speed_interval``: differencing
     consecutive noisy orientations turns white orientation noise into speed noise that grows with the
     rate and biases a gentle motion's peak."""
-    dt_ref, dt_est = np.median(np.diff(ref.t)), np.median(np.diff(est.t))
+    dt_ref, dt_est = ranks.median(np.diff(ref.t)), ranks.median(np.diff(est.t))
     interval = max(dt_ref, dt_est, speed_interval)
     t_a, w_a = speed(ref, max(1, int(round(interval / dt_ref))))
     t_b, w_b = speed(est, max(1, int(round(interval / dt_est))))

@@ -10,6 +10,7 @@ import numpy as np
 
 from epa.artifacts.case import CaseData, Record
 from epa.artifacts.stage import Stage, Value
+from epa.core import ranks
 from epa.core.errors import EpaError
 from epa.metrics import efficiency
 
@@ -25,7 +26,7 @@ def compute(t_est, ape: dict, est_length_m: float, timing, dataset: str, cfg: di
     note = None
     if rate is None:  # not configured: the timing file's own frame rate
         dt = np.diff(np.sort(timing[0]))
-        rate = float(1.0 / np.median(dt[dt > 0])) if (dt > 0).any() else None
+        rate = 1.0 / ranks.median(dt[dt > 0]) if (dt > 0).any() else None
         if rate is None:
             raise EpaError("set efficiency.sensor_rate_hz (the timing file's stamps give no rate)")
         note = f"sensor rate {rate:.3f} Hz from the timing file's stamps (efficiency.sensor_rate_hz not set)"
