@@ -1,3 +1,4 @@
+import subprocess
 import sys
 
 import numpy as np
@@ -340,6 +341,21 @@ def test_artifact_rows_by_pyarrow_read_back_as_the_same_doubles(tmp_path):
     files.write_csv(tmp_path / "d.csv", {"a": big[:, 0], "b": big[:, 1]})
     got = files.read_csv(tmp_path / "d.csv")
     assert np.array_equal(np.column_stack([got["a"], got["b"]]), big)
+
+
+def test_writing_an_artifact_does_not_import_pandas(tmp_path):
+    """pyarrow's pa.table and pa.array import pandas to check for a frame (0.25-0.5 s): a process
+    that writes artifacts without having pandas (the tables rule, `epa eval --artifacts`) must not
+    pay it. In a new process, as those are."""
+    pytest.importorskip("pyarrow")
+    code = (
+        "import sys, numpy as np; from epa.artifacts import files;"
+        f" files.write_csv({str(tmp_path / 'a.csv')!r}, {{'a': np.arange(3.0), 'b': np.ones(3)}});"
+        " print('pandas' in sys.modules, 'pyarrow' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "True"]
+    assert (tmp_path / "a.csv").read_text() == "a,b\n0,1\n1,1\n2,1\n"
 
 
 def test_artifact_numbers_keep_negative_zero_next_to_a_missing_value(tmp_path):
