@@ -34,10 +34,18 @@ def summary(record: dict) -> dict:
 def reference_in_estimate_frame(
     ref: Trajectory, alignment: Similarity, extrinsic=None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Rotations and positions of the (matched) reference poses expressed as the estimate's poses
-    would be: Step 3 undone (world), then Step 2 undone (body -> sensor, scale)."""
-    r, p = alignment.inverse().apply_rp(ref.r, ref.p)
-    return (r, p) if extrinsic is None else extrinsic.to_sensor_rp(r, p)
+    """Orientations ((4, N) quaternion rows x, y, z, w) and positions (N, 3) of the (matched)
+    reference poses expressed as the estimate's poses would be: Step 3 undone (world), then Step 2
+    undone (body -> sensor, scale). By quaternions, not (N, 3, 3) matrices: half the stage's time
+    at 1M poses."""
+    undo = alignment.inverse()
+    q = geometry.mul_rows(geometry.rot_to_quat(undo.R), geometry.component_rows(ref.q))
+    p = undo.s * ref.p @ undo.R.T + undo.t
+    if extrinsic is None:
+        return q, p
+    # r_b R_X and (p_b + r_b t_X) / scale: Extrinsic.to_sensor_rp's, on quaternions
+    lever = geometry.rotate_rows(q, extrinsic.t).T
+    return geometry.mul_rows(q, geometry.rot_to_quat(extrinsic.R)), (p + lever) / extrinsic.scale
 
 
 def _quadratic(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -69,9 +77,11 @@ def evaluate(
     covariance); ``ref`` the matched reference; ``alignment``/``extrinsic`` what Steps 3/2 found."""
     if est.cov_rot is None or est.cov_pos is None:
         return {"available": False, "reason": "the estimate has no covariance"}, {}
-    r_ref, p_ref = reference_in_estimate_frame(ref, alignment, extrinsic)
+    q_ref, p_ref = reference_in_estimate_frame(ref, alignment, extrinsic)
     e_pos = p_ref - est.p
-    e_rot = geometry.so3_log(np.einsum("nba,nbc->nac", est.r, r_ref))  # R_ref = R_est Exp(e_rot)
+    x, y, z, w = geometry.component_rows(est.q)
+    # R_ref = R_est Exp(e_rot): e_rot = log(q_est^-1 q_ref), (N, 3) over its rows
+    e_rot = geometry.log_rows(geometry.mul_rows((-x, -y, -z, w), q_ref)).T
     nees_pos = _quadratic(e_pos, est.cov_pos)
     nees_rot = _quadratic(e_rot, est.cov_rot)
     sig_pos = np.sqrt(np.clip(np.diagonal(est.cov_pos, axis1=1, axis2=2), 0, None))
