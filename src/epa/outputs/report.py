@@ -25,6 +25,11 @@ from epa.outputs import case_report, figures, parallel, tables
 
 CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")
 GRID_FIGURES = ("ate", "success_rate", "success_curve", "drift_rate", "rmse_time")
+# The order the grid figures are drawn in by several workers: the costliest first, so that no
+# worker starts a long one last (PNG + PDF on the 52 EuRoC cases: rmse_time 0.56 s, success_curve
+# 0.50, ate 0.46, drift_rate 0.27, success_rate 0.16; in GRID_FIGURES' order two workers took
+# about 1.2 s, in this one about 1.0). The bytes do not depend on it.
+DRAW_ORDER = ("rmse_time", "success_curve", "ate", "drift_rate", "success_rate")
 
 
 # ----------------------------------------------------------------------------- case artifacts
@@ -393,4 +398,7 @@ def write_grid_figures(results_dir, segments, style: str = "wide", workers: int 
     if workers > 1:
         figures.prepare(style)  # matplotlib imported once, before the fork
     draw = functools.partial(figures.render, style=style)
-    return [path for paths in parallel.map_forked(draw, jobs, workers) for path in paths]
+    rank = {name: k for k, name in enumerate(DRAW_ORDER)}
+    order = sorted(range(len(jobs)), key=lambda k: rank.get(jobs[k][1].name, len(rank)))
+    drawn = dict(zip(order, parallel.map_forked(draw, [jobs[k] for k in order], workers)))
+    return [path for k in range(len(jobs)) for path in drawn[k]]  # in the bundles' order
