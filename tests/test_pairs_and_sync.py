@@ -164,6 +164,25 @@ def test_step1_falls_back_without_motion():
     assert not out.used and out.offset == 0.01 and "too little rotational motion" in out.reason
 
 
+def test_step1_falls_back_on_repeated_stamps():
+    """Every pose written twice (a file read with its order kept): the median stamp interval is 0,
+    so there is no grid to correlate on: the fallback and why, not a division by zero."""
+    from epa.core.trajectory import Trajectory
+
+    t = np.repeat(np.arange(200) * 0.05, 2)
+    yaw = np.repeat(np.cumsum(np.random.default_rng(0).normal(0, 0.3, 200)), 2)
+    q = np.c_[0 * t, 0 * t, np.sin(yaw / 2), np.cos(yaw / 2)]
+    twice = Trajectory(t, np.zeros((len(t), 3)), q)
+    once = twice.select(np.arange(0, len(t), 2))
+    out = sync.estimate_offset(twice, once.shifted(0.2), fallback=0.01)
+    assert not out.used and out.offset == 0.01 and out.status == sync.Step1Status.TOO_LITTLE_MOTION
+    assert out.reason.startswith(
+        "the reference's median interval between consecutive stamps is 0 s"
+    )
+    out = sync.estimate_offset(once, twice.shifted(0.2))
+    assert not out.used and out.reason.startswith("the estimate's median interval")
+
+
 def test_step1_refuses_an_ambiguous_periodic_peak():
     from epa.core import geometry
     from epa.core.trajectory import Trajectory

@@ -318,13 +318,15 @@ def _jackknife_std(
     return float(np.hypot(jack, dt / np.sqrt(12.0)))
 
 
-def _speed_signals(ref: Trajectory, est: Trajectory, speed_interval: float, speed=angular_speed):
+def _speed_signals(
+    ref: Trajectory, est: Trajectory, steps: tuple[float, float], speed_interval: float, speed
+):
     """Each side's angular speed over the same interval: the coarser trajectory only sees chord rates
     over its own sample interval, so the finer one is measured over that interval too (the magnitude
     of a mean rate is not the mean of magnitudes), and over at least ``speed_interval``: differencing
     consecutive noisy orientations turns white orientation noise into speed noise that grows with the
-    rate and biases a gentle motion's peak."""
-    dt_ref, dt_est = ranks.median(np.diff(ref.t)), ranks.median(np.diff(est.t))
+    rate and biases a gentle motion's peak. ``steps``: each side's median sample interval (> 0)."""
+    dt_ref, dt_est = steps
     interval = max(dt_ref, dt_est, speed_interval)
     t_a, w_a = speed(ref, max(1, int(round(interval / dt_ref))))
     t_b, w_b = speed(est, max(1, int(round(interval / dt_est))))
@@ -515,7 +517,16 @@ def estimate_offset(
 
     if len(ref) < 4 or len(est) < 4:
         return _not_used(fallback, Step1Status.TOO_LITTLE_MOTION, "too few poses for a correlation")
-    t_a, w_a, t_b, w_b = _speed_signals(ref, est, speed_interval, speed)
+    steps = ranks.median(np.diff(ref.t)), ranks.median(np.diff(est.t))
+    for side, step in zip(("reference", "estimate"), steps):
+        if not step > 0:  # (stamps kept unsorted, e.g. every pose written twice)
+            return _not_used(
+                fallback,
+                Step1Status.TOO_LITTLE_MOTION,
+                f"the {side}'s median interval between consecutive stamps is {step:g} s (repeated or"
+                " unsorted stamps): no sample interval for a correlation",
+            )
+    t_a, w_a, t_b, w_b = _speed_signals(ref, est, steps, speed_interval, speed)
     motion = dict(ref_motion_rad_s=float(np.std(w_a)), est_motion_rad_s=float(np.std(w_b)))
     refused = _signals_refused(t_a, t_b, motion, window, min_motion, speed is linear_speed)
     if refused is not None:
