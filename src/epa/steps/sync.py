@@ -318,6 +318,21 @@ def _jackknife_std(
     return float(np.hypot(jack, dt / np.sqrt(12.0)))
 
 
+def _sample_steps(ref: Trajectory, est: Trajectory) -> tuple[float, float] | str:
+    """Each side's median interval between consecutive stamps, or why there is nothing to correlate
+    (too few poses; stamps kept repeated or unsorted, e.g. every pose written twice)."""
+    if len(ref) < 4 or len(est) < 4:
+        return "too few poses for a correlation"
+    steps = ranks.median(np.diff(ref.t)), ranks.median(np.diff(est.t))
+    for side, step in zip(("reference", "estimate"), steps):
+        if not step > 0:
+            return (
+                f"the {side}'s median interval between consecutive stamps is {step:g} s (repeated or"
+                " unsorted stamps): no sample interval for a correlation"
+            )
+    return steps
+
+
 def _speed_signals(
     ref: Trajectory, est: Trajectory, steps: tuple[float, float], speed_interval: float, speed
 ):
@@ -515,17 +530,9 @@ def estimate_offset(
     OffsetEstimate
     """
 
-    if len(ref) < 4 or len(est) < 4:
-        return _not_used(fallback, Step1Status.TOO_LITTLE_MOTION, "too few poses for a correlation")
-    steps = ranks.median(np.diff(ref.t)), ranks.median(np.diff(est.t))
-    for side, step in zip(("reference", "estimate"), steps):
-        if not step > 0:  # (stamps kept unsorted, e.g. every pose written twice)
-            return _not_used(
-                fallback,
-                Step1Status.TOO_LITTLE_MOTION,
-                f"the {side}'s median interval between consecutive stamps is {step:g} s (repeated or"
-                " unsorted stamps): no sample interval for a correlation",
-            )
+    steps = _sample_steps(ref, est)
+    if isinstance(steps, str):
+        return _not_used(fallback, Step1Status.TOO_LITTLE_MOTION, steps)
     t_a, w_a, t_b, w_b = _speed_signals(ref, est, steps, speed_interval, speed)
     motion = dict(ref_motion_rad_s=float(np.std(w_a)), est_motion_rad_s=float(np.std(w_b)))
     refused = _signals_refused(t_a, t_b, motion, window, min_motion, speed is linear_speed)
