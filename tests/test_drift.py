@@ -168,3 +168,35 @@ def test_drift_valid_statistics_from_the_metrics_record_are_the_recomputed_ones(
     assert (with_record["success_rate_distance_pct"] < 99) == jump
     # all valid: the whole samples, so the metrics record's own statistics
     assert (with_record["drift_valid"]["ate"] == record["ate"]) == (not jump)
+
+
+@pytest.mark.parametrize("jump", [False, True])
+def test_segment_lengths_read_by_runs_or_by_masks_give_the_same_record(jump):
+    """The metrics stage writes each segment length's pairs as one run of rows, which the drift
+    stage reads as a slice; a table whose lengths interleave (each length's pairs in their order)
+    is read by masks: the same record either way."""
+    from epa.metrics import accuracy
+
+    rng = np.random.default_rng(3)
+    t = np.arange(0, 60, 0.05)
+    p = np.c_[2.0 * t, np.sin(t), np.zeros_like(t)]
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1))
+    noise = rng.normal(0, 0.02, p.shape) + (np.where(t > 30, 8.0, 0.0)[:, None] if jump else 0.0)
+    record, tables = accuracy.evaluate(
+        Trajectory(t, p, q), Trajectory(t, p + noise, q), segments=(8, 16, 500)
+    )
+    seg = tables["rpe_segments"]
+    assert drift._length_runs(seg["length_m"]) is not None
+    # interleaved: row k of each length in turn, each length's own order kept
+    rank = np.concatenate([np.arange(n) for n in np.unique(seg["length_m"], return_counts=True)[1]])
+    order = np.lexsort((seg["length_m"], rank))
+    mixed = {k: np.asarray(v)[order] for k, v in seg.items()}
+    assert drift._length_runs(mixed["length_m"]) is None
+    by_runs, arrays = drift_stage.compute(tables, CFG, dict(record))
+    by_masks, mixed_arrays = drift_stage.compute(
+        {**tables, "rpe_segments": mixed}, CFG, dict(record)
+    )
+    assert json.dumps(by_runs, default=list) == json.dumps(by_masks, default=list)
+    valid = arrays["rpe_segments_valid"]["valid"]
+    assert np.array_equal(valid[order], mixed_arrays["rpe_segments_valid"]["valid"])
+    assert valid.all() != jump

@@ -233,14 +233,25 @@ NO_VALID_INTERVAL = (
 )
 
 
-def _valid_stats(x: np.ndarray, keep: np.ndarray, known, of: np.ndarray | None = None) -> dict:
-    """stats(x[keep]), ``keep`` within ``of`` (all of x without it). ``known``: the metrics stage's
-    statistics of x[of], taken when ``keep`` keeps all of that sample (every pose or pair valid,
-    the usual case): the same sample, so the same numbers, not computed a second time."""
-    whole = len(x) if of is None else int(np.count_nonzero(of))
-    if isinstance(known, dict) and known.get("n") == whole == np.count_nonzero(keep):
+def _valid_stats(x: np.ndarray, keep: np.ndarray | None, known) -> dict:
+    """stats(x[keep]) (of all of x where ``keep`` is None). ``known``: the metrics stage's
+    statistics of x, taken when ``keep`` keeps all of it (every pose or pair valid, the usual
+    case): the same sample, so the same numbers, not computed a second time."""
+    kept = len(x) if keep is None else int(np.count_nonzero(keep))
+    if isinstance(known, dict) and known.get("n") == len(x) == kept:
         return dict(known)
-    return stats(x[keep])
+    return stats(x if keep is None else x[keep])
+
+
+def _length_runs(lengths: np.ndarray) -> dict[float, slice] | None:
+    """{segment length: its rows} where each length's rows are one run of the column, as the
+    metrics stage writes rpe_segments; None where a length comes back after another."""
+    lengths = np.asarray(lengths)
+    if not len(lengths):
+        return {}
+    edges = [0, *(np.flatnonzero(lengths[1:] != lengths[:-1]) + 1).tolist(), len(lengths)]
+    runs = {float(lengths[a]): slice(a, b) for a, b in zip(edges[:-1], edges[1:])}
+    return runs if len(runs) == len(edges) - 1 else None
 
 
 def valid_metrics(
@@ -279,20 +290,26 @@ def valid_metrics(
     )
     every = bool(sv.all())  # the usual case: each length's valid pairs are all of its pairs
     notes = []
+    runs = _length_runs(seg["length_m"])
     for length in segments:
         key = segment_key(length)
-        of_length = seg["length_m"] == float(length)
-        sel = of_length if every else sv & of_length
+        # the length's pairs and their validity: its run of rows where each length has one (the
+        # metrics stage writes them so: 6 passes over a run, not over every pair), else a mask
+        at = runs.get(float(length), slice(0, 0)) if runs is not None else None
+        if at is None:
+            of = seg["length_m"] == float(length)
+            trans, rot, keep = seg["trans_m"][of], seg["rot_deg"][of], sv[of]
+        else:  # (contiguous, as a mask's gather is: the same sums)
+            trans, rot = (np.ascontiguousarray(seg[c][at]) for c in ("trans_m", "rot_deg"))
+            keep = sv[at]
         known_rpe = k.get("rpe_distance", {}).get(key)
-        out["rpe_distance"][key] = _stats_pair(
-            seg["trans_m"], seg["rot_deg"], sel, known_rpe, of_length
-        )
-        out["drift_rate_pct"][key] = drift_rate(seg["trans_m"][sel], length)
-        if not sel.any():
+        out["rpe_distance"][key] = _stats_pair(trans, rot, None if every else keep, known_rpe)
+        out["drift_rate_pct"][key] = drift_rate(trans if every else trans[keep], length)
+        if not (len(trans) if every else keep.any()):
             notes.append(
-                f"none of the {int(of_length.sum())} {key} m segments lies in drift-valid intervals:"
+                f"none of the {len(trans)} {key} m segments lies in drift-valid intervals:"
                 f" its drift-valid RPE and drift rate are empty"
-                if of_length.any()
+                if len(trans)
                 else f"no {key} m segment fits in the matched path: its drift-valid RPE and drift"
                 " rate are empty"
             )
@@ -324,12 +341,12 @@ def _indices(column) -> np.ndarray:
     return np.asarray(column).astype(int, copy=False)
 
 
-def _stats_pair(trans, rot, keep, known, of=None) -> dict:
+def _stats_pair(trans, rot, keep, known) -> dict:
     """The translation and rotation statistics of one drift-valid quantity (:func:`_valid_stats`)."""
     k = known if isinstance(known, dict) else {}
     return {
-        "trans_m": _valid_stats(trans, keep, k.get("trans_m"), of),
-        "rot_deg": _valid_stats(rot, keep, k.get("rot_deg"), of),
+        "trans_m": _valid_stats(trans, keep, k.get("trans_m")),
+        "rot_deg": _valid_stats(rot, keep, k.get("rot_deg")),
     }
 
 
