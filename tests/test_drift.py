@@ -192,11 +192,16 @@ def test_segment_lengths_read_by_runs_or_by_masks_give_the_same_record(jump):
     order = np.lexsort((seg["length_m"], rank))
     mixed = {k: np.asarray(v)[order] for k, v in seg.items()}
     assert drift._length_runs(mixed["length_m"]) is None
+    # a float32 column compares in float32 (0.1 is found): masks, as for any other type
+    as32 = {**seg, "length_m": np.asarray(seg["length_m"], np.float32)}
+    assert drift._length_runs(as32["length_m"]) is None
     by_runs, arrays = drift_stage.compute(tables, CFG, dict(record))
     by_masks, mixed_arrays = drift_stage.compute(
         {**tables, "rpe_segments": mixed}, CFG, dict(record)
     )
     assert json.dumps(by_runs, default=list) == json.dumps(by_masks, default=list)
+    by_32, _ = drift_stage.compute({**tables, "rpe_segments": as32}, CFG, dict(record))
+    assert json.dumps(by_runs, default=list) == json.dumps(by_32, default=list)
     valid = arrays["rpe_segments_valid"]["valid"]
     assert np.array_equal(valid[order], mixed_arrays["rpe_segments_valid"]["valid"])
     assert valid.all() != jump

@@ -183,6 +183,22 @@ def test_step1_falls_back_on_repeated_stamps():
     assert not out.used and out.reason.startswith("the estimate's median interval")
 
 
+def test_step1_falls_back_where_a_side_spans_no_speed_interval():
+    """A 4-pose reference 5 ms apart against an estimate 0.3 s apart: the reference's angular speed
+    over the estimate's 0.3 s has no sample. The fallback and why, not an IndexError."""
+    from epa.core.trajectory import Trajectory
+
+    def turning(t):
+        yaw = 0.5 * t
+        return Trajectory(t, np.zeros((len(t), 3)), np.c_[0 * t, 0 * t, np.sin(yaw), np.cos(yaw)])
+
+    short, sparse = turning(np.arange(4) * 0.005), turning(np.arange(40) * 0.3)
+    out = sync.estimate_offset(short, sparse, fallback=0.02)
+    assert not out.used and out.offset == 0.02 and out.status == sync.Step1Status.TOO_LITTLE_MOTION
+    assert out.reason == "too few poses for a correlation: the reference's poses span no 0.3 s"
+    assert "the estimate's poses span no 0.3 s" in sync.estimate_offset(sparse, short).reason
+
+
 def test_step1_refuses_an_ambiguous_periodic_peak():
     from epa.core import geometry
     from epa.core.trajectory import Trajectory

@@ -245,8 +245,12 @@ def _valid_stats(x: np.ndarray, keep: np.ndarray | None, known) -> dict:
 
 def _length_runs(lengths: np.ndarray) -> dict[float, slice] | None:
     """{segment length: its rows} where each length's rows are one run of the column, as the
-    metrics stage writes rpe_segments; None where a length comes back after another."""
+    metrics stage writes rpe_segments; None where a length comes back after another, or for a
+    column of another type than float64 (a float32 0.1 is no float 0.1: its mask compares in the
+    column's type)."""
     lengths = np.asarray(lengths)
+    if lengths.dtype != np.float64:
+        return None
     if not len(lengths):
         return {}
     edges = [0, *(np.flatnonzero(lengths[1:] != lengths[:-1]) + 1).tolist(), len(lengths)]

@@ -318,6 +318,20 @@ def _jackknife_std(
     return float(np.hypot(jack, dt / np.sqrt(12.0)))
 
 
+def _signals(ref: Trajectory, est: Trajectory, speed_interval: float, speed) -> tuple | str:
+    """Each side's speed signal (:func:`_speed_signals`), or why there is none to correlate: also
+    a side whose poses span no speed interval (a short one at a much lower rate than the other)."""
+    steps = _sample_steps(ref, est)
+    if isinstance(steps, str):
+        return steps
+    signals = _speed_signals(ref, est, steps, speed_interval, speed)
+    for side, w in (("reference", signals[1]), ("estimate", signals[3])):
+        if not len(w):
+            interval = max(*steps, speed_interval)
+            return f"too few poses for a correlation: the {side}'s poses span no {interval:g} s"
+    return signals
+
+
 def _sample_steps(ref: Trajectory, est: Trajectory) -> tuple[float, float] | str:
     """Each side's median interval between consecutive stamps, or why there is nothing to correlate
     (too few poses; stamps kept repeated or unsorted, e.g. every pose written twice)."""
@@ -530,10 +544,10 @@ def estimate_offset(
     OffsetEstimate
     """
 
-    steps = _sample_steps(ref, est)
-    if isinstance(steps, str):
-        return _not_used(fallback, Step1Status.TOO_LITTLE_MOTION, steps)
-    t_a, w_a, t_b, w_b = _speed_signals(ref, est, steps, speed_interval, speed)
+    signals = _signals(ref, est, speed_interval, speed)
+    if isinstance(signals, str):
+        return _not_used(fallback, Step1Status.TOO_LITTLE_MOTION, signals)
+    t_a, w_a, t_b, w_b = signals
     motion = dict(ref_motion_rad_s=float(np.std(w_a)), est_motion_rad_s=float(np.std(w_b)))
     refused = _signals_refused(t_a, t_b, motion, window, min_motion, speed is linear_speed)
     if refused is not None:
