@@ -291,6 +291,7 @@ def exact_rows(data: np.ndarray, delimiter: str) -> Iterator | None:
     except ImportError:
         return None
     options = pacsv.WriteOptions(include_header=False, delimiter=delimiter, quoting_style="none")
+    names = [f"c{k}" for k in range(data.shape[1])]
 
     def blocks():
         for lo in range(0, len(data), ARROW_ROWS_PER_BLOCK):
@@ -302,7 +303,6 @@ def exact_rows(data: np.ndarray, delimiter: str) -> Iterator | None:
                 pa.Array.from_buffers(pa.float64(), len(block), [None, pa.py_buffer(column)])
                 for column in np.ascontiguousarray(block.T)
             ]
-            names = [f"c{k}" for k in range(len(columns))]
             batch = pa.RecordBatch.from_arrays(columns, names=names)
             pacsv.write_csv(batch, sink, write_options=options)
             yield sink.getvalue()

@@ -32,9 +32,8 @@ def run_starts(d: np.ndarray) -> np.ndarray:
     return np.maximum.accumulate(np.where(new, np.arange(n), 0))
 
 
-STARTS_PER_BLOCK = (
-    32768  # starts per block in closest_pairs: its search and temporaries stay in cache
-)
+# starts per block in closest_pairs: its search and temporaries stay in cache
+STARTS_PER_BLOCK = 32768
 
 
 def closest_pairs(

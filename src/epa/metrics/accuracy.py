@@ -320,6 +320,8 @@ def _joined_pairs(dist: np.ndarray, lengths: list[float], tol: float, starts: np
     """Every length's segment pairs, joined (i, j), and each length's count: each block of pairs
     copied once as it is made, into arrays of room for every start of every length (the room
     never written is never touched)."""
+    if not lengths:
+        return np.zeros(0), np.zeros(0), []
     room = len(lengths) * len(dist)
     i, j = np.empty(room, np.intp), np.empty(room, np.intp)
     sizes, end = [], 0
@@ -329,8 +331,6 @@ def _joined_pairs(dist: np.ndarray, lengths: list[float], tol: float, starts: np
             i[end : end + len(a)], j[end : end + len(a)] = a, b
             end += len(a)
         sizes.append(end - begin)
-    if not lengths:
-        return np.zeros(0), np.zeros(0), sizes
     return i[:end], j[:end], sizes
 
 

@@ -318,48 +318,34 @@ def _jackknife_std(
     return float(np.hypot(jack, dt / np.sqrt(12.0)))
 
 
-def _signals(ref: Trajectory, est: Trajectory, speed_interval: float, speed) -> tuple | str:
-    """Each side's speed signal (:func:`_speed_signals`), or why there is none to correlate: also
-    a side whose poses span no speed interval (a short one at a much lower rate than the other)."""
-    steps = _sample_steps(ref, est)
-    if isinstance(steps, str):
-        return steps
-    signals = _speed_signals(ref, est, steps, speed_interval, speed)
-    for side, w in (("reference", signals[1]), ("estimate", signals[3])):
-        if not len(w):
-            interval = max(*steps, speed_interval)
-            return f"too few poses for a correlation: the {side}'s poses span no {interval:g} s"
-    return signals
+def _speed_signals(ref: Trajectory, est: Trajectory, speed_interval: float, speed) -> tuple | str:
+    """Each side's angular speed over the same interval (t_a, w_a, t_b, w_b), or why there is none
+    to correlate: too few poses, a median interval between consecutive stamps that is not positive
+    (stamps kept repeated or unsorted, e.g. every pose written twice), or a side whose poses span
+    no speed interval (a short one at a much lower rate than the other).
 
-
-def _sample_steps(ref: Trajectory, est: Trajectory) -> tuple[float, float] | str:
-    """Each side's median interval between consecutive stamps, or why there is nothing to correlate
-    (too few poses; stamps kept repeated or unsorted, e.g. every pose written twice)."""
+    The coarser trajectory only sees chord rates over its own sample interval, so the finer one is
+    measured over that interval too (the magnitude of a mean rate is not the mean of magnitudes),
+    and over at least ``speed_interval``: differencing consecutive noisy orientations turns white
+    orientation noise into speed noise that grows with the rate and biases a gentle motion's peak."""
     if len(ref) < 4 or len(est) < 4:
         return "too few poses for a correlation"
-    steps = ranks.median(np.diff(ref.t)), ranks.median(np.diff(est.t))
-    for side, step in zip(("reference", "estimate"), steps):
+    sides = (("reference", ref), ("estimate", est))
+    steps = [ranks.median(np.diff(traj.t)) for _, traj in sides]
+    for (side, _), step in zip(sides, steps):
         if not step > 0:
             return (
                 f"the {side}'s median interval between consecutive stamps is {step:g} s (repeated or"
                 " unsorted stamps): no sample interval for a correlation"
             )
-    return steps
-
-
-def _speed_signals(
-    ref: Trajectory, est: Trajectory, steps: tuple[float, float], speed_interval: float, speed
-):
-    """Each side's angular speed over the same interval: the coarser trajectory only sees chord rates
-    over its own sample interval, so the finer one is measured over that interval too (the magnitude
-    of a mean rate is not the mean of magnitudes), and over at least ``speed_interval``: differencing
-    consecutive noisy orientations turns white orientation noise into speed noise that grows with the
-    rate and biases a gentle motion's peak. ``steps``: each side's median sample interval (> 0)."""
-    dt_ref, dt_est = steps
-    interval = max(dt_ref, dt_est, speed_interval)
-    t_a, w_a = speed(ref, max(1, int(round(interval / dt_ref))))
-    t_b, w_b = speed(est, max(1, int(round(interval / dt_est))))
-    return t_a, w_a, t_b, w_b
+    interval = max(*steps, speed_interval)
+    signals = []
+    for (side, traj), step in zip(sides, steps):
+        t, w = speed(traj, max(1, int(round(interval / step))))
+        if not len(w):
+            return f"too few poses for a correlation: the {side}'s poses span no {interval:g} s"
+        signals += [t, w]
+    return tuple(signals)
 
 
 def _on_grid(grid: np.ndarray, ts: np.ndarray, w: np.ndarray):
@@ -544,7 +530,7 @@ def estimate_offset(
     OffsetEstimate
     """
 
-    signals = _signals(ref, est, speed_interval, speed)
+    signals = _speed_signals(ref, est, speed_interval, speed)
     if isinstance(signals, str):
         return _not_used(fallback, Step1Status.TOO_LITTLE_MOTION, signals)
     t_a, w_a, t_b, w_b = signals

@@ -88,7 +88,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
             records[metric.key] = None  # never a rotation invented from positions
             summary["notes"].append(f"{metric.key}: null: it needs orientations ({which})")
         elif metric.enabled(cfg) and metric.compute is not None:  # (Metric requires it here)
-            extra = {k: (inputs or {})[k]() for k in metric.inputs}
+            extra = {k: inputs[k]() for k in metric.inputs}
             records[metric.key], arrays, notes = metric.compute(ref, est, cfg, **extra)
             for name, columns in arrays.items():
                 tables.setdefault(name, {}).update(columns)
