@@ -24,6 +24,25 @@ def test_tum_any_whitespace_comments_and_normalised(tmp_path):
 
 
 @pytest.mark.parametrize(
+    "name,content",
+    [
+        ("a.txt", TUM),
+        ("ov.txt", "1 0 0 0 0 0 0 1" + " 0.1" * 12 + "\n2 1 0 0 0 0 0 1" + " 0.1" * 12 + "\n"),
+        ("euroc.csv", "#timestamp,x,y,z,qw,qx,qy,qz\n1e18,0,0,0,1,0,0,0\n2e18,1,0,0,1,0,0,0\n"),
+        ("gnss.txt", "1 0 0 0\n2 1 0 0\n"),
+    ],
+    ids=["tum", "openvins", "euroc", "positions"],
+)
+def test_a_trajectorys_arrays_are_its_own(tmp_path, name, content):
+    """t and p are not column views of the file's rows, which would keep the whole table alive
+    through every stage (2 x 61 MB at a million poses) and make every pass over them stride."""
+    tr = text.read_trajectory(write(tmp_path, name, content))
+    for a in (tr.t, tr.p):
+        assert a.flags.c_contiguous and a.base is None
+    assert not np.shares_memory(tr.t, tr.p)
+
+
+@pytest.mark.parametrize(
     "content,msg,line",
     [
         ("", "no data rows", None),

@@ -505,7 +505,9 @@ def read_tum_file(path) -> Trajectory:
         extra.update(cov_rot=upper_to_full(rows[:, 8:14]), cov_pos=upper_to_full(rows[:, 14:20]))
     if printed:
         extra["r_printed"] = np.ascontiguousarray(rows[:, -9:]).reshape(len(rows), 3, 3)
-    return Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8], **extra)
+    # each column its own array, as the readers give them (not strided views of the rows)
+    t, p, q = (np.ascontiguousarray(rows[:, k]) for k in (0, slice(1, 4), slice(4, 8)))
+    return Trajectory(t, p, q, **extra)
 
 
 def write_pair_indices(path, i_ref, i_est, t_ref, t_est) -> None:
