@@ -558,7 +558,8 @@ def _direct_link(rows: np.ndarray, link: str, topic: str, stamp: str, notes) -> 
     if notes is not None:
         notes.append(f"bag TF {link} ({len(rows)} poses of {topic}, {stamp} stamps)")
     q = rows[:, 4:8]
-    return Trajectory(rows[:, 0], rows[:, 1:4], q / np.linalg.norm(q, axis=1, keepdims=True))
+    t, p = np.ascontiguousarray(rows[:, 0]), np.ascontiguousarray(rows[:, 1:4])  # not views of rows
+    return Trajectory(t, p, q / np.linalg.norm(q, axis=1, keepdims=True))
 
 
 def _compose(series: dict, steps: list, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
