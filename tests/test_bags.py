@@ -48,6 +48,8 @@ def test_every_message_type_reads_back_exactly(tmp_path, storage):
         np.testing.assert_array_equal(back.t, traj.t)  # sec + nanosec, as evo reads them
         np.testing.assert_array_equal(back.p, traj.p)
         np.testing.assert_allclose(back.q, traj.q, rtol=0, atol=1e-15)
+        # arrays of their own, not views of the decoded messages (kept for the run)
+        assert all(a.flags.c_contiguous and a.base is None for a in (back.t, back.p, back.q))
         if msgtype.endswith(("PoseWithCovarianceStamped", "Odometry")):
             np.testing.assert_array_equal(back.cov_ros, traj.cov_ros)  # 6x6, ROS order
             np.testing.assert_array_equal(back.cov_pos, traj.cov_ros[:, :3, :3])

@@ -505,7 +505,7 @@ def read_tum_file(path) -> Trajectory:
         extra.update(cov_rot=upper_to_full(rows[:, 8:14]), cov_pos=upper_to_full(rows[:, 14:20]))
     if printed:
         extra["r_printed"] = np.ascontiguousarray(rows[:, -9:]).reshape(len(rows), 3, 3)
-    # each column its own array, as the readers give them (not strided views of the rows)
+    # arrays of their own: views would keep the whole table for as long as the trajectory is cached
     t, p, q = (np.ascontiguousarray(rows[:, k]) for k in (0, slice(1, 4), slice(4, 8)))
     return Trajectory(t, p, q, **extra)
 

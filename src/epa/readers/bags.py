@@ -352,6 +352,9 @@ def _finish(t, p, q, cov36) -> Trajectory:
         raise EpaError(f"message {k + 1}: non-finite pose (nan or inf)")
     norms = _quat_norms(q)
     q = q / norms[:, None] if len(t) else q
+    # an array of its own: a view would keep every message's decoded doubles for the run (344 bytes
+    # a pose with covariance, for 24 of positions)
+    p = np.ascontiguousarray(p)
     extra = {}
     if cov36 is not None and np.any(cov36):  # all zeros (a common placeholder) is no covariance
         c = cov36.reshape(-1, 6, 6)  # ROS order: x y z, rotation about the fixed x y z axes
@@ -558,7 +561,7 @@ def _direct_link(rows: np.ndarray, link: str, topic: str, stamp: str, notes) -> 
     if notes is not None:
         notes.append(f"bag TF {link} ({len(rows)} poses of {topic}, {stamp} stamps)")
     q = rows[:, 4:8]
-    t, p = np.ascontiguousarray(rows[:, 0]), np.ascontiguousarray(rows[:, 1:4])  # not views of rows
+    t, p = np.ascontiguousarray(rows[:, 0]), np.ascontiguousarray(rows[:, 1:4])  # as _finish's p
     return Trajectory(t, p, q / np.linalg.norm(q, axis=1, keepdims=True))
 
 

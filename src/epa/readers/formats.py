@@ -79,10 +79,10 @@ def _finish(
 
 
 def _own_columns(tab: Table, t, p, time_unit: str, header_ns: bool):
-    """The stamps in seconds and the positions, each in an array of its own. A builder's columns are
-    views of the file's rows: kept, they would hold the whole table for the run (2 x 61 MB at a
-    million TUM poses, more with covariance) and every pass over t or p would stride across it
-    (0.2 s of the 1M pair's CPU)."""
+    """The stamps in seconds and the positions, each in an array of its own. The builders slice them
+    out of the file's rows (TUM, OpenVINS and EuRoC take column views): kept, a view would hold the
+    whole table for the run (2 x 61 MB at a million TUM poses, more with covariance) and every pass
+    over t or p would stride across it (0.2 s of the 1M pair's CPU)."""
     return np.ascontiguousarray(_seconds(tab, t, time_unit, header_ns)), np.ascontiguousarray(p)
 
 
