@@ -505,8 +505,7 @@ def relative_motion_rows(
     q, t = np.empty((4, m)), np.empty((3, m))
     for part in row_blocks(m):
         a, b = run_slice(_part(i, part)), run_slice(_part(j, part))
-        x, y, z, w = _take(q_rows, a)
-        inv = (-x, -y, -z, w)  # quat_conj
+        inv = conj_rows(_take(q_rows, a))
         q[:, part] = _mul_rows(inv, _take(q_rows, b))
         t[:, part] = _rotate_rows(inv, _take(p_rows, b) - _take(p_rows, a))
     return q, t
@@ -528,6 +527,12 @@ def rot_rows(q_rows: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         for (a, b), entry in zip(_MATRIX_ENTRIES, _rot_entries(*q_rows[:, part])):
             r[a, b, part] = entry
     return r
+
+
+def conj_rows(q_rows) -> tuple:
+    """The conjugate (the inverse of a unit quaternion) of component rows: quat_conj's arithmetic."""
+    x, y, z, w = q_rows
+    return (-x, -y, -z, w)
 
 
 def mul_rows(a_rows, b_rows) -> np.ndarray:

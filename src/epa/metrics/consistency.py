@@ -38,14 +38,8 @@ def reference_in_estimate_frame(
     reference poses expressed as the estimate's poses would be: Step 3 undone (world), then Step 2
     undone (body -> sensor, scale). By quaternions, not (N, 3, 3) matrices: half the stage's time
     at 1M poses."""
-    undo = alignment.inverse()
-    q = geometry.mul_rows(geometry.rot_to_quat(undo.R), geometry.component_rows(ref.q))
-    p = undo.s * ref.p @ undo.R.T + undo.t
-    if extrinsic is None:
-        return q, p
-    # r_b R_X and (p_b + r_b t_X) / scale: Extrinsic.to_sensor_rp's, on quaternions
-    lever = geometry.rotate_rows(q, extrinsic.t).T
-    return geometry.mul_rows(q, geometry.rot_to_quat(extrinsic.R)), (p + lever) / extrinsic.scale
+    q, p = alignment.inverse().apply_rows(geometry.component_rows(ref.q), ref.p)
+    return (q, p) if extrinsic is None else extrinsic.to_sensor_rows(q, p)
 
 
 def _quadratic(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -79,9 +73,9 @@ def evaluate(
         return {"available": False, "reason": "the estimate has no covariance"}, {}
     q_ref, p_ref = reference_in_estimate_frame(ref, alignment, extrinsic)
     e_pos = p_ref - est.p
-    x, y, z, w = geometry.component_rows(est.q)
     # R_ref = R_est Exp(e_rot): e_rot = log(q_est^-1 q_ref), (N, 3) over its rows
-    e_rot = geometry.log_rows(geometry.mul_rows((-x, -y, -z, w), q_ref)).T
+    inv_est = geometry.conj_rows(geometry.component_rows(est.q))
+    e_rot = geometry.log_rows(geometry.mul_rows(inv_est, q_ref)).T
     nees_pos = _quadratic(e_pos, est.cov_pos)
     nees_rot = _quadratic(e_rot, est.cov_rot)
     sig_pos = np.sqrt(np.clip(np.diagonal(est.cov_pos, axis1=1, axis2=2), 0, None))

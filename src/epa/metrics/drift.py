@@ -258,6 +258,21 @@ def _length_runs(lengths: np.ndarray) -> dict[float, slice] | None:
     return runs if len(runs) == len(edges) - 1 else None
 
 
+def _of_length(seg: dict, valid: np.ndarray, runs: dict | None, length: float) -> tuple:
+    """One segment length's pairs' translation and rotation errors and their validity: its run of
+    rows where each length has one (the metrics stage writes them so: 6 passes over a run, not over
+    every pair), else by a mask. Contiguous either way, as a mask's gather is: the same sums."""
+    if runs is None:
+        of = seg["length_m"] == length
+        return seg["trans_m"][of], seg["rot_deg"][of], valid[of]
+    at = runs.get(length, slice(0, 0))
+    return (
+        np.ascontiguousarray(seg["trans_m"][at]),
+        np.ascontiguousarray(seg["rot_deg"][at]),
+        valid[at],
+    )
+
+
 def valid_metrics(
     det: dict,
     ape_trans,
@@ -297,19 +312,12 @@ def valid_metrics(
     runs = _length_runs(seg["length_m"])
     for length in segments:
         key = segment_key(length)
-        # the length's pairs and their validity: its run of rows where each length has one (the
-        # metrics stage writes them so: 6 passes over a run, not over every pair), else a mask
-        at = runs.get(float(length), slice(0, 0)) if runs is not None else None
-        if at is None:
-            of = seg["length_m"] == float(length)
-            trans, rot, keep = seg["trans_m"][of], seg["rot_deg"][of], sv[of]
-        else:  # (contiguous, as a mask's gather is: the same sums)
-            trans, rot = (np.ascontiguousarray(seg[c][at]) for c in ("trans_m", "rot_deg"))
-            keep = sv[at]
+        trans, rot, keep = _of_length(seg, sv, runs, float(length))
         known_rpe = k.get("rpe_distance", {}).get(key)
         out["rpe_distance"][key] = _stats_pair(trans, rot, None if every else keep, known_rpe)
-        out["drift_rate_pct"][key] = drift_rate(trans if every else trans[keep], length)
-        if not (len(trans) if every else keep.any()):
+        valid = trans if every else trans[keep]
+        out["drift_rate_pct"][key] = drift_rate(valid, length)
+        if not len(valid):
             notes.append(
                 f"none of the {len(trans)} {key} m segments lies in drift-valid intervals:"
                 f" its drift-valid RPE and drift rate are empty"

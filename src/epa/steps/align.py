@@ -62,9 +62,10 @@ class Similarity:
             extra.update(cov_rot=traj.cov_rot, cov_pos=cov_pos)
         return Trajectory(np.asarray(traj.t, float), np.asarray(p, float), q, **extra)
 
-    def apply_rp(self, r: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rotations (N, 3, 3) and positions (N, 3) in the target world frame."""
-        return self.R @ r, self.s * p @ self.R.T + self.t
+    def apply_rows(self, q_rows: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Orientations ((4, N) quaternion rows) and positions (N, 3) in the target world frame."""
+        q = geometry.mul_rows(geometry.rot_to_quat(self.R), q_rows)
+        return q, self.s * p @ self.R.T + self.t
 
     def inverse(self) -> Similarity:
         return Similarity(self.R.T, -self.R.T @ self.t / self.s, 1.0 / self.s)

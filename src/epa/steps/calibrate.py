@@ -88,9 +88,11 @@ class Extrinsic:
                 cov_pos[at, a, b] = s2 * c_pos[:, a, b] + pos[a][b]
         return {"cov_rot": cov_rot, "cov_pos": cov_pos}
 
-    def to_sensor_rp(self, r_b: np.ndarray, p_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The inverse of :meth:`apply` on rotations and positions: body poses -> sensor poses."""
-        return r_b @ self.R, (p_b + np.einsum("nab,b->na", r_b, self.t)) / self.scale
+    def to_sensor_rows(self, q_b: np.ndarray, p_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The inverse of :meth:`apply` on orientations ((4, N) quaternion rows) and positions
+        (N, 3): body poses -> sensor poses, r_b R_X and (p_b + r_b t_X) / scale."""
+        lever = geometry.rotate_rows(q_b, self.t).T
+        return geometry.mul_rows(q_b, geometry.rot_to_quat(self.R)), (p_b + lever) / self.scale
 
     @staticmethod
     def from_dict(d: dict) -> Extrinsic:
