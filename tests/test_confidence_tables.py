@@ -332,3 +332,51 @@ def test_selftest_on_planar_motion_says_what_is_unobservable(tmp_path, capsys):
         "this motion leaves part of the extrinsic unobservable: unobservable: rotation about" in out
     )
     assert "Steps 1-2 are trusted in 0 of 3 trials" in out
+
+
+def test_pooled_cells_are_the_same_from_length_runs_and_from_the_length_column(rng):
+    """The tables take a segment length's pairs as its run of rows where the metrics stage wrote them
+    so (results._pairs), else by comparing the length column: the same cells, spread included, and
+    the values by hand (the mean over the pairs pooled from every run)."""
+    from epa.artifacts.case import Case
+    from epa.outputs.tables import cells
+
+    lengths = np.repeat([8.0, 16.0, 24.0], [5, 4, 3])
+    by_column, by_runs = [], []
+    for k in range(3):
+        seg = {
+            "length_m": lengths.copy(),
+            "rot_deg": rng.random(12),
+            "trans_m": rng.random(12),
+            "valid": rng.random(12) > 0.3,
+        }
+        drift_record = {"global_failed": False, "success_rate_distance_pct": 50.0}
+        runs = {k: v for k, v in seg.items() if k != "length_m"}
+        runs["length_runs"] = drift.length_runs(seg["length_m"])
+        for out, segments in ((by_column, seg), (by_runs, runs)):
+            out.append(
+                tables.CaseResult(
+                    Case("alg", "ds", f"run{k}"), drift=drift_record, segments=segments
+                )
+            )
+    for length in (8.0, 16, 24.0, 32.0):
+        for valid in (False, True):
+            sel = [
+                (c.segments["length_m"] == length) & (c.segments["valid"] | (not valid))
+                for c in by_column
+            ]
+            rot = np.concatenate([c.segments["rot_deg"][s] for c, s in zip(by_column, sel)])
+            trans = np.concatenate([c.segments["trans_m"][s] for c, s in zip(by_column, sel)])
+            a = cells.mean_pair_cell(by_column, "segments", valid, length)
+            b = cells.mean_pair_cell(by_runs, "segments", valid, length)
+            if length == 32.0:  # no such pairs
+                assert np.isnan(a.values).all() and np.isnan(b.values).all()
+                continue
+            assert a.values == b.values == (rot.mean(), trans.mean())
+            assert a.fmt(4, "std") == b.fmt(4, "std") and "(n=3)" in b.fmt(4, "std")
+            per_run = [c.segments["trans_m"][s].mean() for c, s in zip(by_column, sel)]
+            assert np.array_equal(b.runs[:, 1], per_run)
+            drift_a = cells.drift_rate_cell(by_column, valid, length)
+            drift_b = cells.drift_rate_cell(by_runs, valid, length)
+            assert drift_a.values == drift_b.values == (np.mean(trans / length) * 100,)
+            assert drift_a.fmt(3, "ci") == drift_b.fmt(3, "ci")

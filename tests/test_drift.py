@@ -186,15 +186,15 @@ def test_segment_lengths_read_by_runs_or_by_masks_give_the_same_record(jump):
         Trajectory(t, p, q), Trajectory(t, p + noise, q), segments=(8, 16, 500)
     )
     seg = tables["rpe_segments"]
-    assert drift._length_runs(seg["length_m"]) is not None
+    assert drift.length_runs(seg["length_m"]) is not None
     # interleaved: row k of each length in turn, each length's own order kept
     rank = np.concatenate([np.arange(n) for n in np.unique(seg["length_m"], return_counts=True)[1]])
     order = np.lexsort((seg["length_m"], rank))
     mixed = {k: np.asarray(v)[order] for k, v in seg.items()}
-    assert drift._length_runs(mixed["length_m"]) is None
+    assert drift.length_runs(mixed["length_m"]) is None
     # a float32 column compares in float32 (0.1 is found): masks, as for any other type
     as32 = {**seg, "length_m": np.asarray(seg["length_m"], np.float32)}
-    assert drift._length_runs(as32["length_m"]) is None
+    assert drift.length_runs(as32["length_m"]) is None
     by_runs, arrays = drift_stage.compute(tables, CFG, dict(record))
     by_masks, mixed_arrays = drift_stage.compute(
         {**tables, "rpe_segments": mixed}, CFG, dict(record)

@@ -176,7 +176,8 @@ def test_tables_from_cases_read_in_parallel_are_the_same_bytes(example, tmp_path
     """The tables rule reads a large grid's cases in forked processes (results.collect): the same
     tables, here forced on the example's 18 cases, handed back 5 at a time. What a case keeps is
     only the columns the tables read, in arrays of their own (not views of the whole parsed table,
-    which a 10,000-case grid held in memory all at once)."""
+    which a 10,000-case grid held in memory all at once), each segment length's pairs as the run of
+    rows the metrics stage writes (no length column)."""
     from epa.outputs.tables import results
 
     monkeypatch.setattr(results, "PARALLEL_FROM_CASES", 2)
@@ -190,10 +191,14 @@ def test_tables_from_cases_read_in_parallel_are_the_same_bytes(example, tmp_path
     assert [f"{c.algorithm}/{c.dataset}/{c.run}" for c in grid] == keys and len(keys) == 18
     kept = [c for c in grid if c.ok]
     assert kept and all(
-        set(c.segments) == {"length_m", "rot_deg", "trans_m", "valid"} for c in kept
+        set(c.segments) == {"length_runs", "rot_deg", "trans_m", "valid"} for c in kept
     )
+    lengths = [float(s) for s in cfg["metrics"]["segments"]]
+    assert all(sorted(c.segments["length_runs"]) == lengths for c in kept)
     assert all(set(c.time) == {"rot_deg", "trans_m", "valid"} for c in kept)
-    columns = [a for c in kept for t in (c.segments, c.time, c.ape) for a in t.values()]
+    columns = [
+        a for c in kept for t in (c.segments, c.time, c.ape) for k, a in t.items() if k != "length_runs"
+    ]
     # an array unpickled from a worker keeps a buffer of its own bytes; never the whole table's
     assert all(a.base is None or memoryview(a.base).nbytes == a.nbytes for a in columns)
     assert all(c.segments["valid"].dtype == bool for c in kept)

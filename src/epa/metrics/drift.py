@@ -243,11 +243,11 @@ def _valid_stats(x: np.ndarray, keep: np.ndarray | None, known) -> dict:
     return stats(x if keep is None else x[keep])
 
 
-def _length_runs(lengths: np.ndarray) -> dict[float, slice] | None:
+def length_runs(lengths: np.ndarray) -> dict[float, slice] | None:
     """{segment length: its rows} where each length's rows are one run of the column, as the
-    metrics stage writes rpe_segments; None where a length comes back after another, or for a
-    column of another type than float64 (a float32 0.1 is no float 0.1: its mask compares in the
-    column's type)."""
+    metrics stage writes rpe_segments (the drift stage and the tables read them so); None where a
+    length comes back after another, or for a column of another type than float64 (a float32 0.1 is
+    no float 0.1: its mask compares in the column's type)."""
     lengths = np.asarray(lengths)
     if lengths.dtype != np.float64:
         return None
@@ -309,7 +309,7 @@ def valid_metrics(
     )
     every = bool(sv.all())  # the usual case: each length's valid pairs are all of its pairs
     notes = []
-    runs = _length_runs(seg["length_m"])
+    runs = length_runs(seg["length_m"])
     for length in segments:
         key = segment_key(length)
         trans, rot, keep = _of_length(seg, sv, runs, float(length))

@@ -7,7 +7,7 @@ from pathlib import Path
 from epa.artifacts import files
 from epa.artifacts.case import CaseFolder
 from epa.metrics import consistency
-from epa.outputs.tables.cells import ok_runs
+from epa.outputs.tables.cells import cases_of, ok_runs
 from epa.outputs.tables.results import CaseResult
 from epa.outputs.tables.summary import records_csv
 
@@ -18,7 +18,7 @@ def write_across_runs(grid: list[CaseResult], results_dir) -> None:
     results_dir = Path(results_dir)
     rows = []
     for alg in sorted({c.algorithm for c in grid}):
-        for ds in sorted({c.dataset for c in grid if c.algorithm == alg}):
+        for ds in sorted({c.dataset for c in cases_of(grid, alg)}):
             runs = {}
             for c in ok_runs(grid, alg, ds):
                 case = CaseFolder.of(results_dir, c.case)

@@ -31,7 +31,18 @@ class Cell:
 
     def __init__(self, values=None, pair: bool = True, runs=None):
         self.values, self.pair = values, pair
-        self.runs = None if runs is None else np.atleast_2d(np.asarray(runs, float))
+        self._runs = runs
+
+    @property
+    def runs(self) -> np.ndarray | None:
+        """Each run's numbers, made when first asked for: ``runs`` may be a function giving them
+        (a table without a spread never asks; pooled cells made them for 600,000 runs at 10,000
+        cases)."""
+        if callable(self._runs):
+            self._runs = self._runs()
+        if self._runs is not None and not isinstance(self._runs, np.ndarray):
+            self._runs = np.atleast_2d(np.asarray(self._runs, float))
+        return self._runs
 
     def fmt(self, decimals: int, spread: str = "none") -> str:
         if self.values is None:
@@ -75,16 +86,26 @@ def rotation_marked(cell: Cell, runs) -> Cell:
 def ok_runs(grid, alg, ds=None):
     """The runs with a result of ``alg`` (on ``ds``), in grid order. From an index built once per
     grid: scanning the grid for every cell made the tables quadratic (31 s on 1,000 cases)."""
+    return list(_index(grid).get((alg, ds), ()))
+
+
+def cases_of(grid, alg):
+    """Every case of ``alg``, with a result or not, in grid order (from the same index)."""
+    return list(_index(grid).get(("every", alg), ()))
+
+
+def _index(grid) -> dict:
     kept = _INDEX.get(id(grid))
     if kept is None or kept[0] is not grid or kept[1] != len(grid):
         index: dict = {}
         for c in grid:
+            index.setdefault(("every", c.algorithm), []).append(c)
             if c.ok:
                 index.setdefault((c.algorithm, None), []).append(c)
                 index.setdefault((c.algorithm, c.dataset), []).append(c)
         _INDEX.clear()  # one grid at a time; holding it keeps its id from being reused
         kept = _INDEX[id(grid)] = (grid, len(grid), index)
-    return list(kept[2].get((alg, ds), ()))
+    return kept[2]
 
 
 _INDEX: dict[int, tuple] = runtime.register("outputs.tables.cells.index", {})
@@ -109,17 +130,25 @@ def ate_cell(runs, valid: bool) -> Cell:
 
 
 def _per_run(runs, table: str, valid: bool, length=None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Each run's (rot, trans) errors of the pairs a pooled cell takes from it."""
+    """Each run's (rot, trans) errors of the pairs a pooled cell takes from it: the same values in
+    the same order whether a length's pairs are a run of rows (``length_runs``) or masked."""
     out = []
     for c in runs:
         t = getattr(c, table)
-        sel = np.ones(len(t.get("rot_deg", [])), bool)
-        if length is not None:
-            sel &= t["length_m"] == float(length)
-        if valid:
-            sel &= t["valid"] > 0
-        out.append((t["rot_deg"][sel], t["trans_m"][sel]))
+        rot, trans = t.get("rot_deg", _NONE), t.get("trans_m", _NONE)
+        keep = t["valid"] > 0 if valid else None
+        if length is not None and "length_runs" in t:
+            at = t["length_runs"].get(float(length), _EMPTY)
+            rot, trans = rot[at], trans[at]
+            keep = None if keep is None else keep[at]
+        elif length is not None:
+            of = t["length_m"] == float(length)
+            keep = of if keep is None else keep & of
+        out.append((rot, trans) if keep is None else (rot[keep], trans[keep]))
     return out
+
+
+_NONE, _EMPTY = np.zeros(0), slice(0, 0)
 
 
 def pooled(runs, table: str, valid: bool, length=None):
@@ -136,7 +165,12 @@ def _pooled_cell(runs, table, valid, length, of, width: int) -> Cell:
     rot, trans = (np.concatenate([r[k] for r in per_run]) for k in (0, 1))
     if _all_nan_valid(runs, valid) or rot.size == 0:
         return Cell((np.nan,) * width)
-    return Cell(of(rot, trans), runs=[of(r, t) for r, t in per_run if r.size])
+    # each run's own numbers taken again if a spread asks for them: kept, the selections of every
+    # cell of a table would stay in memory until it is written
+    return Cell(
+        of(rot, trans),
+        runs=lambda: [of(r, t) for r, t in _per_run(runs, table, valid, length) if r.size],
+    )
 
 
 def mean_pair_cell(runs, table, valid, length=None) -> Cell:

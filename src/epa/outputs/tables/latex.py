@@ -11,6 +11,7 @@ from epa.outputs.tables.cells import (
     Cell,
     ate_cell,
     average_cell,
+    cases_of,
     drift_rate_cell,
     mean_over_runs,
     mean_pair_cell,
@@ -222,15 +223,13 @@ def _metric_table(layout: _Layout, metric, spec):
     grid = layout.grid
 
     def has(alg):
-        return any(c.algorithm == alg and spec.has(c.record_of(metric)) for c in grid)
+        return any(spec.has(c.record_of(metric)) for c in cases_of(grid, alg))
 
     if spec.per_algorithm is not None:  # one row per algorithm with the metric, over all its runs
         rows = []
         for a in layout.algs:
             records = [
-                c.record_of(metric)
-                for c in grid
-                if c.algorithm == a and spec.has(c.record_of(metric))
+                c.record_of(metric) for c in cases_of(grid, a) if spec.has(c.record_of(metric))
             ]
             if records:
                 rows.append((a, [Cell((v,), pair=False) for v in spec.per_algorithm(records)]))
@@ -251,7 +250,7 @@ def _metric_table(layout: _Layout, metric, spec):
         if not spec.missing or has(alg):
             return None
         if callable(spec.missing):
-            return spec.missing([c.record_of(metric) for c in grid if c.algorithm == alg])
+            return spec.missing([c.record_of(metric) for c in cases_of(grid, alg)])
         return spec.missing
 
     rows = layout.rows_per_dataset(cell_of, spec.pair, marked)
@@ -265,11 +264,7 @@ def _metric_table(layout: _Layout, metric, spec):
 
 def _noted(name: str, alg: str, grid, metric, spec) -> str:
     """An algorithm's row name with its table note (of its successful runs that have the metric)."""
-    records = [
-        c.record_of(metric)
-        for c in grid
-        if c.algorithm == alg and c.ok and spec.has(c.record_of(metric))
-    ]
+    records = [c.record_of(metric) for c in ok_runs(grid, alg) if spec.has(c.record_of(metric))]
     text = spec.note(records) if records else None
     return f"{name} ({text})" if text else name
 

@@ -27,12 +27,14 @@ without a single relative-error pair (rpg prints the mean of nothing as 0.000).
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 from epa.artifacts.case import CaseFolder
 from epa.metrics import rpg
+from epa.outputs.tables.cells import ok_runs
 from epa.outputs.tables.latex import latex_escape, restyle, tex_document
 from epa.outputs.tables.results import CaseResult
 
@@ -44,9 +46,7 @@ MISSING = "-"
 
 
 def _trials(grid: list[CaseResult], alg: str, ds: str) -> list[CaseResult]:
-    return [
-        c for c in grid if c.algorithm == alg and c.dataset == ds and c.ok and c.metrics.get("rpg")
-    ]
+    return [c for c in ok_runs(grid, alg, ds) if c.metrics.get("rpg")]
 
 
 def write_tex_table(values: list[list[str]], rows: list[str], cols: list[str]) -> str:
@@ -73,14 +73,7 @@ def rmse_table(grid: list[CaseResult], median_only: bool = False):
     algs = sorted({c.algorithm for c in grid})
     datasets = sorted({c.dataset for c in grid})
     # rpg's n_trials is its --mul_trials: here the most runs any algorithm has on a dataset
-    n_trials = max(
-        (
-            sum(1 for c in grid if c.algorithm == a and c.dataset == d)
-            for a in algs
-            for d in datasets
-        ),
-        default=0,
-    )
+    n_trials = max(Counter((c.algorithm, c.dataset) for c in grid).values(), default=0)
     median_only = median_only or n_trials == 1
     values = []
     for alg in algs:
