@@ -4,6 +4,8 @@ the example grid and on rpg's 10-run EuRoC data; the statistics against hand val
 import csv
 import json
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -33,6 +35,28 @@ def test_exact_wilcoxon_matches_scipy(rng):
             stats.wilcoxon(d, method="exact").pvalue, abs=1e-12
         )
     assert statistics.min_datasets_for(0.05) == 6  # 2 / 2^6 = 0.031 is the first below 0.05
+
+
+def test_wilcoxon_beyond_the_enumeration_equals_scipy_bit_for_bit(rng):
+    """Over 16 datasets: scipy's exact null distribution up to 50 without ties, else its normal
+    approximation with the tie correction; the same floats (the comparison prints them), either tail,
+    without importing scipy.stats."""
+    for trial in range(400):
+        n = int(rng.integers(17, 80))
+        d = rng.normal((-0.8, 0.0, 0.4, 1.2)[trial % 4], 1.0, n)
+        if trial % 3 == 0:  # ties
+            d = np.round(d, 1)
+        d = d[d != 0]
+        if d.size > 16:  # up to 16 the sign assignments are enumerated (exact with ties too)
+            assert statistics.wilcoxon_exact(d) == float(stats.wilcoxon(d).pvalue), d
+    code = (
+        "import sys, numpy as np; from epa.metrics import statistics;"
+        "p = statistics.wilcoxon_exact(np.arange(1.0, 31.0) - 9.5);"
+        "print(p, 'scipy.stats' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    p = float(stats.wilcoxon(np.arange(1.0, 31.0) - 9.5).pvalue)
+    assert out.stdout.split() == [repr(p), "False"] and p < 0.05
 
 
 def test_mann_whitney_and_ranks_equal_scipy_bit_for_bit(rng):

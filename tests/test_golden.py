@@ -197,7 +197,11 @@ def test_tables_from_cases_read_in_parallel_are_the_same_bytes(example, tmp_path
     assert all(sorted(c.segments["length_runs"]) == lengths for c in kept)
     assert all(set(c.time) == {"rot_deg", "trans_m", "valid"} for c in kept)
     columns = [
-        a for c in kept for t in (c.segments, c.time, c.ape) for k, a in t.items() if k != "length_runs"
+        a
+        for c in kept
+        for t in (c.segments, c.time, c.ape)
+        for k, a in t.items()
+        if k != "length_runs"
     ]
     # an array unpickled from a worker keeps a buffer of its own bytes; never the whole table's
     assert all(a.base is None or memoryview(a.base).nbytes == a.nbytes for a in columns)
