@@ -265,16 +265,13 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
     ok = [r for r in rows if tables.has_result(r["status"])]
     algs = sorted({r["algorithm"] for r in rows})
     datasets = sorted({r["dataset"] for r in rows})
+    runs = _by_cell(ok)
 
     def cells(key):
         """Per algorithm, per dataset: the runs' finite values of a summary.csv column."""
         return [
             [
-                [
-                    _column(r, key)
-                    for r in ok
-                    if r["algorithm"] == a and r["dataset"] == d and np.isfinite(_column(r, key))
-                ]
+                [v for v in (_column(r, key) for r in runs.get((a, d), ())) if np.isfinite(v)]
                 for d in datasets
             ]
             for a in algs
@@ -304,12 +301,24 @@ def grid_bundles(summary_csv_path, consistency_dir, segments) -> dict[str, dict]
     }
 
 
+def _by_cell(rows: list[dict]) -> dict[tuple[str, str], list[dict]]:
+    """CSV rows grouped by (algorithm, dataset), in their order: scanning every row for each
+    algorithm and dataset made the grid figures quadratic (13.9 s on 10,000 cases)."""
+    out: dict[tuple[str, str], list[dict]] = {}
+    for r in rows:
+        out.setdefault((r["algorithm"], r["dataset"]), []).append(r)
+    return out
+
+
 def _drift_rate_bundle(ok: list[dict], algs: list[str], segments) -> dict:
     lines = []
+    of_alg: dict[str, list[dict]] = {}
+    for r in ok:
+        of_alg.setdefault(r["algorithm"], []).append(r)
     for k, a in enumerate(algs):
         ys = [
             _nanmean(
-                [_column(r, f"drift_rate_{segment_key(s)}m_pct") for r in ok if r["algorithm"] == a]
+                [_column(r, f"drift_rate_{segment_key(s)}m_pct") for r in of_alg.get(a, ())]
                 or [np.nan]
             )
             for s in segments
@@ -357,12 +366,12 @@ def _rmse_time_bundle(consistency_dir: Path, algs: list[str], datasets: list[str
 
 def _success_curve_bundle(curves_path: Path, algs: list[str], datasets: list[str]) -> dict:
     with open(curves_path, encoding="utf-8", newline="") as fh:
-        curves = list(csv.DictReader(fh))
+        curves = _by_cell(list(csv.DictReader(fh)))
     panels = []
     for d in datasets:
         panel_lines = []
         for k, a in enumerate(algs):
-            rows = [r for r in curves if r["algorithm"] == a and r["dataset"] == d]
+            rows = curves.get((a, d))
             if rows:
                 x = [_column(r, "factor") for r in rows]
                 y = [_column(r, "success_rate_distance_pct") for r in rows]
