@@ -408,3 +408,40 @@ def test_a_log_axis_without_positive_values_stays_linear(tmp_path, values):
     for name, bundle in (("lines", b), ("grouped", grouped)):
         written = figures.render(bundle, tmp_path / name, formats=("png",))
         assert [p.name for p in written] == [f"{name}.png"]
+
+
+def test_grid_bundles_take_each_cells_runs_in_row_order(tmp_path):
+    """The grid figures' numbers from summary.csv and success_curves.csv, by hand, with the rows of
+    algorithms and datasets interleaved (they are grouped once, in their order): a failed run left
+    out, a value that is not finite left out of its cell, an algorithm's drift rate over all its runs."""
+    from epa.outputs import report
+
+    head = (
+        "algorithm,dataset,run,status,ate_trans_rmse_m,success_rate_distance_pct,drift_rate_8m_pct"
+    )
+    rows = [
+        "b,d2,run1,ok,0.5,80,2.0",
+        "a,d1,run1,ok,0.1,100,1.0",
+        "b,d1,run1,ok,0.3,60,3.0",
+        "a,d2,run1,ok,0.2,90,",
+        "a,d1,run2,ok,0.4,50,5.0",
+        "a,d1,run3,failed: no poses,,,",
+        "b,d2,run2,ok,nan,70,4.0",
+    ]
+    (tmp_path / "summary.csv").write_text("\n".join([head, *rows]) + "\n")
+    curves = ["algorithm,dataset,runs,factor,success_rate_distance_pct"]
+    curves += ["b,d1,1,1,60", "a,d1,2,0.5,40", "b,d1,1,2,70", "a,d1,2,1,75", "a,d2,1,1,90"]
+    (tmp_path / "success_curves.csv").write_text("\n".join(curves) + "\n")
+    b = report.grid_bundles(tmp_path / "summary.csv", tmp_path / "consistency", [8])
+    ate = b["ate"]["data"]
+    assert ate["algorithms"] == ["a", "b"] and ate["datasets"] == ["d1", "d2"]
+    assert ate["values"] == [[[0.1, 0.4], [0.2]], [[0.3], [0.5]]]
+    assert b["success_rate"]["data"]["values"] == [[[75.0], [90.0]], [[60.0], [75.0]]]
+    lines = b["drift_rate"]["data"]["panels"][0]["lines"]
+    assert [(line["label"], line["y"]) for line in lines] == [("a", [3.0]), ("b", [3.0])]
+    panels = b["success_curve"]["data"]["panels"]
+    got = [[(line["label"], line["x"], line["y"]) for line in p["lines"]] for p in panels]
+    assert got == [
+        [("a", [0.5, 1.0], [40.0, 75.0]), ("b", [1.0, 2.0], [60.0, 70.0])],
+        [("a", [1.0], [90.0])],
+    ]
