@@ -91,7 +91,7 @@ def ok_runs(grid, alg, ds=None):
 
 def cases_of(grid, alg):
     """Every case of ``alg``, with a result or not, in grid order (from the same index)."""
-    return list(_index(grid).get(("every", alg), ()))
+    return list(_index(grid).get((alg, ...), ()))
 
 
 def _index(grid) -> dict:
@@ -99,7 +99,7 @@ def _index(grid) -> dict:
     if kept is None or kept[0] is not grid or kept[1] != len(grid):
         index: dict = {}
         for c in grid:
-            index.setdefault(("every", c.algorithm), []).append(c)
+            index.setdefault((c.algorithm, ...), []).append(c)  # no dataset name is ...
             if c.ok:
                 index.setdefault((c.algorithm, None), []).append(c)
                 index.setdefault((c.algorithm, c.dataset), []).append(c)
