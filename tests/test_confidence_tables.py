@@ -404,3 +404,35 @@ def test_pooled_cells_are_the_same_from_length_runs_and_from_the_length_column(r
             drift_b = cells.drift_rate_cell(by_runs, valid, length)
             assert drift_a.values == drift_b.values == (np.mean(trans / length) * 100,)
             assert drift_a.fmt(3, "ci") == drift_b.fmt(3, "ci")
+
+
+def test_a_cases_segments_are_read_as_runs_of_rows_or_by_their_lengths(tmp_path):
+    """results._pairs keeps each length's run of rows where the metrics stage wrote them so, and the
+    length column where a length comes back after another; the validity as booleans either way."""
+    from epa.artifacts.case import CaseFolder
+    from epa.outputs.tables import results
+
+    folder = CaseFolder(tmp_path)
+    for lengths, runs in (
+        ([8, 8, 16, 16, 16], {8.0: slice(0, 2), 16.0: slice(2, 5)}),
+        ([8, 16, 8, 16, 16], None),
+    ):
+        errors = np.arange(5.0)
+        folder.write_table(
+            "metrics",
+            "rpe_segments.csv",
+            {
+                "length_m": np.array(lengths, float),
+                "i": errors,
+                "j": errors,
+                "rot_deg": errors,
+                "trans_m": 2 * errors,
+            },
+        )
+        folder.write_table(
+            "drift", "rpe_segments_valid.csv", {"valid": np.array([1.0, 0, 1, 1, 0])}
+        )
+        seg = results._pairs(folder, "rpe_segments", ("length_m", "rot_deg", "trans_m"))
+        assert seg.get("length_runs") == runs and ("length_m" in seg) == (runs is None)
+        assert seg["valid"].tolist() == [True, False, True, True, False]
+        assert np.array_equal(seg["trans_m"], 2 * errors)
