@@ -258,18 +258,20 @@ def length_runs(lengths: np.ndarray) -> dict[float, slice] | None:
     return runs if len(runs) == len(edges) - 1 else None
 
 
-def _of_length(seg: dict, valid: np.ndarray, runs: dict | None, length: float) -> tuple:
-    """One segment length's pairs' translation and rotation errors and their validity: its run of
-    rows where each length has one (the metrics stage writes them so: 6 passes over a run, not over
-    every pair), else by a mask. Contiguous either way, as a mask's gather is: the same sums."""
+def of_length(seg: dict, valid: np.ndarray | None, runs: dict | None, length: float) -> tuple:
+    """One segment length's pairs' translation and rotation errors and their validity (None without
+    ``valid``): its run of rows where each length has one (``runs``, :func:`length_runs`: the metrics
+    stage writes them so, 6 passes over a run, not over every pair), else by ``seg["length_m"]``'s
+    mask. Contiguous either way, as a mask's gather is: the same sums. The drift stage and the
+    tables take a length's pairs here."""
     if runs is None:
         of = seg["length_m"] == length
-        return seg["trans_m"][of], seg["rot_deg"][of], valid[of]
+        return seg["trans_m"][of], seg["rot_deg"][of], None if valid is None else valid[of]
     at = runs.get(length, slice(0, 0))
     return (
         np.ascontiguousarray(seg["trans_m"][at]),
         np.ascontiguousarray(seg["rot_deg"][at]),
-        valid[at],
+        None if valid is None else valid[at],
     )
 
 
@@ -312,7 +314,7 @@ def valid_metrics(
     runs = length_runs(seg["length_m"])
     for length in segments:
         key = segment_key(length)
-        trans, rot, keep = _of_length(seg, sv, runs, float(length))
+        trans, rot, keep = of_length(seg, sv, runs, float(length))
         known_rpe = k.get("rpe_distance", {}).get(key)
         out["rpe_distance"][key] = _stats_pair(trans, rot, None if every else keep, known_rpe)
         valid = trans if every else trans[keep]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from epa.core import runtime
-from epa.metrics import statistics
+from epa.metrics import drift, statistics
 
 
 def num(x) -> float:
@@ -135,20 +135,16 @@ def _per_run(runs, table: str, valid: bool, length=None) -> list[tuple[np.ndarra
     out = []
     for c in runs:
         t = getattr(c, table)
-        rot, trans = t.get("rot_deg", _NONE), t.get("trans_m", _NONE)
         keep = t["valid"] > 0 if valid else None
-        if length is not None and "length_runs" in t:
-            at = t["length_runs"].get(float(length), _EMPTY)
-            rot, trans = rot[at], trans[at]
-            keep = None if keep is None else keep[at]
-        elif length is not None:
-            of = t["length_m"] == float(length)
-            keep = of if keep is None else keep & of
+        if length is None:
+            rot, trans = t.get("rot_deg", _NONE), t.get("trans_m", _NONE)
+        else:  # as the drift stage takes them
+            trans, rot, keep = drift.of_length(t, keep, t.get("length_runs"), float(length))
         out.append((rot, trans) if keep is None else (rot[keep], trans[keep]))
     return out
 
 
-_NONE, _EMPTY = np.zeros(0), slice(0, 0)
+_NONE = np.zeros(0)
 
 
 def pooled(runs, table: str, valid: bool, length=None):
