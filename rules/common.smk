@@ -16,6 +16,7 @@ from epa.workflow import (
     chain as epa_chain,
     discovery as epa_discovery,
     jobs as epa_jobs,
+    overrides as epa_overrides,
 )
 from epa.workflow import cluster as epa_cluster, settings as epa_settings
 
@@ -81,6 +82,8 @@ try:  # a mistake in the config or the folders is one line, not a traceback
         source=CONFIG_SOURCE,
     )
     TRUTH, CASES = epa_discovery.discover_config(EPA, source=CONFIG_SOURCE)
+    # the cases whose settings differ from the grid's (overrides, metric_scale: false)
+    CASE_SETTINGS = epa_overrides.for_grid(EPA, CASES, source=CONFIG_SOURCE)
 except EpaError as exc:
     raise WorkflowError(f"epa: error: {exc.one_line()}") from None
 EPA_VERSION = epa.__version__
@@ -167,15 +170,29 @@ def timing_of(c):
 
 
 def load_case(c):
-    """What the load stage needs of one case: its files and each side's source settings."""
+    """What the load stage needs of one case: its files, each side's source settings, and the
+    case's own settings where it has some (recorded in its load.json)."""
     truth_source, estimate_source = epa_discovery.sources_of(EPA, c)
-    return {
+    out = {
         "key": c.key,
         "truth": str(c.truth),
         "estimate": str(c.estimate),
         "truth_source": truth_source,
         "estimate_source": estimate_source,
     }
+    own = CASE_SETTINGS.get(c.key)
+    if own is not None:
+        out["settings_record"] = own.record()
+        out["settings"] = own.for_stage(epa_chain.sections_for("load"))
+    return out
+
+
+def stage_case(key, stage):
+    """What a later stage needs of one case: its key, and the sections of its own settings that
+    the stage reads (so an override re-runs only the batches of the cases it matches)."""
+    own = CASE_SETTINGS.get(key)
+    changed = own.for_stage(epa_chain.sections_for(stage)) if own is not None else None
+    return {"key": key, "settings": changed} if changed else {"key": key}
 
 
 def stage_params(stage):
@@ -185,7 +202,7 @@ def stage_params(stage):
     ):  # only load reads the user's files: a moved file or a source's settings re-run load onward
         cases = lambda wc: [load_case(CASE_BY_KEY[k]) for k in BATCHES[wc.batch]]
     else:
-        cases = lambda wc: [{"key": k} for k in BATCHES[wc.batch]]
+        cases = lambda wc: [stage_case(k, stage) for k in BATCHES[wc.batch]]
     return {
         "cases": cases,
         "settings": epa_chain.settings_for(stage, EPA),

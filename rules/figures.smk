@@ -27,7 +27,6 @@ rule figures:
         runtime=5,
     params:
         results=lambda wc, input: os.path.dirname(input.summary),
-        segments=EPA["metrics"]["segments"],
         version=EPA_VERSION,
     script:
         "../scripts/figures.py"

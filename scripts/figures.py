@@ -14,7 +14,21 @@ import sys
 from epa.outputs import report
 
 
-def write(results_dir, segments, log_path, workers: int = 1) -> list:
+def summary_segments(results_dir) -> list[float]:
+    """The segment lengths of summary.csv's drift-rate columns: those the tables wrote, the
+    datasets' own where they differ (overrides, ``metrics.segments: auto``)."""
+    with open(os.path.join(results_dir, "summary.csv"), encoding="utf-8") as fh:
+        header = fh.readline().strip().split(",")
+    prefix, suffix = "drift_rate_", "m_pct"
+    return [
+        float(c[len(prefix) : -len(suffix)])
+        for c in header
+        if c.startswith(prefix) and c.endswith(suffix)
+    ]
+
+
+def write(results_dir, log_path, workers: int = 1) -> list:
+    segments = summary_segments(results_dir)
     written = report.write_grid_figures(results_dir, segments, workers=workers)
     with open(log_path, "w", encoding="utf-8") as fh:
         fh.write("\n".join(map(str, written)) + "\n")
@@ -22,7 +36,7 @@ def write(results_dir, segments, log_path, workers: int = 1) -> list:
 
 
 def main(argv=None) -> int:
-    """Without Snakemake: the results folder and segment lengths from the grid's config."""
+    """Without Snakemake: the results folder from the grid's config."""
     from epa.core.errors import EpaError
     from epa.workflow import settings
 
@@ -35,9 +49,7 @@ def main(argv=None) -> int:
         print(f"epa: error: {exc.one_line()}", file=sys.stderr)
         return 2
     results = cfg["results_dir"]
-    written = write(
-        results, cfg["metrics"]["segments"], f"{results}/logs/figures.log", workers=os.cpu_count()
-    )
+    written = write(results, f"{results}/logs/figures.log", workers=os.cpu_count())
     print(f"{len(written)} files in {results}/figures")
     return 0
 
@@ -45,6 +57,6 @@ def main(argv=None) -> int:
 if __name__ == "__main__":
     if "snakemake" in globals():  # run by the figures rule
         sm = globals()["snakemake"]
-        write(sm.params.results, sm.params.segments, sm.log[0], workers=sm.threads)
+        write(sm.params.results, sm.log[0], workers=sm.threads)
     else:
         sys.exit(main())

@@ -50,7 +50,7 @@ def test_untrusted_step2_drops_the_step1_offset_and_reassociates(offset_case, tm
     assert (
         m["extrinsic_rot_deg"] is None
         and m["alignment"]["method"] == "se3"
-        and m["alignment"]["fallback_se3"]
+        and m["alignment"]["fallback"]
     )
     pairs = files.read_csv(tmp_path / "out/04_calibrate/pairs.csv")
     assert np.abs(pairs["t_ref"] - pairs["t_est"]).max() <= 0.02  # matched on raw stamps

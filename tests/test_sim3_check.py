@@ -1,7 +1,8 @@
 """Scale that hides a failure (metrics.sim3_check): with a Sim3 alignment, the scale and the ATE of an
 SE3 fit of the same poses beside the Sim3 ATE, and a warning when the scale may hide a failure, in
 metrics.json, the log, summary.csv's notes, its table and the case report. Injected scales come back,
-the SE3 ATE is the hand-derived one, and nothing changes under other alignments."""
+the SE3 ATE is the hand-derived one. Under an alignment without scale the mirror check: a Sim3 fit
+beside the case's ATE, a warning where a scale far from 1 removes most of the error."""
 
 import json
 
@@ -40,13 +41,13 @@ def _fit_rmse(src, dst, with_scale):
     return np.sqrt(np.mean(np.sum((xd - s * xs @ r.T) ** 2, 1))), s
 
 
-CFG = {"max_log_scale": 0.05, "max_ate_ratio": 10.0, "enabled": True}
+CFG = {"max_log_scale": 0.05, "max_ate_ratio": 10.0, "min_error_removed": 0.5, "enabled": True}
 
 
 def _check(ref, est, metric_scale=None, first_n=-1):
     """The record, as the metrics stage computes it after a Sim3 Step 3."""
     fit = alignment.fit(ref, est, method="sim3", first_n=first_n)
-    info = {"method": "sim3", "first_n": first_n, "fallback_se3": False, **fit.to_dict()}
+    info = {"method": "sim3", "first_n": first_n, "fallback": False, **fit.to_dict()}
     source = {} if metric_scale is None else {"metric_scale": metric_scale}
     cfg = {"metrics": {"sim3_check": CFG}, "align": {"method": "sim3"}}
     record, arrays, notes = sim3_check.compute(
@@ -121,17 +122,50 @@ def test_the_se3_fit_uses_the_same_first_poses_as_the_sim3_fit():
     assert record["ate_se3"]["trans_m"]["rmse"] == pytest.approx(want, rel=1e-9)
 
 
-def test_no_scale_to_check_when_step_3_fitted_se3():
-    """The ov_eval fallback aligns SE3 even under align.method: sim3: the record says so."""
+@pytest.mark.parametrize(
+    "scale, metric_scale, warns",
+    [(5.0, None, True), (1.02, None, False), (5.0, False, False), (1.3, True, True)],
+)
+def test_under_se3_a_sim3_fit_beside_finds_the_injected_scale(scale, metric_scale, warns):
+    """An estimate at an arbitrary scale aligned SE3 (as an undeclared monocular one is): the Sim3
+    fit beside it finds 1/scale and the hand-derived Sim3 RMSE; it warns where the scale is beyond
+    max_log_scale and the fit removes more than half the error, unless declared not metric."""
     ref = smooth_path()
-    info = {"method": "se3", "first_n": -1, "fallback_se3": True, **alignment.IDENTITY.to_dict()}
-    cfg = {"metrics": {"sim3_check": CFG}, "align": {"method": "sim3"}}
-    record, _, notes = sim3_check.compute(ref, ref, cfg, transform=info, estimate_source={})
-    assert record == {
-        "available": False,
-        "reason": "Step 3 fitted se3 (the ov_eval fallback): no scale",
+    est = _estimate(ref, scale, 0.01)
+    fit = alignment.fit(ref, est, method="se3")
+    info = {"method": "se3", "first_n": -1, "fallback": False, **fit.to_dict()}
+    aligned = fit.apply(est)
+    source = {} if metric_scale is None else {"metric_scale": metric_scale}
+    cfg = {"metrics": {"sim3_check": CFG}}
+    record, _, notes = sim3_check.compute(ref, aligned, cfg, transform=info, estimate_source=source)
+    want_rmse, want_s = _fit_rmse(aligned.p, ref.p, with_scale=True)
+    se3_rmse = np.sqrt(np.mean(np.sum((aligned.p - ref.p) ** 2, 1)))
+    assert record["fitted"] == "se3" and record["scale"] == pytest.approx(want_s, rel=1e-9)
+    assert record["scale"] == pytest.approx(1 / scale, rel=2e-3)  # the injected one, inverted
+    assert record["ate_sim3_rmse_m"] == pytest.approx(want_rmse, rel=1e-9)
+    assert record["ate_rmse_m"] == pytest.approx(se3_rmse, rel=1e-12)
+    assert record["error_removed"] == pytest.approx(1 - want_rmse / se3_rmse, rel=1e-9)
+    assert bool(notes) is warns and (record["warning"] is not None) is warns
+    if warns and metric_scale is None:
+        assert "metric_scale: false" in record["warning"]
+    assert record["evaluated_scale"] is None  # nothing fitted a scale for this evaluation
+
+
+def test_the_scale_evaluated_with_is_step_2s_times_step_3s():
+    calib = {"plan": {"apply_extrinsic": True}, "extrinsic": {"scale": 5.0, "scale_std": 0.01}}
+    got = sim3_check.estimate_scale({"method": "sim3", "scale": 1.1}, calib)
+    assert got == {
+        "value": pytest.approx(5.5),
+        "std": pytest.approx(0.011),
+        "fitted_by": "step2+step3",
     }
-    assert notes == []
+    unapplied = {"plan": {"apply_extrinsic": False}, "extrinsic": {"scale": 5.0}}
+    assert sim3_check.estimate_scale({"method": "sim3", "scale": 2.0}, unapplied) == {
+        "value": 2.0,
+        "std": None,
+        "fitted_by": "step3",
+    }
+    assert sim3_check.estimate_scale({"method": "se3"}, unapplied) is None
 
 
 @pytest.fixture(scope="module")
@@ -194,19 +228,21 @@ def test_the_warning_reaches_metrics_json_the_log_summary_the_table_and_the_repo
     )
 
 
-def test_nothing_is_added_under_other_alignments(tmp_path):
+def test_every_case_is_checked_unless_turned_off(tmp_path):
     ref = smooth_path()
     files.write_trajectory(tmp_path / "ref.txt", ref, "tum")
     files.write_trajectory(tmp_path / "est.txt", _estimate(ref, 0.5, 0.01), "tum")
     base = {"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}}
-    for extra in ({}, {"metrics": {"sim3_check": {"enabled": False}}, "align": {"method": "sim3"}}):
-        cfg = settings.resolve({**base, "calibrate": {"enabled": False}, **extra})
-        m = chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "o", cfg)
-        assert "sim3_check" not in m["metrics"]
-        assert "sim3_check" not in tables.table_names(cfg)
-    assert "sim3_check" in tables.table_names(
-        settings.resolve({**base, "align": {"method": "sim3"}})
-    )
+    off = {"metrics": {"sim3_check": {"enabled": False}}, "align": {"method": "sim3"}}
+    cfg = settings.resolve({**base, "calibrate": {"enabled": False}, **off})
+    m = chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "o", cfg)
+    assert "sim3_check" not in m["metrics"] and "sim3_check" not in tables.table_names(cfg)
+    cfg = settings.resolve({**base, "calibrate": {"enabled": False}})
+    m = chain.run_case(tmp_path / "ref.txt", tmp_path / "est.txt", tmp_path / "o", cfg)
+    check = m["metrics"]["sim3_check"]
+    assert check["fitted"] == "se3" and check["scale"] == pytest.approx(2.0, rel=1e-2)
+    assert "metric_scale: false" in check["warning"]
+    assert "sim3_check" in tables.table_names(cfg)
 
 
 @pytest.mark.parametrize(

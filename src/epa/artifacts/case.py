@@ -46,6 +46,8 @@ class Case:
     estimate: Path | None = None
     truth_source: dict | None = None
     estimate_source: dict | None = None
+    # the case's own settings beside the grid's (epa.workflow.overrides.CaseSettings.record)
+    settings_record: dict | None = None
 
     @property
     def key(self) -> str:

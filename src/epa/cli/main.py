@@ -71,6 +71,20 @@ def _add_eval(sub) -> None:
         "--config", help="YAML with stage settings (the workflow's keys: sync, align, ...)"
     )
     e.add_argument(
+        "--algorithm",
+        help="the estimate's algorithm: the config's overrides.algorithms and"
+        f" sources.algorithms of that name apply (default {EVAL_ALGORITHM!r})",
+    )
+    e.add_argument(
+        "--dataset", help="the reference's dataset: the config's overrides.datasets apply"
+    )
+    e.add_argument(
+        "--metric-scale",
+        choices=["true", "false"],
+        help="false: the estimate's scale is arbitrary (monocular): Step 2 solves the scale and"
+        " Step 3 fits Sim3 (sources.algorithms.<algorithm>.metric_scale)",
+    )
+    e.add_argument(
         "--mode",
         choices=["epa", "ov_eval", "rpg"],
         help="ov_eval: no Step 1/2, one-to-one 0.02 s; rpg: rpg_trajectory_evaluation's association,"
@@ -471,10 +485,14 @@ def _add_simulate(sub) -> None:
     s.add_argument("--seed", type=int, default=7)
 
 
-def _eval_config(args) -> dict:
+def _eval_config(args):
+    """The case's settings (the config's, the options over them, then what the config's overrides
+    and metric_scale give this algorithm and dataset) and what they changed (CaseSettings)."""
+    from epa.workflow import overrides as cells
     from epa.workflow import settings
 
     cfg: dict = {"truth_dir": ".", "algorithms_dir": "."}
+    algorithm = args.algorithm or EVAL_ALGORITHM
     if args.config:
         cfg.update(settings.load_yaml(args.config))
     overrides: dict[tuple[str, ...], object] = {
@@ -501,10 +519,13 @@ def _eval_config(args) -> dict:
         ("report", "figures"): "all" if args.report else None,  # one case, asked for: every figure
         ("sources", "reference", "topic"): args.ref_topic,
         ("sources", "reference", "frames"): args.ref_frames,
-        ("sources", "algorithms", EVAL_ALGORITHM, "topic"): args.est_topic,
-        ("sources", "algorithms", EVAL_ALGORITHM, "frames"): args.est_frames,
-        ("sources", "algorithms", EVAL_ALGORITHM, "timing"): args.timing
+        ("sources", "algorithms", algorithm, "topic"): args.est_topic,
+        ("sources", "algorithms", algorithm, "frames"): args.est_frames,
+        ("sources", "algorithms", algorithm, "timing"): args.timing
         and str(Path(args.timing).resolve()),
+        ("sources", "algorithms", algorithm, "metric_scale"): (
+            None if args.metric_scale is None else args.metric_scale == "true"
+        ),
     }
     given = (
         (cfg.get("report") or {}).get("per_case") if isinstance(cfg.get("report"), dict) else None
@@ -521,7 +542,12 @@ def _eval_config(args) -> dict:
         for k in keys[:-1]:
             node = node.setdefault(k, {})
         node[keys[-1]] = value
-    return settings.resolve(cfg, source=args.config or "command line")
+    source = args.config or "command line"
+    resolved = settings.resolve(cfg, source=source)
+    case_cfg, own = cells.one_case(resolved, algorithm, args.dataset or "", source=source)
+    for where in own.applied:
+        logging.getLogger("epa").info("settings of this case: %s", where)
+    return case_cfg, own
 
 
 LARGE_INPUT_MB = 20  # about 200,000 TUM poses, some seconds of work: worth showing progress
@@ -582,7 +608,8 @@ def _eval(args) -> None:
     from epa.workflow import chain
 
     runtime.one_case_alone()  # a second core for its stages, freed memory kept for reuse
-    cfg = _eval_config(args)
+    cfg, own = _eval_config(args)
+    algorithm = args.algorithm or EVAL_ALGORITHM
     out = CaseFolder(args.out)
     chain.clear_arrays(out)
     document = Path(args.out) / "metrics.json"  # every stage's record in one document
@@ -619,7 +646,8 @@ def _eval(args) -> None:
             write_arrays=args.artifacts or args.report or args.rerun,
             on_stage=on_stage,
             ref_source=readers.options(cfg, "reference"),
-            est_source=readers.options(cfg, "estimate", algorithm=EVAL_ALGORITHM),
+            est_source=readers.options(cfg, "estimate", algorithm=algorithm),
+            settings_record=own.record() if own.applied else None,
         )
     finally:  # also for a case that fails: what it was run on
         write_provenance()
@@ -695,8 +723,11 @@ def _eval_provenance(args, cfg) -> Callable[[], None]:
     the returned function is first called."""
     from epa.outputs import provenance
 
-    timing = provenance.run_timing(cfg, args.est, EVAL_ALGORITHM)
-    case = {"reference": args.ref, "estimate": args.est, "algorithm": EVAL_ALGORITHM}
+    algorithm = args.algorithm or EVAL_ALGORITHM
+    timing = provenance.run_timing(cfg, args.est, algorithm)
+    case = {"reference": args.ref, "estimate": args.est, "algorithm": algorithm}
+    if args.dataset:
+        case["dataset"] = args.dataset
     finish = provenance.document_started(
         "case",
         cfg,

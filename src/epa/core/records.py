@@ -149,6 +149,7 @@ class PlanRecord(TypedDict):
     offset_s: float
     apply_extrinsic: bool
     reason: str
+    dropped: NotRequired[list[str]]  # a fallback: what it left out of the configured evaluation
 
 
 class CalibrateRecord(TypedDict):
@@ -178,7 +179,7 @@ class TransformRecord(SimilarityRecord):
 
     method: str
     first_n: int
-    fallback_se3: bool
+    fallback: bool  # Steps 1-2 dropped (untrusted): the configured alignment all the same
 
 
 class MetricsRecord(TypedDict):

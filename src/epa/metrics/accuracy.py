@@ -201,6 +201,37 @@ def _pairs_at_angle(q: np.ndarray, angle: float, tol: float, block: int = 256):
 
 
 # ----------------------------------------------------------------------------- errors
+def segment_lengths(spec, path_length_m: float) -> list[float]:
+    """The distance-RPE segment lengths (m) of ``metrics.segments`` for a reference path of
+    ``path_length_m`` (the whole cropped reference's, as rpg takes its groundtruth's): a list as
+    given; ``auto``, rpg_trajectory_evaluation's 10-50 % of it (truncated to 2 decimals, as rpg
+    does); ``kitti``, the devkit's 100-800 m.
+
+    Parameters
+    ----------
+    spec : list of float or {"auto", "kitti"}
+    path_length_m : float
+
+    Returns
+    -------
+    list of float
+    """
+    if spec == "auto":
+        from epa.metrics import rpg
+
+        return [float(d) for d in rpg.boxplot_distances(path_length_m)]
+    if spec == "kitti":
+        from epa.metrics import kitti
+
+        return list(kitti.LENGTHS_M)
+    return [float(length) for length in spec]
+
+
+def recorded_lengths(record: dict) -> list[float]:
+    """The segment lengths (m) a metrics record was computed with, in order."""
+    return [float(key) for key in record["rpe_distance"]]
+
+
 def segment_key(length) -> str:
     """The one spelling of a segment length in keys, columns and labels: 8, 16, 0.5."""
     return f"{float(length):g}"

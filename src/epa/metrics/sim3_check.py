@@ -3,8 +3,7 @@ SE3 fit of the same matched poses, and a warning when the scale may hide what th
 
 A Sim3 fit absorbs any error that looks like a scale: a run that drifted or collapsed can read a few
 centimetres under Sim3 and a metre under SE3 (a published case: 122 cm against 1.6 cm). Active when
-``align.method`` is ``sim3`` (``metrics.sim3_check.enabled``, on by default); nothing is added
-otherwise. Two checks:
+``align.method`` is ``sim3``. Two checks there:
 
 - **scale**, for an algorithm declared metric (``sources.algorithms.<alg>.metric_scale: true``:
   stereo, VIO, LiDAR): ``|ln s| > metrics.sim3_check.max_log_scale`` (0.05, about 5 %);
@@ -15,6 +14,12 @@ otherwise. Two checks:
 The SE3 fit is of the estimate at its own scale, the aligned one divided by s (a rigid motion of
 the calibrated estimate, so its SE3 fit and ATE are that estimate's), on the same first N matched
 poses as the Sim3 fit (``align.first_n``). One Umeyama fit and one ATE: linear in the poses.
+
+Under an alignment without scale (se3, posyaw, none) the check is the mirror: a Sim3 fit of the
+aligned estimate beside its ATE. A scale beyond ``max_log_scale`` whose fit removes more than
+``min_error_removed`` of the ATE RMSE is a warning (unless the algorithm is declared not metric): an
+undeclared monocular estimate, whose SE3 numbers mean nothing. One Umeyama fit, positions only.
+Every case is checked (``metrics.sim3_check.enabled``, on by default).
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ from epa.steps import align as alignment
 
 
 def enabled(cfg: dict) -> bool:
-    return bool(cfg["metrics"]["sim3_check"]["enabled"]) and cfg["align"]["method"] == "sim3"
+    return bool(cfg["metrics"]["sim3_check"]["enabled"])
 
 
 def se3_beside(ref: Trajectory, est: Trajectory, scale: float, first_n: int) -> tuple:
@@ -85,27 +90,114 @@ def findings(
     return out
 
 
+def sim3_beside(ref: Trajectory, est: Trajectory, first_n: int) -> tuple[float, float]:
+    """The scale and ATE RMSE (m) of a Sim3 fit of matched positions aligned without scale.
+
+    Parameters
+    ----------
+    ref, est : Trajectory
+        Matched pose for pose, ``est`` as Step 3 aligned it (se3, posyaw or none).
+    first_n : int
+        The poses Step 3 fitted on (``align.first_n``, -1: all); the Sim3 fit uses the same.
+
+    Returns
+    -------
+    scale, rmse : float
+        The fitted scale s (est -> ref) and the position RMSE after the fit.
+    """
+    n = len(ref) if first_n < 0 else min(first_n, len(ref))
+    fit = alignment.umeyama(est.p[:n], ref.p[:n], with_scale=True)
+    moved = fit.s * (est.p @ fit.R.T) + fit.t
+    return float(fit.s), float(np.sqrt(np.mean(np.sum(np.square(moved - ref.p), axis=1))))
+
+
+def unscaled_findings(
+    scale: float, fitted_rmse: float, sim3_rmse: float, metric_scale: bool | None, c: dict
+) -> list[str]:
+    """The warning of a case aligned without scale whose Sim3 fit finds one far from 1 that removes
+    most of its error (empty: none): the recipe does not fit the estimate."""
+    if metric_scale is False or not fitted_rmse > 0:
+        return []
+    removed = 1.0 - sim3_rmse / fitted_rmse
+    if abs(math.log(scale)) <= c["max_log_scale"] or removed <= c["min_error_removed"]:
+        return []
+    what = (
+        "for an algorithm declared metric (metric_scale: true): its scale is wrong"
+        if metric_scale
+        else "if its scale is arbitrary (monocular), declare"
+        " sources.algorithms.<algorithm>.metric_scale: false to evaluate it with Sim3"
+    )
+    return [
+        f"a Sim3 fit finds scale {scale:.4g} (|ln s| = {abs(math.log(scale)):.3g} >"
+        f" {c['max_log_scale']:g}) and removes {100 * removed:.0f} % of the ATE"
+        f" ({fitted_rmse:.4g} m -> {sim3_rmse:.4g} m): {what}"
+    ]
+
+
+def estimate_scale(transform: dict, calibrate_record: dict | None) -> dict | None:
+    """The scale a case was evaluated with (reference metres per estimate unit), where anything
+    fitted one: Step 2's (applied by the plan) times Step 3's Sim3 scale, with Step 2's standard
+    deviation carried through Step 3's factor (Step 3's own has none). None: no scale fitted."""
+    plan = (calibrate_record or {}).get("plan") or {}
+    ext = (calibrate_record or {}).get("extrinsic") or {}
+    step2 = ext.get("scale") if plan.get("apply_extrinsic") else None
+    step3 = transform.get("scale") if transform.get("method") == "sim3" else None
+    if step2 is None and step3 is None:
+        return None
+    s3 = 1.0 if step3 is None else float(step3)
+    std = ext.get("scale_std") if step2 is not None else None
+    return {
+        "value": (1.0 if step2 is None else float(step2)) * s3,
+        "std": None if std is None else float(std) * s3,
+        "fitted_by": "+".join(
+            name for name, v in (("step2", step2), ("step3", step3)) if v is not None
+        ),
+    }
+
+
 def compute(
-    ref: Trajectory, est: Trajectory, cfg: dict, *, transform: dict, estimate_source: dict
+    ref: Trajectory,
+    est: Trajectory,
+    cfg: dict,
+    *,
+    transform: dict,
+    estimate_source: dict,
+    calibrate_record: dict | None = None,
 ) -> tuple[dict, dict, list[str]]:
     c = cfg["metrics"]["sim3_check"]
     fitted = transform
-    if fitted.get("method") != "sim3":  # the ov_eval fallback aligns SE3
-        why = " (the ov_eval fallback)" if fitted.get("fallback_se3") else ""
+    declared = estimate_source.get("metric_scale")
+    if fitted.get("method") != "sim3":  # the recipe fitted no scale: does the estimate need one?
+        fitted_rmse = float(np.sqrt(np.mean(np.sum(np.square(est.p - ref.p), axis=1))))
+        scale, sim3_rmse = sim3_beside(ref, est, fitted["first_n"])
+        warnings = unscaled_findings(scale, fitted_rmse, sim3_rmse, declared, c)
         record = {
-            "available": False,
-            "reason": f"Step 3 fitted {fitted.get('method')}{why}: no scale",
+            "available": True,
+            "fitted": fitted.get("method"),
+            "evaluated_scale": estimate_scale(fitted, calibrate_record),
+            "scale": scale,
+            "log_scale": math.log(scale),
+            "metric_scale": declared,
+            "ate_rmse_m": fitted_rmse,
+            "ate_sim3_rmse_m": sim3_rmse,
+            "error_removed": 1.0 - sim3_rmse / fitted_rmse if fitted_rmse > 0 else None,
+            "thresholds": {
+                "max_log_scale": c["max_log_scale"],
+                "min_error_removed": c["min_error_removed"],
+            },
+            "warning": "; ".join(warnings) or None,
         }
-        return record, {}, []
+        return record, {}, warnings
     scale = float(fitted["scale"])
     trans, rot = se3_beside(ref, est, scale, fitted["first_n"])
     se3 = {"trans_m": stats(trans), "rot_deg": stats(rot)}
     sim3_rmse = float(np.sqrt(np.mean(np.sum(np.square(est.p - ref.p), axis=1))))  # the ATE's
     se3_rmse = se3["trans_m"]["rmse"]
-    declared = estimate_source.get("metric_scale")
     warnings = findings(scale, se3_rmse, sim3_rmse, declared, c)
     record = {
         "available": True,
+        "fitted": "sim3",
+        "evaluated_scale": estimate_scale(fitted, calibrate_record),
         "scale": scale,
         "log_scale": math.log(scale),
         "metric_scale": declared,
@@ -123,8 +215,11 @@ def _has(record: dict) -> bool:
 
 
 def per_run(record: dict) -> tuple[float, float]:
-    """One run's Sim3 scale and SE3 ATE RMSE (m)."""
-    return record["scale"], record["ate_se3"]["trans_m"]["rmse"]
+    """One run's Sim3 scale and SE3 ATE RMSE (m): under Sim3 the SE3 fit's beside it, else the
+    case's own ATE (its alignment has no scale)."""
+    if "ate_se3" in record:
+        return record["scale"], record["ate_se3"]["trans_m"]["rmse"]
+    return record["scale"], record["ate_rmse_m"]
 
 
 def note(records: list[dict]) -> str | None:
@@ -134,7 +229,13 @@ def note(records: list[dict]) -> str | None:
 
 
 def summary(record: dict) -> dict:
-    return {}
+    """summary.csv: the alignment Step 3 fitted and the scale the case was evaluated with."""
+    scale = record.get("evaluated_scale") or {}
+    return {
+        "alignment": record.get("fitted"),
+        "scale": scale.get("value"),
+        "scale_std": scale.get("std"),
+    }
 
 
 _TABLES = (
@@ -150,13 +251,15 @@ _TABLES = (
 
 
 METRIC = Metric(
-    key="sim3_check",  # metrics.sim3_check; only with align.method: sim3
+    key="sim3_check",  # metrics.sim3_check; every case
     stage="metrics",
     enabled=enabled,
     summary=summary,  # summary.csv: its warning in the notes column
-    settings=("metrics.sim3_check", "align.method"),
+    settings=("metrics.sim3_check",),
     compute=compute,
     after="ate",  # beside the (Sim3) ATE in metrics.json
-    inputs=("transform", "estimate_source"),  # Step 3's scale; the metric_scale declaration
+    # Step 3's scale; the metric_scale declaration; Step 2's scale
+    inputs=("transform", "estimate_source", "calibrate_record"),
+    summary_columns=("alignment", "scale", "scale_std"),
     tables=_TABLES,
 )

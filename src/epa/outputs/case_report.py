@@ -49,8 +49,10 @@ TEXT: dict[str, dict[str, Any]] = {
         "s2_not": "not applied (status `{status}`: {meaning}; {reason}).",
         "s2_found": "found {rot:.3f} deg and {trans:.4f} m but ",
         "s3": "`{method}` fit of the estimate onto the reference: yaw {yaw:.3f} deg, scale {scale:.6f}.",
-        "fallback": "The case is evaluated the ov_eval way (no extrinsic, SE3 alignment).",
+        "fallback": "The case is evaluated the ov_eval way, with the configured alignment; dropped: {dropped}.",
         "s3_se3": "An SE3 fit of the same matched poses gives an ATE RMSE of {se3} m against {sim3} m under Sim3 (ratio {ratio}).",
+        "s3_sim3": "A Sim3 fit beside it (the scale check) finds scale {scale} and an ATE RMSE of {sim3} m against {ate} m ({removed} % of it removed).",
+        "scale_used": "The estimate is evaluated at scale {value}{std} (fitted by {by}).",
         "warning": "Warning",
         "meaning": {
             "trusted": "every check passed",
@@ -123,8 +125,10 @@ TEXT: dict[str, dict[str, Any]] = {
         "s2_not": "未使用（状态 `{status}`：{meaning}；{reason}）。",
         "s2_found": "求得 {rot:.3f} deg 与 {trans:.4f} m，但",
         "s3": "估计轨迹到参考轨迹的 `{method}` 拟合：航向 {yaw:.3f} deg，尺度 {scale:.6f}。",
-        "fallback": "本例按 ov_eval 方式评估（无外参，SE3 对齐）。",
+        "fallback": "本例按 ov_eval 方式评估，对齐方式按配置不变；未使用：{dropped}。",
         "s3_se3": "对同一组匹配位姿做 SE3 拟合，ATE RMSE 为 {se3} m，Sim3 下为 {sim3} m（比值 {ratio}）。",
+        "s3_sim3": "另做 Sim3 拟合（尺度检查）：尺度 {scale}，ATE RMSE 为 {sim3} m，原为 {ate} m（消除 {removed} %）。",
+        "scale_used": "估计轨迹按尺度 {value}{std} 评估（由 {by} 拟合）。",
         "warning": "警告",
         "meaning": {
             "trusted": "全部检查通过",
@@ -230,8 +234,10 @@ def metrics_table(m: dict, T: dict) -> list[str]:
 
 
 def metric_warnings(doc: dict) -> list[str]:
-    """The registered metrics' warnings of a case (their records' ``warning``), in registry order."""
-    out = []
+    """The warnings of a case: drift detection's (its thresholds do not fit the dataset), then the
+    registered metrics' (their records' ``warning``), in registry order."""
+    drift = doc.get("drift")
+    out = [f"drift: {drift['warning']}"] if isinstance(drift, dict) and drift.get("warning") else []
     for metric in registry.REGISTRY:
         metrics = doc.get("metrics", {})
         record = metrics.get(metric.key) if metric.stage == "metrics" else doc.get(metric.stage)
@@ -304,12 +310,30 @@ def steps_lines(m: dict, T: dict) -> list[str]:
         scale=_num(align.get("scale")),
     )
     check = m.get("sim3_check") or {}
-    if check.get("available"):
+    if check.get("available") and "ate_se3" in check:
         ratio = check.get("ate_ratio")
         three += " " + T["s3_se3"].format(
             se3=_f(check["ate_se3"]["trans_m"]["rmse"]),
             sim3=_f((m.get("ate") or {}).get("trans_m", {}).get("rmse")),
             ratio="–" if ratio is None else f"{_num(ratio):.3g}",
+        )
+    elif check.get("available"):
+        removed = check.get("error_removed")
+        three += " " + T["s3_sim3"].format(
+            scale=f"{_num(check['scale']):.4g}",
+            sim3=_f(check["ate_sim3_rmse_m"]),
+            ate=_f(check["ate_rmse_m"]),
+            removed="–" if removed is None else f"{100 * _num(removed):.0f}",
+        )
+    used = check.get("evaluated_scale")
+    if used:
+        std = used.get("std")
+        three += " " + T["scale_used"].format(
+            value=f"{_num(used['value']):.6g}",
+            std="" if std is None else f" ± {_num(std):.2g}",
+            by=" + ".join(
+                {"step2": "Step 2", "step3": "Step 3"}[k] for k in used["fitted_by"].split("+")
+            ),
         )
     lines = [
         f"- **{T['step1']}**: {one}",
@@ -317,7 +341,7 @@ def steps_lines(m: dict, T: dict) -> list[str]:
         f"- **{T['step3']}**: {three}",
     ]
     if plan.get("fallback"):
-        lines.append(f"- {T['fallback']}")
+        lines.append(f"- {T['fallback'].format(dropped='; '.join(plan.get('dropped') or []) or '-')}")
     return lines
 
 

@@ -183,12 +183,16 @@ def run_case_data(
     ref_source: dict | None = None,
     est_source: dict | None = None,
     keep: tuple[str, ...] = (),
+    settings_record: dict | None = None,
 ) -> case_module.CaseData:
     """:func:`run_case`, returning the whole :class:`CaseData`; besides each stage's ``result`` the
     values named in ``keep`` stay in memory (what the Python API, :func:`epa.evaluate`, hands on:
-    every record and the per-pose errors, which are not on disk without ``write_arrays``)."""
+    every record and the per-pose errors, which are not on disk without ``write_arrays``).
+    ``settings_record``: what the case's own settings changed (load.json ``settings``)."""
     chain = declared()
-    case = Case("", "", "", Path(ref_path), Path(est_path), ref_source, est_source)
+    case = Case(
+        "", "", "", Path(ref_path), Path(est_path), ref_source, est_source, settings_record
+    )
     data = chain.data_class(CaseFolder(out_dir, case))
     kept = {st.result for st in chain.stages} | set(keep)
     for st in chain.stages:

@@ -31,7 +31,7 @@ from epa.artifacts import files
 from epa.artifacts.case import Case, CaseFolder
 from epa.core import runtime
 from epa.core.errors import EpaError
-from epa.workflow import chain
+from epa.workflow import chain, overrides
 
 log = logging.getLogger("epa")
 
@@ -132,14 +132,15 @@ def case_log(path):
 def run_cases(
     stage: str, cases: list[dict], results_dir, cfg: dict, upstream: dict[str, str]
 ) -> dict[str, dict]:
-    """Run ``stage`` on each case ({key, truth, estimate, truth_source, estimate_source}); never
-    raises for a case's failure. ``upstream``: key -> reason for cases whose previous stage failed.
+    """Run ``stage`` on each case ({key, truth, estimate, truth_source, estimate_source}, and where
+    the case has settings of its own: ``settings``, the sections of ``cfg`` it replaces, and for
+    the load stage ``settings_record``, what it records of them); never raises for a case's failure. ``upstream``: key -> reason for cases whose previous stage failed.
     Returns key -> status."""
     status: dict[str, dict] = {}
     artifacts = chain.BY_NAME[stage].artifacts
     for c in cases:
         key = c["key"]
-        inputs = ("truth", "estimate", "truth_source", "estimate_source")
+        inputs = ("truth", "estimate", "truth_source", "estimate_source", "settings_record")
         try:
             case = CaseFolder.of(results_dir, Case.from_key(key, **{k: c.get(k) for k in inputs}))
         except EpaError as exc:  # a name that is no plain name: this case fails, nothing is written
@@ -156,7 +157,8 @@ def run_cases(
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("always")  # every case logs its own warnings
-                        chain.run_stage(stage, chain.CaseData(case), cfg)
+                        case_cfg = overrides.case_config(cfg, c.get("settings"))
+                        chain.run_stage(stage, chain.CaseData(case), case_cfg)
                 except EpaError as exc:
                     reason = f"{stage}: {exc.one_line()}"
                     log.error("case failed: %s", reason)

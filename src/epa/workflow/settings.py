@@ -140,14 +140,9 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
             )
         raise EpaError(f"{key}: {what}", path=source)
     cfg = apply_mode(_fill(cfg, schema()), given=config or {})
-    for problem in (check_inputs(cfg), check_first_n(cfg)):
+    for problem in (check_inputs(cfg), check_first_n(cfg), check_crop(cfg)):
         if problem:
             raise EpaError(problem, path=source)
-    crop = cfg["crop"]
-    if crop["start"] is not None and crop["end"] is not None and crop["end"] <= crop["start"]:
-        raise EpaError(
-            f"crop.end ({crop['end']}) must be after crop.start ({crop['start']})", path=source
-        )
     sources = cfg["sources"]
     for key, src in [("reference", sources.get("reference") or {})] + [
         (f"datasets.{name}", src or {}) for name, src in (sources.get("datasets") or {}).items()
@@ -185,7 +180,7 @@ def _schema_at(keys: list) -> dict:
     sch = root
     for k in keys:
         if "$ref" in sch:
-            sch = root["$defs"][sch["$ref"].rsplit("/", 1)[-1]]
+            sch = _pointer(root, sch["$ref"])
         if isinstance(k, int) or (isinstance(k, str) and k.isdigit() and "items" in sch):
             sch = sch.get("items", {})
         elif k in sch.get("properties", {}):
@@ -195,8 +190,16 @@ def _schema_at(keys: list) -> dict:
         else:
             return {}
     if "$ref" in sch:
-        sch = root["$defs"][sch["$ref"].rsplit("/", 1)[-1]]
+        sch = _pointer(root, sch["$ref"])
     return sch
+
+
+def _pointer(root: dict, ref: str) -> dict:
+    """The schema a local ``$ref`` (``#/$defs/source``, ``#/properties/sync``) points at."""
+    node = root
+    for part in ref.removeprefix("#/").split("/"):
+        node = node[part]
+    return node
 
 
 YAML_TRUE = ("true", "yes", "on")
@@ -316,6 +319,14 @@ def check_first_n(cfg: dict) -> str | None:
         )
     if n == 1 and method == "sim3":
         return "align.first_n: 1 is not allowed with align.method sim3: rpg's sim3 needs 2 or more"
+    return None
+
+
+def check_crop(cfg: dict) -> str | None:
+    """What is wrong with the crop window (None: nothing)."""
+    crop = cfg["crop"]
+    if crop["start"] is not None and crop["end"] is not None and crop["end"] <= crop["start"]:
+        return f"crop.end ({crop['end']}) must be after crop.start ({crop['start']})"
     return None
 
 

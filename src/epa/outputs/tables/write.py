@@ -55,7 +55,7 @@ def write_all(
 ) -> None:
     """error_comparison.txt, summary.csv and tables/<name>.tex under ``results_dir``."""
     results_dir = Path(results_dir)
-    segments = cfg["metrics"]["segments"]
+    segments = grid_segments(grid, cfg["metrics"]["segments"])
     decimals = cfg["tables"]["decimals"]
     spread = cfg["tables"]["spread"]
     style = cfg["tables"]["style"]
@@ -87,6 +87,27 @@ def write_all(
     write_across_runs(grid, results_dir)
     if cfg.get("mode") == "rpg":
         rpg_tables.write_rpg_tables(grid, results_dir, cfg, files.write_text)
+
+
+def segments_by_dataset(grid: list[CaseResult]) -> dict[str, list[float]]:
+    """Each dataset's distance-RPE segment lengths, as its cases were evaluated (the first case with
+    a result of each dataset; its settings may be its own: overrides, ``segments: auto``)."""
+    out: dict[str, list[float]] = {}
+    for c in grid:
+        if c.ok and c.dataset not in out and c.metrics.get("rpe_distance") is not None:
+            out[c.dataset] = accuracy.recorded_lengths(c.metrics)
+    return out
+
+
+def grid_segments(grid: list[CaseResult], configured) -> list[float]:
+    """The segment lengths of the tables' columns: the datasets' one list where they share it,
+    else every length of any dataset in ascending order (a cell pools the datasets that have it)."""
+    lists = {tuple(v) for v in segments_by_dataset(grid).values()}
+    if len(lists) == 1:
+        return list(lists.pop())
+    if not lists:
+        return [] if isinstance(configured, str) else list(configured)
+    return sorted({length for lengths in lists for length in lengths})
 
 
 def make(

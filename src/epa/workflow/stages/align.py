@@ -28,7 +28,7 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, calib_info: dict):
     return aligned, {
         "method": method,
         "first_n": first_n,
-        "fallback_se3": plan["fallback"],
+        "fallback": plan["fallback"],
         **fit.to_dict(),
     }
 

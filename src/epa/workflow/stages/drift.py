@@ -3,12 +3,17 @@ the metrics stage's per-pose and per-pair errors (07_drift/)."""
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from epa.artifacts.case import CaseData, Columns, Record
 from epa.artifacts.stage import Stage, Value
 from epa.metrics import drift
+from epa.metrics import accuracy
 from epa.metrics.accuracy import null_rotation
+
+log = logging.getLogger("epa")
 
 NAME = "drift"
 
@@ -33,7 +38,9 @@ def compute(tables: dict, cfg: dict, metrics_record: dict | None = None):
         ape["rot_deg"],
         seg,
         tp,
-        cfg["metrics"]["segments"],
+        accuracy.recorded_lengths(metrics_record)
+        if metrics_record is not None and isinstance(cfg["metrics"]["segments"], str)
+        else cfg["metrics"]["segments"],
         time_delta=cfg["metrics"]["time_delta"],
         known=metrics_record,
     )
@@ -77,6 +84,10 @@ def compute(tables: dict, cfg: dict, metrics_record: dict | None = None):
         summary["drift_valid"] = null_rotation(valid)
     if notes:  # why a drift-valid quantity is empty (None); absent when none is
         summary["notes"] = notes
+    misfit = thresholds_misfit(summary, metrics_record, cfg["drift"])
+    if misfit:
+        summary["warning"] = misfit
+        log.warning("%s", misfit)
     artifacts = {
         "fail_segments": fs,
         "pose_valid": {"t": ape["t"], "valid": ~det["invalid"]},
@@ -85,6 +96,27 @@ def compute(tables: dict, cfg: dict, metrics_record: dict | None = None):
         "rpe_time_valid": {"valid": time_valid},
     }
     return summary, artifacts
+
+
+def thresholds_misfit(summary: dict, metrics_record: dict | None, c: dict) -> str | None:
+    """A success rate of 100 % beside an ATE of several percent of the path: the thresholds do not
+    fit the dataset's scale (an indoor sequence under metre thresholds, an arbitrary scale), so
+    the success rate says nothing. None where it fits."""
+    if not metrics_record or summary["success_rate_distance_pct"] != 100.0:
+        return None
+    rmse, length = metrics_record["ate"]["trans_m"]["rmse"], metrics_record["ref_length_m"]
+    if rmse is None or not length or 100.0 * rmse / length <= c["max_ate_path_pct"]:
+        return None
+    fix = (
+        "set drift.mode: scale_aware, or the thresholds under overrides.datasets"
+        if c["mode"] == "fixed"
+        else "set tighter thresholds (drift.scale_rpe_factor, drift.scale_jump_factor)"
+    )
+    return (
+        f"success rate 100 % beside an ATE RMSE of {rmse:.4g} m, {100.0 * rmse / length:.3g} % of"
+        f" the {length:.4g} m path (> drift.max_ate_path_pct {c['max_ate_path_pct']:g}): the drift"
+        f" thresholds do not fit this dataset's scale; {fix}"
+    )
 
 
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:

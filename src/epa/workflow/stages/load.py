@@ -143,6 +143,8 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     finally:  # an error before the estimate's table was taken: its thread ends here, not later
         if est_table is not None:
             est_table.join()
+    if case.settings_record:  # what this case ran with beside the grid's settings
+        info["settings"] = case.settings_record
     data.loaded, data.load_record, data.timing = (ref, est), info, timing
     if write_arrays:
         # the efficiency stage reads the run's timing from here, never from the user's folder

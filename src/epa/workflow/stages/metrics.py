@@ -55,6 +55,12 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, inputs: dict | None = N
             f"the reference does not move ({length:.3g} m over the matched poses): distance RPE,"
             " drift rate and success rate are undefined"
         )
+    if isinstance(c["segments"], str):  # auto, kitti: this case's lengths, for every metric here
+        # auto: of the whole (cropped) reference's path, as rpg takes its groundtruth's
+        whole = (inputs or {}).get("reference")
+        whole_length = geometry.path_distances(whole().p)[-1] if whole is not None else length
+        c = {**c, "segments": accuracy.segment_lengths(c["segments"], float(whole_length))}
+        cfg = {**cfg, "metrics": c}
     which = position_only(ref, est)  # a side without orientation: every rotation error null
     # D = Q P^T and the positions as rows, once: every relative error and ATE 2D's yaw
     rows = None if which else geometry.pair_rows(None, ref.p, est.p, q=(ref.q, est.q))
@@ -196,6 +202,7 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         "estimate": lambda: data.cropped[1],
         "image_stamps": lambda: image_stamps(cfg, data.folder.case),
         "printed_quaternions": lambda: printed_quaternions(data),
+        "calibrate_record": lambda: data.calibrate_record,
     }
     summary, tables = compute(data.matched[0], data.aligned, cfg, inputs)
     record = case_record(
