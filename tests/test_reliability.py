@@ -43,12 +43,16 @@ SIGNED = {
 def _numeric_keys(sch: dict, root: dict, prefix: str = ""):
     """(dotted key, schema) of every number in the schema ("*" for a free name, "0" for an item)."""
     if "$ref" in sch:
-        sch = root["$defs"][sch["$ref"].rsplit("/", 1)[-1]]
+        sch = settings._pointer(root, sch["$ref"])
+    for branch in sch.get("anyOf", ()):  # a list or a word (metrics.segments)
+        yield from _numeric_keys(branch, root, prefix)
     types = sch.get("type")
     types = types if isinstance(types, list) else [types]
     if "number" in types or "integer" in types:
         yield prefix, sch
     for k, sub in sch.get("properties", {}).items():
+        if not prefix and k == "overrides":  # the top-level sections again, by $ref
+            continue
         yield from _numeric_keys(sub, root, f"{prefix}.{k}" if prefix else k)
     if isinstance(sch.get("additionalProperties"), dict):
         yield from _numeric_keys(sch["additionalProperties"], root, f"{prefix}.x")

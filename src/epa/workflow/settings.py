@@ -131,8 +131,8 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
         raise EpaError(f"{bad}: {value} is not a finite number", path=source)
     errors = [] if _plainly_valid(cfg, schema()) else _schema_errors(cfg)
     if errors:
-        err = errors[0]
-        key = ".".join(str(p) for p in err.path) or "(top level)"
+        err = _deepest(errors[0])
+        key = ".".join(str(p) for p in err.absolute_path) or "(top level)"
         what = err.message
         if err.validator == "not":
             what = f"{err.instance!r} is not allowed: {err.schema.get('description', '')}".rstrip(
@@ -161,6 +161,21 @@ def resolve(config: dict | None, *, source: str = "config") -> dict:
     return cfg
 
 
+def _deepest(err):
+    """Of a value valid under none of a setting's forms (a list of lengths or a word): the error of
+    the form it was meant as (a list's bad item), not "is not valid under any of the given schemas"
+    (a wrong word: the words it may be)."""
+    if err.validator != "anyOf" or not err.context:
+        return err
+    meant = [e for e in err.context if e.validator not in ("type", "enum")]
+    if meant:
+        return _deepest(meant[0])
+    words = [w for b in err.validator_value for w in b.get("enum", ())]
+    if words:
+        err.message = f"{err.instance!r} is neither a list of numbers nor one of {', '.join(words)}"
+    return err
+
+
 def _schema_errors(cfg: dict) -> list:
     import jsonschema
 
@@ -181,6 +196,11 @@ def _schema_at(keys: list) -> dict:
     for k in keys:
         if "$ref" in sch:
             sch = _pointer(root, sch["$ref"])
+        if "anyOf" in sch:  # a list or a word (metrics.segments): the branch that has the key
+            digit = isinstance(k, int) or (isinstance(k, str) and k.isdigit())
+            sch = next(
+                (b for b in sch["anyOf"] if ("items" in b) == digit), sch["anyOf"][0]
+            )
         if isinstance(k, int) or (isinstance(k, str) and k.isdigit() and "items" in sch):
             sch = sch.get("items", {})
         elif k in sch.get("properties", {}):
@@ -191,6 +211,9 @@ def _schema_at(keys: list) -> dict:
             return {}
     if "$ref" in sch:
         sch = _pointer(root, sch["$ref"])
+    if "anyOf" in sch:  # the leaf's types: every branch's
+        types = [b.get("type") for b in sch["anyOf"]]
+        return {**sch, "type": [t for t in types if isinstance(t, str)]}
     return sch
 
 
