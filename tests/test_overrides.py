@@ -86,7 +86,10 @@ def test_metric_scale_false_means_step_2_scale_and_sim3_in_every_mode():
         sources={"algorithms": {"mono": {"metric_scale": False}}},
         overrides={"algorithms": {"mono": {"align": {"method": "se3"}}}},
     )
-    with pytest.raises(EpaError, match="metric_scale: false needs align.method: 'sim3'"):
+    with pytest.raises(
+        EpaError,
+        match="metric_scale: false needs align.method: .sim3.*overrides.algorithms.mono sets",
+    ):
         overrides.for_case(cfg, "mono", "d")
 
 
@@ -307,3 +310,28 @@ def test_auto_segments_are_rpgs_distances_on_rpgs_results(data, tmp_path):
         float(n[len("relative_error_statistics_") : -5].replace("_", ".")) for n in names
     )
     assert [round(x, 1) for x in lengths] == printed
+
+
+def test_mode_rpg_takes_each_estimate_folders_eval_cfg(data, tmp_path):
+    """rpg sets the alignment per estimate folder (eval_cfg.yaml): in mode rpg each case takes its
+    folder's, over the grid's align; the config's overrides still win; metric_scale: false against
+    a folder's posyaw is an error naming the file."""
+    rpg_results = data / "uzh-rpg_rpg_trajectory_evaluation/results/euroc_mono_stereo/laptop"
+    folder = rpg_results / "vio_stereo/laptop_vio_stereo_MH_01"
+    est = folder / "stamped_traj_estimate.txt"
+    case = Case("vio_stereo", "MH_01", "run1", estimate=est)
+    cfg = resolved(mode="rpg", align={"method": "se3"})
+    own = overrides.for_grid(cfg, [case])[case.key]
+    assert own.applied == (str(folder / "eval_cfg.yaml"),)
+    assert own.changed["align"] == {"method": "posyaw", "first_n": -1}
+    ref = data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt"
+    m = chain.run_case(ref, est, tmp_path / "o", overrides.case_config(cfg, own.changed))["metrics"]
+    assert m["rpg"]["align_type"] == "posyaw" and m["alignment"]["method"] == "posyaw"
+    cfg = resolved(
+        mode="rpg", overrides={"algorithms": {"vio_stereo": {"align": {"method": "sim3"}}}}
+    )
+    assert overrides.for_grid(cfg, [case])[case.key].changed["align"]["method"] == "sim3"
+    cfg = resolved(mode="rpg", sources={"algorithms": {"vio_stereo": {"metric_scale": False}}})
+    with pytest.raises(EpaError, match="eval_cfg.yaml sets 'posyaw'"):
+        overrides.for_grid(cfg, [case])
+    assert overrides.for_grid(resolved(align={"method": "se3"}), [case]) == {}  # mode epa: not read

@@ -37,10 +37,10 @@ import math
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from epa.core.errors import EpaError
 from epa.metrics.rpg import MT_ABS, dist_str, multi_trial_statistics, rel_labels, yaml_text
+from epa.readers.rpg_files import read_eval_cfg, read_yaml
 from epa.rpg import protocol as P
 
 GT_NAME = "stamped_groundtruth.txt"
@@ -54,7 +54,6 @@ MATCH_NAMES = {
     "pose_graph": "stamped_pg_gt_matches",
     "ba_estimate": "stamped_ba_gt_matches",
 }
-DEFAULT_ALIGN = ("sim3", -1)
 
 
 def read_stamped(path: Path) -> np.ndarray:
@@ -88,45 +87,12 @@ def read_stamped(path: Path) -> np.ndarray:
     return np.array(rows, dtype=float)
 
 
-def _read_yaml(path: Path):
-    try:
-        with open(path) as f:
-            return yaml.safe_load(f)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise EpaError(
-            f"not valid YAML ({getattr(exc, 'problem', None) or exc})",
-            path=path,
-            line=None if mark is None else mark.line + 1,
-        ) from None
-    except OSError as exc:
-        raise EpaError(f"cannot read: {exc.strerror or exc}", path=path) from None
-
-
-def read_eval_cfg(case_dir: Path) -> tuple[str, int]:
-    """``eval_cfg.yaml``'s ``align_type`` and ``align_num_frames``; rpg's defaults when the file is absent."""
-    path = Path(case_dir) / "eval_cfg.yaml"
-    if not path.exists():
-        return DEFAULT_ALIGN
-    cfg = _read_yaml(path)
-    if not isinstance(cfg, dict) or "align_type" not in cfg or "align_num_frames" not in cfg:
-        raise EpaError("needs the keys align_type and align_num_frames", path=path)
-    kind, n = cfg["align_type"], cfg["align_num_frames"]
-    if kind not in P.ALIGN_TYPES:
-        raise EpaError(f"align_type {kind!r} is not one of {', '.join(P.ALIGN_TYPES)}", path=path)
-    if isinstance(n, bool) or not isinstance(n, int) or not (n == -1 or n >= 1 or kind == "none"):
-        raise EpaError(f"align_num_frames {n!r} must be -1 (all) or a positive integer", path=path)
-    if kind == "sim3" and n == 1:
-        raise EpaError("align_type sim3 needs align_num_frames >= 2 or -1", path=path)
-    return kind, n
-
-
 def read_start_end(case_dir: Path) -> tuple[float, float]:
     """``start_end_time.yaml``'s window (seconds, inclusive); unbounded when the file or a key is absent."""
     path = Path(case_dir) / "start_end_time.yaml"
     start, end = -math.inf, math.inf
     if path.exists():
-        d = _read_yaml(path)
+        d = read_yaml(path)
         if not isinstance(d, dict):
             raise EpaError("expected a mapping with start_time_sec and/or end_time_sec", path=path)
         try:
@@ -186,7 +152,7 @@ def update_and_save(path: Path, labels: dict) -> None:
     """rpg's ``update_and_save_stats``: merge labels into the YAML file (kept keys stay), sorted dump."""
     stats = {}
     if path.exists():
-        stats = _read_yaml(path)
+        stats = read_yaml(path)
         if not isinstance(stats, dict):
             raise EpaError(
                 "an existing statistics file rpg would update is not a mapping", path=path

@@ -2,7 +2,8 @@
 datasets or (algorithm, dataset) cells their own, and ``sources.algorithms.<alg>.metric_scale: false``
 declares an algorithm monocular (Step 2 solves the scale, Step 3 fits Sim3).
 
-Precedence, the most specific last (it wins): the grid's settings, ``overrides.datasets``,
+Precedence, the most specific last (it wins): the grid's settings, in mode rpg an estimate folder's
+``eval_cfg.yaml`` (rpg's per-folder ``align_type``), ``overrides.datasets``,
 ``overrides.algorithms``, ``overrides.cases`` (``<algorithm>/<dataset>``), then what
 ``metric_scale: false`` implies. Within one level a name beats a glob pattern; two patterns of one
 level that set one key of a case to different values are an error naming both. A pattern that
@@ -18,6 +19,7 @@ from __future__ import annotations
 import copy
 import fnmatch
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from epa.core.errors import EpaError
 
@@ -76,7 +78,8 @@ def _entries(cfg: dict, algorithm: str, dataset: str) -> list[tuple[str, dict]]:
     out: list[tuple[str, dict]] = []
     for level in LEVELS:
         table = overrides.get(level) or {}
-        names, patterns = [], []
+        names: list[tuple[str, dict]] = []
+        patterns: list[tuple[str, dict]] = []
         for key, value in table.items():
             if level == "cases":
                 alg_pat, _, ds_pat = key.partition("/")
@@ -110,11 +113,20 @@ def _metric_scale(cfg: dict, algorithm: str) -> bool | None:
     return src.get("metric_scale")
 
 
-def for_case(cfg: dict, algorithm: str, dataset: str, *, source: str = "config") -> CaseSettings:
-    """The settings one case runs with, as what differs from the resolved grid ``cfg``."""
+def for_case(
+    cfg: dict,
+    algorithm: str,
+    dataset: str,
+    *,
+    source: str = "config",
+    folder: tuple[str, dict] | None = None,
+) -> CaseSettings:
+    """The settings one case runs with, as what differs from the resolved grid ``cfg``.
+    ``folder``: the estimate folder's own settings in mode rpg (``(where, settings)``, from its
+    ``eval_cfg.yaml``), applied before the config's overrides."""
     from epa.workflow import settings
 
-    entries = _entries(cfg, algorithm, dataset)
+    entries = ([folder] if folder else []) + _entries(cfg, algorithm, dataset)
     monocular = _metric_scale(cfg, algorithm) is False
     if not entries and not monocular:
         return CaseSettings()
@@ -130,9 +142,10 @@ def for_case(cfg: dict, algorithm: str, dataset: str, *, source: str = "config")
         for (section, key), value in implied.items():
             set_to = (given.get(section) or {}).get(key, value)
             if set_to != value:
+                by = [w for w, v in entries if (v.get(section) or {}).get(key) == set_to][-1]
                 raise EpaError(
                     f"sources.algorithms.{algorithm}.metric_scale: false needs {section}.{key}:"
-                    f" {value!r} (an arbitrary scale is fitted), but an override sets {set_to!r}"
+                    f" {value!r} (an arbitrary scale is fitted), but {by} sets {set_to!r}"
                     f" for {algorithm}/{dataset}",
                     path=source,
                 )
@@ -190,20 +203,43 @@ def for_grid(cfg: dict, cases, *, source: str = "config") -> dict[str, CaseSetti
     problem = unmatched(cfg, (c.algorithm for c in cases), (c.dataset for c in cases))
     if problem:
         raise EpaError(problem, path=source)
-    if not (cfg.get("overrides") or {}).get("algorithms") and not any(
-        (cfg.get("overrides") or {}).get(level) for level in LEVELS
+    overrides = cfg.get("overrides") or {}
+    if (
+        not any(overrides.get(level) for level in LEVELS)
+        and cfg["mode"] != "rpg"
+        and not any(_metric_scale(cfg, a) is False for a in {c.algorithm for c in cases})
     ):
-        if not any(_metric_scale(cfg, a) is False for a in {c.algorithm for c in cases}):
-            return {}
-    by_cell: dict[tuple[str, str], CaseSettings] = {}
+        return {}
+    by_cell: dict[tuple, CaseSettings] = {}
+    folders: dict[Path, tuple[str, dict] | None] = {}
     out = {}
     for c in cases:
-        cell = (c.algorithm, c.dataset)
+        folder = None
+        if cfg["mode"] == "rpg" and c.estimate is not None:
+            parent = Path(c.estimate).parent
+            if parent not in folders:
+                folders[parent] = rpg_folder(parent)
+            folder = folders[parent]
+        cell = (c.algorithm, c.dataset, folder and folder[0])
         if cell not in by_cell:
-            by_cell[cell] = for_case(cfg, *cell, source=source)
+            by_cell[cell] = for_case(cfg, c.algorithm, c.dataset, source=source, folder=folder)
         if by_cell[cell].applied:
             out[c.key] = by_cell[cell]
     return out
+
+
+def rpg_folder(folder: Path) -> tuple[str, dict] | None:
+    """Mode rpg: an estimate folder's ``eval_cfg.yaml`` as the settings of its cases (rpg's
+    ``align_type`` and ``align_num_frames`` are ``align.method`` and ``align.first_n``); None where
+    the folder has none (the grid's ``align`` then)."""
+    from epa.readers.rpg_files import read_eval_cfg
+
+    path = folder / "eval_cfg.yaml"
+    if not path.is_file():
+        return None
+    kind, n = read_eval_cfg(folder)
+    first_n = -1 if kind == "none" and n < 1 else n  # rpg ignores the count without alignment
+    return str(path), {"align": {"method": kind, "first_n": first_n}}
 
 
 def one_case(
