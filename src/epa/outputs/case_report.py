@@ -341,7 +341,9 @@ def steps_lines(m: dict, T: dict) -> list[str]:
         f"- **{T['step3']}**: {three}",
     ]
     if plan.get("fallback"):
-        lines.append(f"- {T['fallback'].format(dropped='; '.join(plan.get('dropped') or []) or '-')}")
+        lines.append(
+            f"- {T['fallback'].format(dropped='; '.join(plan.get('dropped') or []) or '-')}"
+        )
     return lines
 
 

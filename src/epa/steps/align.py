@@ -127,6 +127,42 @@ def _umeyama(
     return Similarity(r, mu_d - s * r @ mu_s, s)
 
 
+def sim3_fit_rmse(src_rows: np.ndarray, dst_rows: np.ndarray) -> tuple[float, float]:
+    """The scale of the Sim3 fit (Umeyama) of ``src`` onto ``dst`` and the position RMSE after it,
+    on positions as component rows, in blocks: the temporaries stay in cache and no (N, 3) copy is
+    made (a 1M-pose case's check is two passes over its rows). The residual is summed directly, not
+    from the moments (whose difference loses 1e-8 of a centimetre RMSE on 100 m of path).
+
+    Parameters
+    ----------
+    src_rows, dst_rows : ndarray, shape (3, N)
+        Matched positions, x, y and z rows (:func:`epa.core.geometry.pair_rows` holds them).
+
+    Returns
+    -------
+    scale, rmse : float
+    """
+    n = src_rows.shape[1]
+    mu_s, mu_d = src_rows.mean(axis=1), dst_rows.mean(axis=1)
+    cov, var_s = np.zeros((3, 3)), 0.0
+    for part in geometry.row_blocks(n):
+        xs, xd = src_rows[:, part] - mu_s[:, None], dst_rows[:, part] - mu_d[:, None]
+        cov += xd @ xs.T
+        var_s += float(np.einsum("ij,ij->", xs, xs))
+    u, d, vt = np.linalg.svd(cov / n)
+    sign = np.eye(3)
+    if np.linalg.det(u) * np.linalg.det(vt) < 0:
+        sign[2, 2] = -1
+    scale = float(np.trace(np.diag(d) @ sign) / (var_s / n))
+    sr = scale * (u @ sign @ vt)
+    t = mu_d - sr @ mu_s
+    squares = 0.0
+    for part in geometry.row_blocks(n):
+        r = dst_rows[:, part] - (sr @ src_rows[:, part] + t[:, None])
+        squares += float(np.einsum("ij,ij->", r, r))
+    return scale, float(np.sqrt(squares / n))
+
+
 def posyaw(src: np.ndarray, dst: np.ndarray) -> Similarity:
     """Rotation about gravity (z) and translation only: the 4 DoF a VIO cannot observe."""
     mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)

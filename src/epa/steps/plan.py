@@ -58,7 +58,8 @@ def dropped(cfg: dict, step1: dict) -> list[str]:
         )
     if cfg["calibrate"]["enabled"]:
         out.append(
-            "Step 2's extrinsic" + (" and scale (Step 3's Sim3 fits the scale)" if cfg["calibrate"]["scale"] else "")
+            "Step 2's extrinsic"
+            + (" and scale (Step 3's Sim3 fits the scale)" if cfg["calibrate"]["scale"] else "")
         )
     return out
 

@@ -190,9 +190,7 @@ def run_case_data(
     every record and the per-pose errors, which are not on disk without ``write_arrays``).
     ``settings_record``: what the case's own settings changed (load.json ``settings``)."""
     chain = declared()
-    case = Case(
-        "", "", "", Path(ref_path), Path(est_path), ref_source, est_source, settings_record
-    )
+    case = Case("", "", "", Path(ref_path), Path(est_path), ref_source, est_source, settings_record)
     data = chain.data_class(CaseFolder(out_dir, case))
     kept = {st.result for st in chain.stages} | set(keep)
     for st in chain.stages:

@@ -190,9 +190,8 @@ def unmatched(cfg: dict, algorithms, datasets) -> str | None:
             if not hit:
                 kind = {"datasets": "dataset", "algorithms": "algorithm", "cases": "cell"}[level]
                 known = datasets if level == "datasets" else algorithms
-                return (
-                    f"overrides.{level}.{key}: matches no {kind} of the grid"
-                    + ("" if level == "cases" else f" ({', '.join(known) or 'none'})")
+                return f"overrides.{level}.{key}: matches no {kind} of the grid" + (
+                    "" if level == "cases" else f" ({', '.join(known) or 'none'})"
                 )
     return None
 

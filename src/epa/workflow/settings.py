@@ -198,9 +198,7 @@ def _schema_at(keys: list) -> dict:
             sch = _pointer(root, sch["$ref"])
         if "anyOf" in sch:  # a list or a word (metrics.segments): the branch that has the key
             digit = isinstance(k, int) or (isinstance(k, str) and k.isdigit())
-            sch = next(
-                (b for b in sch["anyOf"] if ("items" in b) == digit), sch["anyOf"][0]
-            )
+            sch = next((b for b in sch["anyOf"] if ("items" in b) == digit), sch["anyOf"][0])
         if isinstance(k, int) or (isinstance(k, str) and k.isdigit() and "items" in sch):
             sch = sch.get("items", {})
         elif k in sch.get("properties", {}):
