@@ -134,8 +134,9 @@ def run_cases(
 ) -> dict[str, dict]:
     """Run ``stage`` on each case ({key, truth, estimate, truth_source, estimate_source}, and where
     the case has settings of its own: ``settings``, the sections of ``cfg`` it replaces, and for
-    the load stage ``settings_record``, what it records of them); never raises for a case's failure. ``upstream``: key -> reason for cases whose previous stage failed.
-    Returns key -> status."""
+    the load stage ``settings_record``, what it records of them); never raises for a case's
+    failure. ``upstream``: key -> reason for cases whose previous stage failed. Returns key ->
+    status."""
     status: dict[str, dict] = {}
     artifacts = chain.BY_NAME[stage].artifacts
     for c in cases:

@@ -9,8 +9,7 @@ import numpy as np
 
 from epa.artifacts.case import CaseData, Columns, Record
 from epa.artifacts.stage import Stage, Value
-from epa.metrics import drift
-from epa.metrics import accuracy
+from epa.metrics import accuracy, drift
 from epa.metrics.accuracy import null_rotation
 
 log = logging.getLogger("epa")
