@@ -609,12 +609,10 @@ def _eval(args) -> None:
 
     runtime.one_case_alone()  # a second core for its stages, freed memory kept for reuse
     cfg, own = _eval_config(args)
-    algorithm = args.algorithm or EVAL_ALGORITHM
     out = CaseFolder(args.out)
     chain.clear_arrays(out)
     document = Path(args.out) / "metrics.json"  # every stage's record in one document
-    if document.is_file():  # a previous run's: never beside this run's stage folders
-        document.unlink()
+    document.unlink(missing_ok=True)  # a previous run's: never beside this run's stage folders
     write_provenance = _eval_provenance(args, cfg)
     clock: dict[str, Any] = {"stage": None, "t": time.perf_counter()}
     size_mb = sum(_input_bytes(p) for p in (args.ref, args.est)) / 1e6
@@ -646,7 +644,7 @@ def _eval(args) -> None:
             write_arrays=args.artifacts or args.report or args.rerun,
             on_stage=on_stage,
             ref_source=readers.options(cfg, "reference"),
-            est_source=readers.options(cfg, "estimate", algorithm=algorithm),
+            est_source=readers.options(cfg, "estimate", algorithm=args.algorithm or EVAL_ALGORITHM),
             settings_record=own.record() if own.applied else None,
         )
     finally:  # also for a case that fails: what it was run on

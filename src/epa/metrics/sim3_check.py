@@ -100,7 +100,8 @@ def sim3_beside(
     ref, est : Trajectory
         Matched pose for pose, ``est`` as Step 3 aligned it (se3, posyaw or none).
     first_n : int
-        The poses Step 3 fitted on (``align.first_n``, -1: all); the Sim3 fit uses the same.
+        The poses Step 3 fitted on (``align.first_n``, -1: all); the Sim3 fit uses the same (every
+        pose where Step 3 used fewer than 3).
     rows : ndarray, optional
         :func:`epa.core.geometry.pair_rows` of the pair (its position rows are read).
 
@@ -109,7 +110,8 @@ def sim3_beside(
     scale, rmse : float
         The fitted scale s (est -> ref) and the position RMSE after the fit.
     """
-    n = len(ref) if first_n < 0 else min(first_n, len(ref))
+    # Step 3 on 1 or 2 poses (mode rpg) determines no Sim3: the estimate's scale on every pose
+    n = len(ref) if first_n < 3 else min(first_n, len(ref))
     if n == len(ref):  # fitted on every pose: on component rows, in blocks
         ref_rows = rows[4:7] if rows is not None else np.ascontiguousarray(ref.p.T)
         est_rows = rows[7:10] if rows is not None else np.ascontiguousarray(est.p.T)
@@ -184,6 +186,9 @@ def compute(
             if ate is not None
             else float(np.sqrt(np.mean(np.sum(np.square(est.p - ref.p), axis=1))))
         )
+        if len(ref) < 3 or not np.ptp(est.p, axis=0).any():
+            reason = "fewer than 3 matched poses" if len(ref) < 3 else "the estimate does not move"
+            return {"available": False, "reason": f"no Sim3 fit: {reason}"}, {}, []
         scale, sim3_rmse = sim3_beside(ref, est, fitted["first_n"], pair_rows)
         warnings = unscaled_findings(scale, fitted_rmse, sim3_rmse, declared, c)
         record = {

@@ -304,6 +304,21 @@ def steps_lines(m: dict, T: dict) -> list[str]:
         two = found + T["s2_not"].format(
             status=status, meaning=meaning, reason=plan.get("reason", "")
         )
+    three = step3_text(m, align, T)
+    lines = [
+        f"- **{T['step1']}**: {one}",
+        f"- **{T['step2']}**: {two}",
+        f"- **{T['step3']}**: {three}",
+    ]
+    if plan.get("fallback"):
+        lines.append(
+            f"- {T['fallback'].format(dropped='; '.join(plan.get('dropped') or []) or '-')}"
+        )
+    return lines
+
+
+def step3_text(m: dict, align: dict, T: dict) -> str:
+    """Step 3's line: the fit, the scale check beside it, and the scale the case was evaluated with."""
     three = T["s3"].format(
         method=align.get("method"),
         yaw=_num(align.get("yaw_deg")),
@@ -335,16 +350,7 @@ def steps_lines(m: dict, T: dict) -> list[str]:
                 {"step2": "Step 2", "step3": "Step 3"}[k] for k in used["fitted_by"].split("+")
             ),
         )
-    lines = [
-        f"- **{T['step1']}**: {one}",
-        f"- **{T['step2']}**: {two}",
-        f"- **{T['step3']}**: {three}",
-    ]
-    if plan.get("fallback"):
-        lines.append(
-            f"- {T['fallback'].format(dropped='; '.join(plan.get('dropped') or []) or '-')}"
-        )
-    return lines
+    return three
 
 
 def figure_lines(drawn, bundles, every: tuple, cfg_report: dict, T: dict) -> list[str]:

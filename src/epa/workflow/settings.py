@@ -167,9 +167,12 @@ def _deepest(err):
     (a wrong word: the words it may be)."""
     if err.validator != "anyOf" or not err.context:
         return err
-    meant = [e for e in err.context if e.validator not in ("type", "enum")]
-    if meant:
-        return _deepest(meant[0])
+    kind = {list: "array", str: "string"}.get(type(err.instance))
+    branches = [b.get("type") for b in err.validator_value]
+    if kind in branches:  # the form its type says it was meant as: that form's first error
+        meant = [e for e in err.context if e.relative_schema_path[0] == branches.index(kind)]
+        if meant and kind == "array":
+            return _deepest(meant[0])
     words = [w for b in err.validator_value for w in b.get("enum", ())]
     if words:
         err.message = f"{err.instance!r} is neither a list of numbers nor one of {', '.join(words)}"
