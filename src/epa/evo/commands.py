@@ -9,7 +9,6 @@ Option names and defaults are evo 1.38.1's; docs/evo.md maps every evo option to
 
 from __future__ import annotations
 
-import io as io_bytes
 import json
 import zipfile
 from pathlib import Path
@@ -206,7 +205,9 @@ def run(args) -> None:
     if not args.silent:
         print(result.statistics_block(), end="")
     if args.save_results:
-        save(result, args.save_results, ref=_source(args, "ref"), est=_source(args, "est"))
+        # evo's zip names each side as evo does (the file as given, or the topic)
+        name = _evo_name if Path(args.save_results).suffix.lower() == ".zip" else _source
+        save(result, args.save_results, ref=name(args, "ref"), est=name(args, "est"))
         print(f"wrote {args.save_results}")
 
 
@@ -240,6 +241,13 @@ def _path(args, which: str) -> str:
     )
 
 
+def _evo_name(args, which: str) -> str:
+    """The name evo gives one side: its file as given on the command line, or its bag topic."""
+    if args.form in ("bag", "bag2", "mcap"):
+        return getattr(args, f"{which}_topic")
+    return str(_path(args, which))
+
+
 def _source(args, which: str) -> str:
     if args.form in ("bag", "bag2", "mcap"):
         return f"{args.bag}:{getattr(args, f'{which}_topic')}"
@@ -248,11 +256,16 @@ def _source(args, which: str) -> str:
 
 # ----------------------------------------------------------------------------- saved results
 def save(result, path, *, ref: str, est: str) -> None:
-    """The result as JSON (``epica-result/1``: kind, title, stats, options, info, reference and
-    estimate names, the error array), or a .zip holding ``result.json`` and ``errors.csv``."""
+    """The result as evo's result zip (``FILE.zip``, :mod:`epa.evo.archive`; ``ref`` and ``est``
+    named as evo names them), or as JSON (``epica-result/1``: kind, title, stats, options, info,
+    reference and estimate names, the error array)."""
     from epa.artifacts import files
+    from epa.evo import archive
     from epa.outputs import figures
 
+    if Path(path).suffix.lower() == ".zip":
+        archive.write(path, result, ref_name=ref, est_name=est)
+        return
     doc = {
         "format": RESULT_FORMAT,
         "kind": result.kind,
@@ -263,27 +276,33 @@ def save(result, path, *, ref: str, est: str) -> None:
         "options": result.options,
         "info": result.info,
     }
-    path = Path(path)
-    if path.suffix.lower() != ".zip":
-        files.write_text(path, figures._json({**doc, "errors": result.errors}) + "\n")
-        return
-    buf = io_bytes.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("result.json", json.dumps(doc, indent=1) + "\n")
-        z.writestr("errors.csv", "error\n" + "".join(f"{e!r}\n" for e in result.errors.tolist()))
-    files.write_bytes(path, buf.getvalue())
+    files.write_text(path, figures._json({**doc, "errors": result.errors}) + "\n")
 
 
 STAT_COLUMNS = ("rmse", "mean", "median", "std", "min", "max", "sse")
 
 
 def load_results(path) -> list[dict]:
-    """Rows {name, what, stats} of one saved file: an ``epa ape/rpe --save_results`` JSON or zip, a
-    case's metrics.json (06_metrics/ or 10_report/), or a case's result bundle .zip."""
+    """Rows {name, what, stats} of one saved file: evo's result zip (written by evo or by ``epa
+    ape/rpe --save_results X.zip``; the row also holds it as ``evo``), an ``epa ape/rpe`` JSON, the
+    zip epica wrote before (result.json and errors.csv), a case's metrics.json (06_metrics/ or
+    10_report/), or a case's result bundle .zip."""
+    from epa.evo import archive
+
     path = Path(path)
     try:
         if path.suffix.lower() == ".zip":
             with zipfile.ZipFile(path) as z:
+                if archive.is_evo_zip(z):
+                    r = archive.read(z, str(path))
+                    return [
+                        {
+                            "name": str(path),
+                            "what": r.title.split("\n")[0],
+                            "stats": r.stats,
+                            "evo": r,
+                        }
+                    ]
                 names = z.namelist()
                 inner = next((n for n in names if n.endswith("result.json")), None) or next(
                     (n for n in names if n.endswith("metrics.json")), None
@@ -349,21 +368,45 @@ def _stats(doc: dict, key: str, where: str, prefix: str = "") -> dict:
 
 def res(args) -> None:
     rows = [row for path in args.results for row in load_results(path)]
-    header = ["result", "metric", *STAT_COLUMNS]
     table = [
         [r["name"], r["what"], *(_cell(r["stats"].get(c)) for c in STAT_COLUMNS)] for r in rows
     ]
-    widths = [max(len(str(x)) for x in col) for col in zip(header, *table)]
-    for line in [header, *table]:
-        print("  ".join(str(x).ljust(w) for x, w in zip(line, widths)).rstrip())
-    if args.save_table:
-        from epa.artifacts import files
+    if all("evo" in r for r in rows):  # evo's zips only: evo_res's printout
+        _evo_res(args, [r["evo"] for r in rows])
+    else:
+        header = ["result", "metric", *STAT_COLUMNS]
+        widths = [max(len(str(x)) for x in col) for col in zip(header, *table)]
+        for line in [header, *table]:
+            print("  ".join(str(x).ljust(w) for x, w in zip(line, widths)).rstrip())
+    if args.save_table:  # epica's table, whatever was printed
+        _save_table(args.save_table, table)
 
-        files.write_text(
-            args.save_table,
-            "\n".join(",".join(_csv(x) for x in line) for line in [header, *table]) + "\n",
-        )
-        print(f"wrote {args.save_table}")
+
+def _evo_res(args, zips) -> None:
+    """What evo_res prints. A title that differs from the first file's is a warning (evo_res asks
+    whether to go on, and then prints the first title)."""
+    import sys
+
+    from epa.evo import archive
+
+    text = archive.evo_res_text(zips, use_filenames=args.use_filenames)
+    for z in zips[1:]:
+        if z.title != zips[0].title:
+            print(
+                f"warning: {z.path}: its title differs from {zips[0].path}'s, which is printed",
+                file=sys.stderr,
+            )
+    print(text, end="")
+
+
+def _save_table(path, table: list[list[str]]) -> None:
+    from epa.artifacts import files
+
+    header = ["result", "metric", *STAT_COLUMNS]
+    files.write_text(
+        path, "\n".join(",".join(_csv(x) for x in line) for line in [header, *table]) + "\n"
+    )
+    print(f"wrote {path}")
 
 
 def _cell(v) -> str:
@@ -376,7 +419,16 @@ def _csv(x: str) -> str:
 
 def add_res_parser(sub) -> None:
     r = sub.add_parser(
-        "res", help="a table of saved results (epa ape/rpe --save_results, metrics.json, case zips)"
+        "res",
+        help="a table of saved results (evo's result zips, epa ape/rpe --save_results, "
+        "metrics.json, case zips)",
     )
-    r.add_argument("results", nargs="+", help="result .json/.zip files or case metrics.json files")
+    r.add_argument(
+        "results", nargs="+", help="result .zip/.json files (evo's or epica's) or case metrics.json"
+    )
     r.add_argument("--save_table", help="also write the table as CSV")
+    r.add_argument(
+        "--use_filenames",
+        action="store_true",
+        help="label evo's zips by their file, not their estimate's name (as evo_res)",
+    )
