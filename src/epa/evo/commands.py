@@ -52,6 +52,7 @@ def add_parsers(sub) -> None:
 
 
 def _add_options(f, kind: str, timed: bool) -> None:
+    from epa.evo.plots import PLOT_MODES, X_DIMENSIONS
     from epa.metrics import relations
 
     choices = list(relations.RELATIONS) if kind == "rpe" else list(relations.RELATIONS[:-1])
@@ -126,7 +127,29 @@ def _add_options(f, kind: str, timed: bool) -> None:
         choices=["error", "sort", "keep"],
         help="repeated or backward stamps: stop (default), sort and drop repeats, or keep repeats (evo)",
     )
-    f.add_argument("--save_results", help="write the result: FILE.zip (as evo) or FILE.json")
+    f.add_argument(
+        "--save_results",
+        help="write the result: FILE.zip (evo's result zip, which evo_res reads) or FILE.json",
+    )
+    f.add_argument(
+        "-p",
+        "--plot",
+        action="store_true",
+        help="show evo's figures (error over time, trajectory coloured by it) in a window; "
+        "without a display, only with --save_plot",
+    )
+    f.add_argument(
+        "--save_plot",
+        help="write evo's figures: FILE.pdf (both pages) or FILE.png (FILE_raw.png, FILE_map.png)",
+    )
+    f.add_argument(
+        "--plot_mode", choices=list(PLOT_MODES), help="the trajectory's axes (default: xyz, 3D)"
+    )
+    f.add_argument(
+        "--plot_x_dimension",
+        choices=list(X_DIMENSIONS),
+        help="x axis of the error plot (default: seconds; index without stamps)",
+    )
     f.add_argument("--silent", action="store_true", help="do not print the statistics block")
 
 
@@ -198,17 +221,65 @@ def run(args) -> None:
         if names.get(k, k) in fields and v is not None
     }
     _check_numbers(args)
+    show = _check_plot(args)
     o = evo_protocol.EvoOptions(**values)
     ref, est = _read(args, "ref"), _read(args, "est")
     fn = evo_protocol.ape if args.command == "ape" else evo_protocol.rpe
     result = fn(ref, est, o, timed=args.form != "kitti")
     if not args.silent:
         print(result.statistics_block(), end="")
+    if args.plot or args.save_plot:
+        _plot(args, result, show)
     if args.save_results:
         # evo's zip names each side as evo does (the file as given, or the topic)
         name = _evo_name if Path(args.save_results).suffix.lower() == ".zip" else _source
         save(result, args.save_results, ref=name(args, "ref"), est=name(args, "est"))
         print(f"wrote {args.save_results}")
+
+
+def _check_plot(args) -> bool:
+    """Whether --plot opens windows; before any reading: a plot setting without a plot, a
+    --save_plot suffix matplotlib cannot write, or --plot with no display and no --save_plot is one
+    line."""
+    from epa.evo import plots
+
+    plotting = args.plot or args.save_plot
+    for name in ("plot_mode", "plot_x_dimension"):
+        if getattr(args, name, None) is not None and not plotting:
+            raise EpaError(f"--{name} draws nothing without --plot or --save_plot")
+    if args.save_plot:
+        plots.outputs(args.save_plot)
+    show = bool(args.plot) and plots.can_show()
+    if args.plot and not show and not args.save_plot:
+        raise EpaError(
+            "--plot: no display to open a window on; write the figures with --save_plot "
+            "FILE.pdf or FILE.png"
+        )
+    return show
+
+
+def _plot(args, result, show: bool) -> None:
+    from epa.evo import plots
+
+    figures = plots.draw(
+        result,
+        plot_mode=args.plot_mode or "xyz",
+        x_dimension=args.plot_x_dimension or "seconds",
+        show=show,
+    )
+    if args.save_plot:
+        written = ", ".join(str(p) for p in plots.save(figures, args.save_plot))
+        print(
+            f"wrote {written}"
+            if show or not args.plot
+            else f"no display for --plot: wrote {written}"
+        )
+    import matplotlib.pyplot as plt
+
+    if show:
+        plt.show()
+    for fig in figures.values():
+        plt.close(fig)
 
 
 # options that must be positive (deltas, tolerances, rates) or at least 0; every number is finite
