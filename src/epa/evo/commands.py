@@ -211,21 +211,9 @@ def read_source(
 
 
 def run(args) -> None:
-    from epa.evo import protocol as evo_protocol
-
-    names = {"pose_relation": "relation"}
-    fields = set(evo_protocol.EvoOptions.__dataclass_fields__)
-    values = {
-        names.get(k, k): v
-        for k, v in vars(args).items()
-        if names.get(k, k) in fields and v is not None
-    }
     _check_numbers(args)
     show = _check_plot(args)
-    o = evo_protocol.EvoOptions(**values)
-    ref, est = _read(args, "ref"), _read(args, "est")
-    fn = evo_protocol.ape if args.command == "ape" else evo_protocol.rpe
-    result = fn(ref, est, o, timed=args.form != "kitti")
+    result = compute(args)
     if not args.silent:
         print(result.statistics_block(), end="")
     if args.plot or args.save_plot:
@@ -235,6 +223,23 @@ def run(args) -> None:
         name = _evo_name if Path(args.save_results).suffix.lower() == ".zip" else _source
         save(result, args.save_results, ref=name(args, "ref"), est=name(args, "est"))
         print(f"wrote {args.save_results}")
+
+
+def compute(args):
+    """The :class:`epa.evo.protocol.EvoResult` of parsed ``epa ape|rpe`` arguments."""
+    from epa.evo import protocol as evo_protocol
+
+    names = {"pose_relation": "relation"}
+    fields = set(evo_protocol.EvoOptions.__dataclass_fields__)
+    values = {
+        names.get(k, k): v
+        for k, v in vars(args).items()
+        if names.get(k, k) in fields and v is not None
+    }
+    o = evo_protocol.EvoOptions(**values)
+    ref, est = _read(args, "ref"), _read(args, "est")
+    fn = evo_protocol.ape if args.command == "ape" else evo_protocol.rpe
+    return fn(ref, est, o, timed=args.form != "kitti")
 
 
 def _check_plot(args) -> bool:
