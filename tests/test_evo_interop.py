@@ -344,3 +344,27 @@ def test_plot_mistakes_are_one_line_before_any_work(
     err = captured.err.strip()
     assert why in err and "\n" not in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_plot_with_a_display_shows_the_figures_and_writes_nothing(
+    data, tmp_path, capsys, monkeypatch
+):
+    import matplotlib.pyplot as plt
+
+    shown = []
+    monkeypatch.setattr(plots, "can_show", lambda: True)
+    monkeypatch.setattr(plt, "show", lambda: shown.append(sorted(plt.get_fignums())))
+    monkeypatch.chdir(tmp_path)
+    kind, form, inputs, evo_opts, epa_opts = case_paths(data, "ape_se3")
+    before = plt.get_fignums()
+    assert cli.main([kind, form, *inputs, *evo_opts, *epa_opts, "--plot", "--silent"]) == 0
+    assert len(shown) == 1 and len(shown[0]) == len(before) + 2  # raw and map, open when shown
+    assert plt.get_fignums() == before  # closed after the windows are
+    assert capsys.readouterr().out == "" and list(tmp_path.iterdir()) == []
+
+
+def test_no_display_no_window(monkeypatch):
+    monkeypatch.setattr(plots.sys, "platform", "linux")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert plots.can_show() is False
