@@ -9,7 +9,6 @@ Option names and defaults are evo 1.38.1's; docs/evo.md maps every evo option to
 
 from __future__ import annotations
 
-import io as io_bytes
 import json
 import zipfile
 from pathlib import Path
@@ -53,6 +52,7 @@ def add_parsers(sub) -> None:
 
 
 def _add_options(f, kind: str, timed: bool) -> None:
+    from epa.evo.plots import PLOT_MODES, X_DIMENSIONS
     from epa.metrics import relations
 
     choices = list(relations.RELATIONS) if kind == "rpe" else list(relations.RELATIONS[:-1])
@@ -127,7 +127,29 @@ def _add_options(f, kind: str, timed: bool) -> None:
         choices=["error", "sort", "keep"],
         help="repeated or backward stamps: stop (default), sort and drop repeats, or keep repeats (evo)",
     )
-    f.add_argument("--save_results", help="write the result: FILE.zip (as evo) or FILE.json")
+    f.add_argument(
+        "--save_results",
+        help="write the result: FILE.zip (evo's result zip, which evo_res reads) or FILE.json",
+    )
+    f.add_argument(
+        "-p",
+        "--plot",
+        action="store_true",
+        help="show evo's figures (error over time, trajectory coloured by it) in a window; "
+        "without a display, only with --save_plot",
+    )
+    f.add_argument(
+        "--save_plot",
+        help="write evo's figures: FILE.pdf (both pages) or FILE.png (FILE_raw.png, FILE_map.png)",
+    )
+    f.add_argument(
+        "--plot_mode", choices=list(PLOT_MODES), help="the trajectory's axes (default: xyz, 3D)"
+    )
+    f.add_argument(
+        "--plot_x_dimension",
+        choices=list(X_DIMENSIONS),
+        help="x axis of the error plot (default: seconds; index without stamps)",
+    )
     f.add_argument("--silent", action="store_true", help="do not print the statistics block")
 
 
@@ -189,6 +211,22 @@ def read_source(
 
 
 def run(args) -> None:
+    _check_numbers(args)
+    show = _check_plot(args)
+    result = compute(args)
+    if not args.silent:
+        print(result.statistics_block(), end="")
+    if args.plot or args.save_plot:
+        _plot(args, result, show)
+    if args.save_results:
+        # evo's zip names each side as evo does (the file as given, or the topic)
+        name = _evo_name if Path(args.save_results).suffix.lower() == ".zip" else _source
+        save(result, args.save_results, ref=name(args, "ref"), est=name(args, "est"))
+        print(f"wrote {args.save_results}")
+
+
+def compute(args):
+    """The :class:`epa.evo.protocol.EvoResult` of parsed ``epa ape|rpe`` arguments."""
     from epa.evo import protocol as evo_protocol
 
     names = {"pose_relation": "relation"}
@@ -198,16 +236,55 @@ def run(args) -> None:
         for k, v in vars(args).items()
         if names.get(k, k) in fields and v is not None
     }
-    _check_numbers(args)
     o = evo_protocol.EvoOptions(**values)
     ref, est = _read(args, "ref"), _read(args, "est")
     fn = evo_protocol.ape if args.command == "ape" else evo_protocol.rpe
-    result = fn(ref, est, o, timed=args.form != "kitti")
-    if not args.silent:
-        print(result.statistics_block(), end="")
-    if args.save_results:
-        save(result, args.save_results, ref=_source(args, "ref"), est=_source(args, "est"))
-        print(f"wrote {args.save_results}")
+    return fn(ref, est, o, timed=args.form != "kitti")
+
+
+def _check_plot(args) -> bool:
+    """Whether --plot opens windows; before any reading: a plot setting without a plot, a
+    --save_plot suffix matplotlib cannot write, or --plot with no display and no --save_plot is one
+    line."""
+    from epa.evo import plots
+
+    plotting = args.plot or args.save_plot
+    for name in ("plot_mode", "plot_x_dimension"):
+        if getattr(args, name, None) is not None and not plotting:
+            raise EpaError(f"--{name} draws nothing without --plot or --save_plot")
+    if args.save_plot:
+        plots.outputs(args.save_plot)
+    show = bool(args.plot) and plots.can_show()
+    if args.plot and not show and not args.save_plot:
+        raise EpaError(
+            "--plot: no display to open a window on; write the figures with --save_plot "
+            "FILE.pdf or FILE.png"
+        )
+    return show
+
+
+def _plot(args, result, show: bool) -> None:
+    from epa.evo import plots
+
+    figures = plots.draw(
+        result,
+        plot_mode=args.plot_mode or "xyz",
+        x_dimension=args.plot_x_dimension or "seconds",
+        show=show,
+    )
+    if args.save_plot:
+        written = ", ".join(str(p) for p in plots.save(figures, args.save_plot))
+        print(
+            f"wrote {written}"
+            if show or not args.plot
+            else f"no display for --plot: wrote {written}"
+        )
+    import matplotlib.pyplot as plt
+
+    if show:
+        plt.show()
+    for fig in figures.values():
+        plt.close(fig)
 
 
 # options that must be positive (deltas, tolerances, rates) or at least 0; every number is finite
@@ -240,6 +317,13 @@ def _path(args, which: str) -> str:
     )
 
 
+def _evo_name(args, which: str) -> str:
+    """The name evo gives one side: its file as given on the command line, or its bag topic."""
+    if args.form in ("bag", "bag2", "mcap"):
+        return getattr(args, f"{which}_topic")
+    return str(_path(args, which))
+
+
 def _source(args, which: str) -> str:
     if args.form in ("bag", "bag2", "mcap"):
         return f"{args.bag}:{getattr(args, f'{which}_topic')}"
@@ -248,11 +332,16 @@ def _source(args, which: str) -> str:
 
 # ----------------------------------------------------------------------------- saved results
 def save(result, path, *, ref: str, est: str) -> None:
-    """The result as JSON (``epica-result/1``: kind, title, stats, options, info, reference and
-    estimate names, the error array), or a .zip holding ``result.json`` and ``errors.csv``."""
+    """The result as evo's result zip (``FILE.zip``, :mod:`epa.evo.archive`; ``ref`` and ``est``
+    named as evo names them), or as JSON (``epica-result/1``: kind, title, stats, options, info,
+    reference and estimate names, the error array)."""
     from epa.artifacts import files
+    from epa.evo import archive
     from epa.outputs import figures
 
+    if Path(path).suffix.lower() == ".zip":
+        archive.write(path, result, ref_name=ref, est_name=est)
+        return
     doc = {
         "format": RESULT_FORMAT,
         "kind": result.kind,
@@ -263,27 +352,33 @@ def save(result, path, *, ref: str, est: str) -> None:
         "options": result.options,
         "info": result.info,
     }
-    path = Path(path)
-    if path.suffix.lower() != ".zip":
-        files.write_text(path, figures._json({**doc, "errors": result.errors}) + "\n")
-        return
-    buf = io_bytes.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("result.json", json.dumps(doc, indent=1) + "\n")
-        z.writestr("errors.csv", "error\n" + "".join(f"{e!r}\n" for e in result.errors.tolist()))
-    files.write_bytes(path, buf.getvalue())
+    files.write_text(path, figures._json({**doc, "errors": result.errors}) + "\n")
 
 
 STAT_COLUMNS = ("rmse", "mean", "median", "std", "min", "max", "sse")
 
 
 def load_results(path) -> list[dict]:
-    """Rows {name, what, stats} of one saved file: an ``epa ape/rpe --save_results`` JSON or zip, a
-    case's metrics.json (06_metrics/ or 10_report/), or a case's result bundle .zip."""
+    """Rows {name, what, stats} of one saved file: evo's result zip (written by evo or by ``epa
+    ape/rpe --save_results X.zip``; the row also holds it as ``evo``), an ``epa ape/rpe`` JSON, the
+    zip epica wrote before (result.json and errors.csv), a case's metrics.json (06_metrics/ or
+    10_report/), or a case's result bundle .zip."""
+    from epa.evo import archive
+
     path = Path(path)
     try:
         if path.suffix.lower() == ".zip":
             with zipfile.ZipFile(path) as z:
+                if archive.is_evo_zip(z):
+                    r = archive.read(z, str(path))
+                    return [
+                        {
+                            "name": str(path),
+                            "what": r.title.split("\n")[0],
+                            "stats": r.stats,
+                            "evo": r,
+                        }
+                    ]
                 names = z.namelist()
                 inner = next((n for n in names if n.endswith("result.json")), None) or next(
                     (n for n in names if n.endswith("metrics.json")), None
@@ -349,21 +444,45 @@ def _stats(doc: dict, key: str, where: str, prefix: str = "") -> dict:
 
 def res(args) -> None:
     rows = [row for path in args.results for row in load_results(path)]
-    header = ["result", "metric", *STAT_COLUMNS]
     table = [
         [r["name"], r["what"], *(_cell(r["stats"].get(c)) for c in STAT_COLUMNS)] for r in rows
     ]
-    widths = [max(len(str(x)) for x in col) for col in zip(header, *table)]
-    for line in [header, *table]:
-        print("  ".join(str(x).ljust(w) for x, w in zip(line, widths)).rstrip())
-    if args.save_table:
-        from epa.artifacts import files
+    if all("evo" in r for r in rows):  # evo's zips only: evo_res's printout
+        _evo_res(args, [r["evo"] for r in rows])
+    else:
+        header = ["result", "metric", *STAT_COLUMNS]
+        widths = [max(len(str(x)) for x in col) for col in zip(header, *table)]
+        for line in [header, *table]:
+            print("  ".join(str(x).ljust(w) for x, w in zip(line, widths)).rstrip())
+    if args.save_table:  # epica's table, whatever was printed
+        _save_table(args.save_table, table)
 
-        files.write_text(
-            args.save_table,
-            "\n".join(",".join(_csv(x) for x in line) for line in [header, *table]) + "\n",
-        )
-        print(f"wrote {args.save_table}")
+
+def _evo_res(args, zips) -> None:
+    """What evo_res prints. A title that differs from the first file's is a warning (evo_res asks
+    whether to go on, and then prints the first title)."""
+    import sys
+
+    from epa.evo import archive
+
+    text = archive.evo_res_text(zips, use_filenames=args.use_filenames)
+    for z in zips[1:]:
+        if z.title != zips[0].title:
+            print(
+                f"warning: {z.path}: its title differs from {zips[0].path}'s, which is printed",
+                file=sys.stderr,
+            )
+    print(text, end="")
+
+
+def _save_table(path, table: list[list[str]]) -> None:
+    from epa.artifacts import files
+
+    header = ["result", "metric", *STAT_COLUMNS]
+    files.write_text(
+        path, "\n".join(",".join(_csv(x) for x in line) for line in [header, *table]) + "\n"
+    )
+    print(f"wrote {path}")
 
 
 def _cell(v) -> str:
@@ -376,7 +495,16 @@ def _csv(x: str) -> str:
 
 def add_res_parser(sub) -> None:
     r = sub.add_parser(
-        "res", help="a table of saved results (epa ape/rpe --save_results, metrics.json, case zips)"
+        "res",
+        help="a table of saved results (evo's result zips, epa ape/rpe --save_results, "
+        "metrics.json, case zips)",
     )
-    r.add_argument("results", nargs="+", help="result .json/.zip files or case metrics.json files")
+    r.add_argument(
+        "results", nargs="+", help="result .zip/.json files (evo's or epica's) or case metrics.json"
+    )
     r.add_argument("--save_table", help="also write the table as CSV")
+    r.add_argument(
+        "--use_filenames",
+        action="store_true",
+        help="label evo's zips by their file, not their estimate's name (as evo_res)",
+    )

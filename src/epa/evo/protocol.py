@@ -59,6 +59,19 @@ class EvoResult:
     stats: dict
     options: dict
     info: dict = field(default_factory=dict)
+    # what the errors were computed on, for evo's result zip and figures: the matched reference and
+    # estimate, aligned and projected; the RPE's pair ends (evo's delta_ids, one per error); evo's
+    # alignment_transformation_sim3 (4x4); whether the poses have stamps (not KITTI's)
+    ref: Trajectory | None = field(default=None, repr=False)
+    est: Trajectory | None = field(default=None, repr=False)
+    ends: np.ndarray | None = field(default=None, repr=False)
+    sim3: np.ndarray | None = field(default=None, repr=False)
+    timed: bool = True
+
+    @property
+    def unit(self) -> str:
+        """evo's unit of the errors (its Unit enum's value)."""
+        return relations.UNIT[self.options["relation"]] or "unit-less"
 
     def statistics_block(self) -> str:
         """evo's printout: the title, a blank line, one `name<TAB>value` line per statistic (sorted)."""
@@ -104,32 +117,43 @@ def synchronise(ref: Trajectory, est: Trajectory, o: EvoOptions) -> tuple[Trajec
     return ref.at(e.t + o.t_offset), e
 
 
+def _sim3(fit: alignment.Similarity) -> np.ndarray:
+    """The fit as evo's lie_algebra.sim3 writes it: [[s R, t], [0, 1]]."""
+    m = np.eye(4)
+    m[:3, :3] = fit.s * fit.R
+    m[:3, 3] = fit.t
+    return m
+
+
 def align(
     ref: Trajectory, est: Trajectory, o: EvoOptions
-) -> tuple[Trajectory, alignment.Similarity | None]:
+) -> tuple[Trajectory, alignment.Similarity | None, np.ndarray | None]:
     """The estimate aligned as evo's flags say (-a, -s, -as, --n_to_align, --align_origin), or on
     position and yaw only (``--align_posyaw``: 4 degrees of freedom, for VIO whose roll and pitch
-    gravity makes observable; Step 3's ``posyaw``)."""
+    gravity makes observable; Step 3's ``posyaw``). Also the transformation as evo records it
+    (alignment_transformation_sim3): with -s alone, the whole Sim(3) fit, of which only the scale
+    is applied."""
     if o.align and o.align_origin:
         raise EpaError("--align and --align_origin can't be used together")
     if o.align_posyaw:
         if o.align or o.align_origin or o.correct_scale:
             raise EpaError("--align_posyaw aligns alone: not with -a, --align_origin or -s")
         fit = alignment.fit(ref, est, method="posyaw", first_n=o.n_to_align)
-        return fit.apply(est), fit
+        return fit.apply(est), fit, _sim3(fit)
     if o.align or o.correct_scale:
         fit = alignment.fit(
             ref, est, method="sim3" if o.correct_scale else "se3", first_n=o.n_to_align
         )
+        recorded = _sim3(fit)
         if not o.align:  # -s alone: the scale only
             fit = alignment.Similarity(np.eye(3), np.zeros(3), fit.s)
-        return fit.apply(est), fit
+        return fit.apply(est), fit, recorded
     if o.align_origin:
         r0, p0 = ref.r_as_printed[0], est.r_as_printed[0]
         rot = r0 @ p0.T
         fit = alignment.Similarity(rot, ref.p[0] - rot @ est.p[0], 1.0)
-        return fit.apply(est), fit
-    return est, None
+        return fit.apply(est), fit, _sim3(fit)
+    return est, None, None
 
 
 def project(traj: Trajectory, plane: str) -> Trajectory:
@@ -181,7 +205,8 @@ def _relation_head(kind: str, relation: str) -> str:
 
 
 def prepare(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True):
-    """Reference and estimate matched, aligned and projected; info on what was done."""
+    """Reference and estimate matched, aligned and projected; info on what was done; the alignment
+    as evo records it (or None)."""
     if o.project_to_plane is not None and o.project_to_plane not in PLANES:
         raise EpaError(
             f"unknown --project_to_plane {o.project_to_plane!r}; choose one of {', '.join(PLANES)}"
@@ -205,16 +230,16 @@ def prepare(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = Tr
             f"(reference {len(ref)}, estimate {len(est)})"
         )
     info["n_matched"] = len(ref)
-    est, fit = align(ref, est, o)
+    est, fit, sim3 = align(ref, est, o)
     if fit is not None:
         info["alignment"] = fit.to_dict()
     if o.project_to_plane:
         ref, est = project(ref, o.project_to_plane), project(est, o.project_to_plane)
-    return ref, est, o, info
+    return ref, est, o, info, sim3
 
 
 def ape(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True) -> EvoResult:
-    ref, est, o, info = prepare(ref, est, o, timed=timed)
+    ref, est, o, info, sim3 = prepare(ref, est, o, timed=timed)
     errors = relations.ape(ref, est, o.relation)
     return EvoResult(
         "ape",
@@ -223,6 +248,10 @@ def ape(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True) 
         relations.evo_statistics(errors),
         asdict(o),
         info,
+        ref=ref,
+        est=est,
+        sim3=sim3,
+        timed=timed,
     )
 
 
@@ -235,7 +264,7 @@ def rpe(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True) 
         raise EpaError(f"--delta must be positive, not {o.delta:g}")
     if o.delta_unit == "f" and float(o.delta) != int(o.delta):
         raise EpaError(f"--delta must be an integer for delta unit f (frames), not {o.delta}")
-    ref, est, o, info = prepare(ref, est, o, timed=timed)
+    ref, est, o, info, sim3 = prepare(ref, est, o, timed=timed)
     i, j = accuracy.evo_pairs(
         ref if o.pairs_from_reference else est,
         o.delta,
@@ -249,6 +278,11 @@ def rpe(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True) 
             f"or a larger --delta_tol"
         )
     errors = relations.rpe(ref, est, i, j, o.relation)
+    ends = j
+    if (
+        o.relation == "point_distance_error_ratio"
+    ):  # the pairs relations.rpe keeps: a moved reference
+        ends = j[np.linalg.norm(ref.p[j] - ref.p[i], axis=1) != 0]
     delta = int(o.delta) if o.delta_unit == "f" else o.delta
     head = (
         _relation_head("rpe", o.relation)
@@ -262,4 +296,9 @@ def rpe(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = True) 
         relations.evo_statistics(errors),
         asdict(o),
         {**info, "n_pairs": int(len(i))},
+        ref=ref,
+        est=est,
+        ends=np.asarray(ends),
+        sim3=sim3,
+        timed=timed,
     )
