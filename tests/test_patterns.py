@@ -266,3 +266,71 @@ def test_constraints_without_patterns_are_an_error():
     )
     with pytest.raises(EpaError, match="inputs.constraints constrain the wildcards of"):
         discovery.discover_config(cfg, source="my.yaml")
+
+
+def brute_readings(pat, path: str, accept) -> list[dict[str, str]]:
+    """Every reading of ``path`` by trying every length of every wildcard's first occurrence."""
+    import itertools
+
+    literals, names = pat._parts
+    first = list(dict.fromkeys(names))
+    found = []
+    for lengths in itertools.product(range(1, len(path) + 1), repeat=len(first)):
+        values, pos, ok = {}, 0, path.startswith(literals[0])
+        pos = len(literals[0])
+        for name, literal in zip(names, literals[1:], strict=True):
+            size = len(values[name]) if name in values else lengths[first.index(name)]
+            value = values.get(name) or path[pos : pos + size]
+            ok = ok and path.startswith(value, pos) and "/" not in value and len(value) == size
+            values[name] = value
+            pos += len(value)
+            ok = ok and path.startswith(literal, pos)
+            pos += len(literal)
+        if ok and pos == len(path) and all(accept(k, v) for k, v in values.items()):
+            found.append(values)
+    return sorted(found, key=lambda v: [len(v[n]) for n in first], reverse=True)
+
+
+def test_readings_are_every_reading_the_greedy_one_first():
+    """The readings of random paths (letters, '_' and '/') by random patterns are exactly those a
+    brute force over every wildcard's length finds, the longest first value first (the reading a
+    greedy regular expression gives); where the greedy and lazy expressions agree there is one."""
+    import random
+
+    from epa.workflow.patterns import Pattern
+
+    rng = random.Random(7)
+    wild = ("{algorithm}", "{dataset}", "{run}")
+    seen_ambiguous = seen_unique = 0
+    for _ in range(200):
+        text = "".join(
+            rng.choice(wild) if rng.random() < 0.45 else rng.choice(("_", "a", "/", "x_"))
+            for _ in range(rng.randint(2, 5))
+        )
+        if "{" not in text:
+            continue
+        pat = Pattern("k", text)
+        # mostly a path the pattern makes (each wildcard a random value), sometimes any text
+        values = {w: "".join(rng.choice("ab_") for _ in range(rng.randint(1, 3))) for w in wild}
+        path = text
+        for w in wild:
+            path = path.replace(w, values[w])
+        if rng.random() < 0.2:
+            path = "".join(rng.choice("a_b/") for _ in range(rng.randint(2, 9)))
+        known = {"b", "a_b", "b_a"}
+
+        def accept(name, value, known=known):
+            return name != "dataset" or value in known
+
+        want = brute_readings(pat, path, accept)
+        assert list(pat.readings(path, accept)) == want, (text, path)
+        every = brute_readings(pat, path, lambda n, v: True)
+        greedy, lazy = pat._shapes
+        g, lz = greedy.match(path), lazy.match(path)
+        assert (g is not None) == bool(every), (text, path)
+        if g is not None and lz is not None:
+            assert g.groupdict() == every[0]
+            assert (g.groupdict() == lz.groupdict()) == (len(every) == 1), (text, path)
+            seen_unique += len(every) == 1
+            seen_ambiguous += len(every) > 1
+    assert seen_unique > 20 and seen_ambiguous > 20  # both kinds were tried
