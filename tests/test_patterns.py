@@ -159,8 +159,8 @@ def test_a_path_read_two_ways_is_an_error_naming_both(tmp_path):
     }
     assert error_of(inputs) == (
         f"{tmp_path}/laptop_a_b_C/est.txt: inputs.estimate reads it two ways, algorithm 'a_b',"
-        " dataset 'C' and algorithm 'a', dataset 'b_C': constrain a wildcard ({run,[0-9]+} or"
-        " inputs.constraints)"
+        " dataset 'C' and algorithm 'a', dataset 'b_C': constrain {algorithm} or {dataset}"
+        " ({algorithm,<regex>} or inputs.constraints.algorithm)"
     )
     # a constraint settles it, inline or in the config, for the pattern and for a sheet alike
     est = tmp_path / "laptop_a_b_C/est.txt"

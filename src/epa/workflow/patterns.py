@@ -120,7 +120,7 @@ class Pattern:
     def _shapes(self) -> tuple[re.Pattern, re.Pattern]:
         """The pattern as a greedy and as a lazy regular expression (constraints aside): where both
         read a path alike, it has that one reading (they find the first and the last one in the
-        order of :meth:`readings`), read in C instead of Python (5 us a path, not 50)."""
+        order of :meth:`readings`), read in C: about 4 us a path, where :meth:`readings` takes 20-50."""
         literals, names = self._parts
         out = []
         for any_ in ("[^/]+", "[^/]+?"):
@@ -210,7 +210,7 @@ class Pattern:
             if len(first) == 2:
                 raise EpaError(
                     f"{self.key} reads it two ways, {_said(first[0])} and {_said(first[1])}:"
-                    " constrain a wildcard ({run,[0-9]+} or inputs.constraints)",
+                    f" {_settle(first[0], first[1])}",
                     path=path,
                 )
             if not first and known is not None:
@@ -222,6 +222,13 @@ class Pattern:
 
 def _said(values: dict[str, str]) -> str:
     return ", ".join(f"{name} {value!r}" for name, value in values.items())
+
+
+def _settle(one: dict[str, str], other: dict[str, str]) -> str:
+    """What settles two readings: a constraint on a wildcard they read differently."""
+    differ = [name for name in one if one[name] != other[name]]
+    names = " or ".join("{" + name + "}" for name in differ)
+    return f"constrain {names} ({{{differ[0]},<regex>}} or inputs.constraints.{differ[0]})"
 
 
 def patterns(value, key: str, constraints: dict | None = None) -> list[Pattern]:
