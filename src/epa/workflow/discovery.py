@@ -46,6 +46,12 @@ def discover_config(
     ``algorithms_dir`` (:func:`discover`). ``say``: where the patterns' and the sheet's account of
     what they matched goes (default: stderr)."""
     inputs = cfg.get("inputs") or {}
+    if inputs.get("constraints") and not inputs.get("estimate"):  # never ignored in silence
+        raise EpaError(
+            "inputs.constraints constrain the wildcards of inputs.reference and inputs.estimate:"
+            " there are none",
+            path=source or "config",
+        )
     if not inputs.get("sheet") and not inputs.get("estimate"):
         return discover(cfg["truth_dir"], cfg["algorithms_dir"], source=source, cfg=cfg)
     say = say or (lambda line: print(f"epa: {line}", file=sys.stderr))
