@@ -70,7 +70,7 @@ def load_schema(path: Path = SCHEMA) -> dict:
 KEYWORDS = {
     "type", "enum", "const", "default", "description", "minimum", "maximum", "exclusiveMinimum",
     "exclusiveMaximum", "minLength", "maxLength", "items", "minItems", "maxItems", "properties",
-    "additionalProperties", "required", "not", "$ref",
+    "additionalProperties", "required", "not", "$ref", "anyOf", "propertyNames",
 }  # fmt: skip
 
 
@@ -135,6 +135,11 @@ def type_of(node: dict, root: dict) -> str:
     if name:
         return f"[{name}](#{name}-settings)"
     node = _resolve(node, root)
+    if "anyOf" in node:  # a list or a word (metrics.segments)
+        return " or ".join(
+            type_of(b, root) + (f" ({', '.join(b['enum'])})" if "enum" in b else "")
+            for b in node["anyOf"]
+        )
     types = node.get("type")
     types = [types] if isinstance(types, str) else list(types or [])
     if "array" in types and "items" in node:
