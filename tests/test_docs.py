@@ -9,6 +9,7 @@ options, a name in backticks is a promise about epica."""
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import shlex
 import shutil
@@ -427,3 +428,86 @@ def test_the_checks_find_a_renamed_setting_option_and_file(tmp_path, example_out
         stages.replace("`01_load/timing.csv`", "`01_load/times.csv`"), example_outputs
     )
     assert any("`01_load/times.csv` is not written" in p for p in said), said
+
+
+# ----------------------------------------------------------------------------- the release
+def _readme_module_recipe() -> str:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    return next(b for b in re.findall(r"```python\n(.*?)```", text, re.S) if "module epica:" in b)
+
+
+def test_the_readme_names_this_release_and_the_changelog_has_it():
+    from epa import __version__
+
+    tag = f"v{__version__}"
+    recipe = _readme_module_recipe()
+    assert re.findall(r'tag="([^"]+)"', recipe) == [tag]
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert set(re.findall(r"--(?:tag|branch) (v[\d.]+)", readme)) == {tag}
+    assert set(re.findall(r"@(v\d+\.\d+\.\d+)", readme)) == {tag}
+    changelog = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
+    assert "## [Unreleased]" in changelog
+    assert re.search(
+        rf"^## \[{re.escape(__version__)}\] - \d{{4}}-\d{{2}}-\d{{2}}$", changelog, re.M
+    )
+
+
+def test_the_readme_module_recipe_deploys_a_clone_at_the_release_tag(tmp_path):
+    """The README's recipe with its local-path form: this checkout's HEAD tagged `v<__version__>` in
+    a clone (the tag a release makes), a `git clone --branch <tag>` of that, and a host workflow
+    whose Snakefile is the README's block with the clone's Snakefile for `github(...)`; a dry run of
+    the bundled example through it."""
+    from epa import __version__
+
+    git = shutil.which("git")
+    if git is None or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout (or no git): nothing to clone")
+    tag = f"v{__version__}"
+
+    def run(*args, cwd=tmp_path):
+        out = subprocess.run([git, *args], cwd=cwd, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        return out.stdout.strip()
+
+    run("clone", "--quiet", "--bare", str(ROOT), "origin.git")
+    run("fetch", "--quiet", str(ROOT), "HEAD", cwd=tmp_path / "origin.git")  # HEAD may be detached
+    run("tag", tag, "FETCH_HEAD", cwd=tmp_path / "origin.git")
+    host = tmp_path / "host"
+    host.mkdir()
+    run("clone", "--quiet", "--branch", tag, str(tmp_path / "origin.git"), "epica", cwd=host)
+    assert run("rev-parse", "HEAD", cwd=host / "epica") == run("rev-parse", "HEAD", cwd=ROOT)
+    version = re.search(r'__version__ = "(.+)"', (host / "epica/src/epa/__init__.py").read_text())
+    assert version and version.group(1) == __version__
+    recipe = re.sub(r"github\([^)]*\)", '"epica/Snakefile"', _readme_module_recipe())
+    assert 'snakefile: "epica/Snakefile"' in recipe
+    (host / "Snakefile").write_text(
+        'configfile: "config.yaml"\n\n'
+        + recipe
+        + "\n\nrule all:\n    default_target: True\n    input:\n        rules.epica_all.input,\n"
+    )
+    example = host / "epica/example"
+    cfg = {
+        "epica": {
+            "truth_dir": str(example / "truth"),
+            "algorithms_dir": str(example / "algorithms"),
+        }
+    }
+    cfg["epica"]["results_dir"] = "epica_results"
+    (host / "config.yaml").write_text(yaml.safe_dump(cfg))
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(host / "epica/src"),
+    }  # the release's library
+    dry = subprocess.run(
+        [sys.executable, "-m", "snakemake", "-n", "--cores", "2", "--quiet", "rules"],
+        cwd=host,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    said = dry.stdout + dry.stderr
+    assert dry.returncode == 0, said[-3000:]
+    jobs = dict(re.findall(r"^(epica_\w+)\s+(\d+)$", said, re.M))
+    assert {"epica_load", "epica_report", "epica_tables", "epica_figures"} <= set(jobs), said
+    assert int(jobs["epica_tables"]) == 1
