@@ -33,10 +33,12 @@ this page is written from it by `{command}`, and a test checks that it is curren
 
 How to pass a config:
 - `snakemake --cores 2` runs the bundled example with [`config/config.yaml`](config.yaml).
-- `snakemake --cores 2 --configfile my.yaml` runs another grid. `my.yaml` must name `truth_dir`,
-  `algorithms_dir` and `results_dir`, or an `inputs` section (path patterns or a run sheet:
-  [docs/inputs.md](../docs/inputs.md)) and `results_dir` (a config file that names no inputs is an
-  error: the bundled example's would be merged in underneath); every other setting defaults.
+- `snakemake --cores 2 --configfile my.yaml` runs another grid. `my.yaml` must name `truth_dir`
+  and `algorithms_dir`, or an `inputs` section (path patterns or a run sheet:
+  [docs/inputs.md](../docs/inputs.md)): a config file that names no inputs is an error (the
+  bundled example's would be merged in underneath). `results_dir` defaults to `results`, the
+  example's: name your own, or the two grids' cases and tables share one folder. Every other
+  setting defaults.
 - Another workflow uses epica as a module with its own config section: `module epica: snakefile:
   ...; config: config["epica"]` (README.md).
 - `snakemake --cores 2 --configfile my.yaml --config key=value` overrides single top-level settings

@@ -1878,6 +1878,12 @@ PACKAGE_ROWS = (
         "`epa verify` of an archive whose `package.json` is a folder (or a link), not a file",
         "not an epica package: its package.json is not a file",
     ),
+    (
+        "unlisted-member",
+        "`epa verify` of a package to which a member `results/huge.bin` was added after packing "
+        "(named, never extracted; exit status 1)",
+        "NOT VERIFIED: 1 archive members not listed in package.json",
+    ),
 )
 
 

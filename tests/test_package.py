@@ -33,6 +33,7 @@ RUN_HERE = {  # each row of the catalogue's package section is run by a test bel
     "wrong-hash-input",
     "input-not-found",
     "tampered-package",
+    "unlisted-member",
 }
 CASES = [
     ("vio_body", "drone_figure8", "run1.txt"),
@@ -155,6 +156,43 @@ def test_a_tampered_package_is_not_verified(moved, tmp_path, capsys, monkeypatch
     out = capsys.readouterr().out
     assert "unpacked" in out and f"({EXPECT['tampered-package']})" in out
     assert "differs: tables/ate.tex: first line " in out and "NOT VERIFIED" in out
+
+
+def test_a_member_the_package_does_not_list_is_named_and_never_extracted(
+    moved, tmp_path, capsys, monkeypatch
+):
+    monkeypatch.chdir(tmp_path)
+    good = package.pack(moved / "results", tmp_path / "p.tar.gz")
+    added = tmp_path / "added.tar.gz"
+    with tarfile.open(good) as tar, tarfile.open(added, "w:gz") as out:
+        for m in tar.getmembers():
+            out.addfile(m, tar.extractfile(m) if m.isfile() else None)
+        huge = tarfile.TarInfo("results/huge.bin")
+        huge.size = 1 << 20
+        out.addfile(huge, io.BytesIO(b"\0" * huge.size))
+    extracted = []
+    real = tarfile.TarFile.extractall
+
+    def spy(self, path=".", members=None, **kw):
+        members = list(members if members is not None else self.getmembers())
+        extracted.extend(m.name for m in members)
+        return real(self, path, members, **kw)
+
+    monkeypatch.setattr(tarfile.TarFile, "extractall", spy)
+    assert cli.main(["verify", str(added), "--data", str(moved / "data")]) == 1
+    out = capsys.readouterr().out
+    assert "1 archive members not listed in package.json, not extracted" in out
+    assert "\n  results/huge.bin\n" in out
+    assert f"epa verify: {EXPECT['unlisted-member']} (the verdicts: " in out
+    assert "REPRODUCED" not in out
+    assert "results/summary.csv" in extracted and "results/huge.bin" not in extracted
+    doc = json.loads((tmp_path / "added.verify.json").read_text())
+    assert doc["unlisted_members"] == ["results/huge.bin"]
+    assert doc["verdict"] == EXPECT["unlisted-member"]
+    # the same package without the member: reproduced, nothing unlisted
+    assert cli.main(["verify", str(good), "--data", str(moved / "data")]) == 0
+    assert "not listed" not in capsys.readouterr().out
+    assert json.loads((tmp_path / "p.verify.json").read_text())["unlisted_members"] == []
 
 
 def test_bad_packages_and_inputs_are_one_line(moved, tmp_path, capsys, monkeypatch):

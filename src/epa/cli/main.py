@@ -134,8 +134,10 @@ def _protocols() -> tuple[str, ...]:
 
 def _add_eval_sources(e) -> None:
     """How `epa eval` reads its two inputs: formats, stamps, bag topics and TF frames."""
-    e.add_argument("--ref-format", help="reference format (auto, tum, kitti, euroc, openvins, csv)")
-    e.add_argument("--est-format", help="estimate format")
+    e.add_argument(
+        "--ref-format", help="reference format (auto, tum, kitti, euroc, openvins, csv, position)"
+    )
+    e.add_argument("--est-format", help="estimate format (the same choices)")
     e.add_argument("--unsorted", choices=["error", "sort"], help="repeated/backward stamps")
     e.add_argument("--time-unit", choices=["auto", "s", "ns", "sec_nsec"])
     e.add_argument("--ref-topic", help="reference bag topic")
@@ -674,7 +676,7 @@ def _eval(args) -> None:
         )
     if e.get("available"):
         ea = (
-            f"EA-Drift {e['ea_drift']:.4f} % (seed formula {e['ea_drift_seed']:.4f} %)"
+            f"EA-Drift {e['ea_drift']:.4f} % (EPA's formula {e['ea_drift_seed']:.4f} %)"
             if e.get("ea_drift") is not None
             else "EA-Drift empty: " + e.get("ea_drift_reason", "")
         )

@@ -1,4 +1,4 @@
-"""Local drift/fail detection, success rate and drift-valid metrics (seed 000, issue 4).
+"""Local drift/fail detection, success rate and drift-valid metrics (EPA's definitions).
 
 Signals are computed on the final aligned case: the time-RPE pairs (``metrics.time_delta``, 1 s by
 default) and the APE translation series. A pose is invalid when a time-RPE pair spanning it has a

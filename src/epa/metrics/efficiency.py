@@ -1,8 +1,8 @@
-"""Efficiency: per-frame processing time, and the Efficiency-Aware Drift rate (EA-Drift, seed 003).
+"""Efficiency: per-frame processing time, and the Efficiency-Aware Drift rate (EA-Drift, EPA's definition).
 
 EA-Drift = sqrt(sum_i w_i |e_i|^2) / L, w_i = exp((t_i - T) / T), where e_i is the translation error
 of pose i after the rigid alignment, t_i the processing time of frame i and T = 1/f the sensor
-period, both in seconds (the seed writes (t_i - 1/f)/f with t_i in ms; only t_i and T in one unit
+period, both in seconds (EPA's text writes (t_i - 1/f)/f with t_i in ms; only t_i and T in one unit
 and the difference divided by T make the weight dimensionless and exactly 1 when a frame takes one
 period), and L the estimate's path length. Reported in % like the drift rate.
 
@@ -118,7 +118,7 @@ def _overflowing_frame(frame_ms: np.ndarray, rate_hz: float) -> int | None:
 
 
 def ea_drift(err_m: np.ndarray, frame_ms: np.ndarray, rate_hz: float, path_length_m: float) -> dict:
-    """The seed's EA-Drift and the per-frame normalised variant, in %."""
+    """EPA's EA-Drift and the per-frame normalised variant, in %."""
     w = weights(frame_ms, rate_hz)
     s = float(np.sum(w * err_m**2))
     n = len(err_m)

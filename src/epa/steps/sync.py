@@ -104,7 +104,7 @@ def associate(
 
 # ----------------------------------------------------------------------------- Step 1
 def angular_speed(traj: Trajectory, step: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """|log(R_i^T R_{i+step})| / dt, stamped at the midpoints (seed 004; step 1 = consecutive poses)."""
+    """|log(R_i^T R_{i+step})| / dt, stamped at the midpoints (EPA's angular rate; step 1 = consecutive poses)."""
     t = traj.t
     dt = t[step:] - t[:-step]
     return t[:-step] + dt / 2, geometry.relative_angles(traj.q, step) / dt

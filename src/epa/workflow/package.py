@@ -13,6 +13,7 @@ import re
 import sys
 import tarfile
 from pathlib import Path
+from typing import NamedTuple
 
 from epa import __version__
 from epa.core.errors import EpaError
@@ -165,10 +166,26 @@ def is_package(path) -> bool:
     return path.is_file() and path.name.endswith((".tar.gz", ".tgz", ".tar"))
 
 
-def unpack(archive, into) -> tuple[Path, Path | None, list[str]]:
-    """Unpack ``archive`` into ``into``; returns its results folder, its inputs folder (or None) and
-    each packed file whose bytes no longer match the manifest. A file that is not such an archive,
-    a cut-off one, or one from a newer epica is one line naming the archive."""
+class Unpacked(NamedTuple):
+    results: Path  # the results folder
+    inputs: Path | None  # the inputs folder, if packed
+    changed: list[str]  # listed files whose bytes no longer match package.json
+    unlisted: list[str]  # members package.json does not list: named, never extracted
+
+
+def listed_members(manifest: dict) -> set[str]:
+    """The archive members a package vouches for: its manifest, REPRODUCE.md, the lock file, each
+    results file and each input that ``package.json`` names."""
+    names = {MANIFEST, README} | ({LOCK} if manifest.get("lock") else set())
+    names |= {f"{manifest.get('results', RESULTS)}/{n}" for n in manifest["files"]}
+    return names | {f"{INPUTS}/{sha}" for sha in manifest.get("inputs") or {}}
+
+
+def unpack(archive, into) -> Unpacked:
+    """Unpack the members of ``archive`` that its ``package.json`` lists into ``into``; any other
+    member is named in ``unlisted`` and not extracted (a package vouches only for what it lists).
+    A file that is not such an archive, a cut-off one, or one from a newer epica is one line naming
+    the archive."""
     archive, into = Path(archive), Path(into)
     try:
         with tarfile.open(archive, "r:*") as tar:
@@ -186,7 +203,13 @@ def unpack(archive, into) -> tuple[Path, Path | None, list[str]]:
                 parts = Path(m.name).parts
                 if Path(m.name).is_absolute() or ".." in parts or not (m.isfile() or m.isdir()):
                     raise EpaError(f"refused: the archive holds {m.name!r}", path=str(archive))
-            tar.extractall(into)
+            listed = listed_members(manifest)
+            folders = {str(parent) for name in listed for parent in Path(name).parents}
+            take = [m for m in members if m.isfile() and m.name in listed]
+            unlisted = sorted(
+                {m.name for m in members if m.name not in listed and m.name not in folders}
+            )
+            tar.extractall(into, members=take)
     except (tarfile.TarError, EOFError, OSError, ValueError) as exc:
         raise EpaError(f"cannot unpack: {_why(exc)}", path=str(archive)) from None
     results = into / manifest["results"]
@@ -196,7 +219,7 @@ def unpack(archive, into) -> tuple[Path, Path | None, list[str]]:
         if not (results / name).is_file() or provenance.sha256(results / name) != sha
     ]
     inputs = into / INPUTS
-    return results, inputs if inputs.is_dir() else None, changed
+    return Unpacked(results, inputs if inputs.is_dir() else None, changed, unlisted)
 
 
 def _why(exc: Exception) -> str:

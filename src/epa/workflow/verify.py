@@ -12,6 +12,8 @@
    record (every case's stage artifacts, ``consistency/<alg>/<dataset>.csv``) number by number. Exit
    status 0 only when every printed output is identical (or differs only by digits flipped at a
    rounding boundary) and every record is within the contract; ``exact`` compares bytes instead.
+A package's members that its ``package.json`` does not list are named, never extracted, and make
+the verdict NOT VERIFIED (exit status 1): a package vouches only for what it lists.
 See docs/reproducibility.md.
 """
 
@@ -260,11 +262,20 @@ def verify(
 def _verify(source, tmp, cores, snakefile, keep, force, exact, data, json_path, log) -> int:
     results = source
     damaged: list[str] = []
+    unlisted: list[str] = []
     if package.is_package(source):
-        results, inputs, damaged = package.unpack(source, tmp / "package")
+        results, inputs, damaged, unlisted = package.unpack(source, tmp / "package")
         print(
             f"epa verify: unpacked {source} ({len(damaged)} files changed since packed)", file=log
         )
+        if unlisted:
+            print(
+                f"epa verify: {len(unlisted)} archive members not listed in {package.MANIFEST}, "
+                "not extracted and not vouched for:",
+                file=log,
+            )
+            for name in unlisted:
+                print("  " + name, file=log)
         data += [inputs] if inputs else []
         json_path = json_path or Path.cwd() / (source.name.split(".")[0] + ".verify.json")
     doc = _read_results(results)
@@ -300,19 +311,24 @@ def _verify(source, tmp, cores, snakefile, keep, force, exact, data, json_path, 
     ok = report(compared, exact=exact, log=log) and not problems
     how = "byte for byte" if exact else "within the numeric contract"
     verdict = "REPRODUCED " + how if ok else "NOT VERIFIED"
+    if unlisted:  # what it lists may reproduce; the archive as a whole is not what was packed
+        ok = False
+        verdict = f"NOT VERIFIED: {len(unlisted)} archive members not listed in {package.MANIFEST}"
     out = Path(json_path) if json_path else (into if keep else results) / "verify.json"
     try:
-        _write_json(out, source, doc, compared, verdict, problems or [], exact)
+        _write_json(out, source, doc, compared, verdict, problems or [], exact, unlisted)
     except EpaError:
         if json_path:
             raise
         out = Path.cwd() / "verify.json"  # a results folder one may not write to (a read-only copy)
-        _write_json(out, source, doc, compared, verdict, problems or [], exact)
+        _write_json(out, source, doc, compared, verdict, problems or [], exact, unlisted)
     print(f"epa verify: {verdict} (the verdicts: {out})", file=log)
     return 0 if ok else 1
 
 
-def _write_json(out: Path, source, doc, compared, verdict: str, problems, exact: bool) -> None:
+def _write_json(
+    out: Path, source, doc, compared, verdict: str, problems, exact: bool, unlisted=()
+) -> None:
     """verify.json: the verdict, what was compared and how, and both machines' numerics."""
     from epa import __version__
     from epa.artifacts import files
@@ -323,6 +339,7 @@ def _write_json(out: Path, source, doc, compared, verdict: str, problems, exact:
         "rule": "bytes" if exact else "numeric contract (docs/reproducibility.md)",
         "epica": __version__,
         "inputs_not_as_recorded": problems,
+        "unlisted_members": list(unlisted),
         "table": [dict(zip(("file", "verdict", "worst"), row)) for row in summary_rows(compared)],
         "files": [c.to_dict() for c in compared],
         "numerics": {"recorded": doc.get("numerics"), "here": provenance.environment()["numerics"]},

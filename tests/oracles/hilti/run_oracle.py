@@ -1,6 +1,8 @@
 """Runs the Hilti SLAM Challenge 2022 evaluation on the cases of hilti_cases.py; writes its outputs here.
 
-    /tmp/venv-h4-hilti/bin/python tests/oracles/hilti/run_oracle.py EVALUATION_2022_DIR DATA_DIR
+    $VENV/bin/python tests/oracles/hilti/run_oracle.py EVALUATION_2022_DIR DATA_DIR
+
+($VENV: the environment README.md here describes.)
 
 2022: batch_evaluation.evaluate_submission (unchanged) on a submission holding one case as
 ``exp07_long_corridor.txt`` against its control points under that name (the pole tip applied);

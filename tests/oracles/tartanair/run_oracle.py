@@ -1,6 +1,6 @@
 """Runs tartanair_tools' evaluator on the cases of tartanair_cases.py and writes its outputs here.
 
-    /tmp/venv-h4/bin/python tests/oracles/tartanair/run_oracle.py TOOLS_EVALUATION_DIR DATA_DIR
+    $VENV/bin/python tests/oracles/tartanair/run_oracle.py TOOLS_EVALUATION_DIR DATA_DIR
 
 (see README.md here for the environment)
 

@@ -1,4 +1,4 @@
-"""error_comparison.txt in the seed's layout (mode epa)."""
+"""error_comparison.txt in EPA's layout (mode epa)."""
 
 from __future__ import annotations
 
