@@ -20,6 +20,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+from epa.workflow import settings
+
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = ROOT / "src/epa/workflow/config.schema.yaml"
 
@@ -80,8 +82,7 @@ def _schema() -> dict:
 def _resolve(node: dict, schema: dict) -> list[dict]:
     """The node and the branches it may take (a $ref followed, oneOf/anyOf/allOf spread)."""
     if "$ref" in node:
-        name = node["$ref"].split("/")[-1]
-        return _resolve(schema["$defs"][name], schema)
+        return _resolve(settings._pointer(schema, node["$ref"]), schema)
     out = [node]
     for key in ("oneOf", "anyOf", "allOf"):
         for branch in node.get(key, []):
