@@ -335,3 +335,60 @@ def test_mode_rpg_takes_each_estimate_folders_eval_cfg(data, tmp_path):
     with pytest.raises(EpaError, match="eval_cfg.yaml sets 'posyaw'"):
         overrides.for_grid(cfg, [case])
     assert overrides.for_grid(resolved(align={"method": "se3"}), [case]) == {}  # mode epa: not read
+
+
+@pytest.fixture(scope="module")
+def mixed(data, tmp_path_factory):
+    """A paper's mixed grid from real files: ORB-SLAM3 monocular and stereo on EuRoC MH_01 (body
+    frame reference: Step 2 finds the camera), ORB-SLAM (stereo) on KITTI 00, per-cell settings:
+    the monocular one declared, KITTI with the devkit's lengths and scale-aware drift."""
+    from test_workflow import smk
+
+    root = tmp_path_factory.mktemp("mixed")
+    links = {
+        "truth/MH_01.txt": "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt",
+        "truth/KITTI_00.txt": "MichaelGrupp_evo/test/data/KITTI_00_gt.txt",
+        "truth/KITTI_00_times.txt": "MichaelGrupp_evo/test/data/KITTI_00_gt_times.txt",
+        "algs/orb3_mono/MH_01/run1.txt": "spsingh37_ORB_SLAM3_ubuntu22/f_dataset-MH01_mono.txt",
+        "algs/orb3_stereo/MH_01/run1.txt": "spsingh37_ORB_SLAM3_ubuntu22/f_dataset-MH01_stereo.txt",
+        "algs/orb3_stereo/KITTI_00/run1.txt": "MichaelGrupp_evo/test/data/KITTI_00_ORB.txt",
+    }
+    for name, target in links.items():
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).symlink_to(data / target)
+    (root / "cfg.yaml").write_text(
+        "truth_dir: truth\nalgorithms_dir: algs\nresults_dir: results\n"
+        "sources: {algorithms: {orb3_mono: {metric_scale: false}}}\n"
+        "overrides:\n"
+        "  datasets:\n"
+        "    'KITTI_*': {metrics: {segments: kitti}, drift: {mode: scale_aware}}\n"
+    )
+    smk(root)
+    return root / "results"
+
+
+def test_a_real_mixed_grid_evaluates_each_cell_as_it_fits(mixed):
+    mono = _doc(mixed, "orb3_mono/MH_01/run1")
+    assert mono["alignment"]["method"] == "sim3" and mono["sim3_check"]["warning"] is None
+    assert mono["ate"]["trans_m"]["rmse"] == pytest.approx(0.0186, abs=5e-4)
+    stereo = _doc(mixed, "orb3_stereo/MH_01/run1")
+    assert stereo["alignment"]["method"] == "se3" and stereo["sim3_check"]["warning"] is None
+    kitti = _doc(mixed, "orb3_stereo/KITTI_00/run1")
+    assert accuracy.recorded_lengths(kitti) == [100.0 * k for k in range(1, 9)]
+    assert accuracy.recorded_lengths(stereo) == [8.0, 16.0, 24.0, 32.0, 40.0, 48.0]
+    drift = json.loads((mixed / "cases/orb3_stereo/KITTI_00/run1/07_drift/drift.json").read_text())
+    assert drift.get("warning") is None  # scale-aware thresholds fit the kilometres
+    # one table: the lengths of both datasets, each cell from the datasets that have it
+    tex = (mixed / "tables/rpe_distance.tex").read_text()
+    assert "\\textbf{48m} & \\textbf{100m}" in tex and "\\textbf{800m}" in tex
+    rows = {
+        r.split(",")[0] + "/" + r.split(",")[1]: r
+        for r in (mixed / "summary.csv").read_text().splitlines()
+    }
+    header = rows["algorithm/dataset"].split(",")
+    mono_row = dict(zip(header, rows["orb3_mono/MH_01"].split(",")))
+    assert mono_row["alignment"] == "sim3" and float(mono_row["scale"]) == pytest.approx(
+        5.17, abs=0.01
+    )
+    assert 0 < float(mono_row["scale_std"]) < 0.01
+    assert mono_row["rpe_100m_trans_mean_m"] == ""  # MH_01 has no 100 m segment length

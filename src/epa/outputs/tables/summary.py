@@ -121,11 +121,15 @@ def summary_rows(
             # a stage after drift that failed (a broken timing file) leaves the accuracy standing
             failed = [r["failed"] for r in c.records.values() if r.get("failed")]
             warned = [w for w in (c.record_of(m).get("warning") for m in registry.REGISTRY) if w]
+            if d.get("warning"):  # drift's thresholds do not fit the dataset
+                warned.insert(0, d["warning"])
             # a position-only estimate's rotation columns are nan for want of an orientation
             only = [POSITION_ONLY_NOTE] if position_only(c) else []
             row["notes"] = "; ".join(failed + warned + only) or None
             for s in segments:
                 L = segment_key(s)
+                if L not in (m.get("rpe_distance") or {}):  # a length of other datasets: empty
+                    continue
                 row[f"rpe_{L}m_trans_mean_m"] = stat(m, "rpe_distance", L, "trans_m", "mean")
                 row[f"rpe_{L}m_rot_mean_deg"] = stat(m, "rpe_distance", L, "rot_deg", "mean")
                 row[f"drift_rate_{L}m_pct"] = stat(m, "drift_rate_pct", L)
