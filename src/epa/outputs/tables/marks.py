@@ -1,0 +1,129 @@
+"""The marks of a table cell: how the cases it holds were evaluated, when that is not one recipe.
+
+A cell is marked (a superscript letter in the .tex and the text tables, a footnote under the table,
+the letters in the CSV's ``marks`` column) when its cases
+
+- ``e``: were evaluated by different sources (``eval_source``: epa, and the ov_eval way a case falls
+  back to when Step 1 or 2 is not trusted);
+- ``a``: were aligned by different Step 3 methods (``05_align/transform.json`` ``method``);
+- ``s``: were Sim3-aligned (the fitted scale in the footnote, per algorithm);
+- ``f``: hold a flagged case: a registered metric's record carries a ``warning`` (the Sim3 scale
+  check's, any other's), even a cell of one case.
+
+Every letter is of the cases a cell pools: a dataset's runs, or every run of the algorithm for its
+Average and the per-segment and per-algorithm tables.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from epa.metrics import registry
+
+SOURCES, ALIGNMENTS, SIM3, FLAGGED = "e", "a", "s", "f"
+ORDER = (SOURCES, ALIGNMENTS, SIM3, FLAGGED)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """How one case was evaluated, as its records say."""
+
+    source: str  # metrics.json eval_source
+    fallback: bool  # the ov_eval way because Step 1 or 2 was not trusted (not by choice)
+    method: str | None  # Step 3's method (se3, sim3, posyaw, none)
+    scale: float | None  # Step 3's Sim3 scale
+    warnings: tuple[tuple[str, str], ...]  # (metric key, warning) of every metric that warned
+
+
+def evaluation(c) -> Evaluation:
+    """A case's :class:`Evaluation`, made once per case (a cell of every table asks for it)."""
+    kept = getattr(c, "_evaluation", None)
+    if kept is None:
+        m = c.metrics
+        align = m.get("alignment") or {}
+        plan = (m.get("calibrate") or {}).get("plan") or {}
+        scale = align.get("scale") if align.get("method") == "sim3" else None
+        warned = []
+        for metric in registry.REGISTRY:
+            record = c.record_of(metric)
+            if isinstance(record, dict) and record.get("warning"):
+                warned.append((metric.key, str(record["warning"])))
+        kept = Evaluation(
+            source=m.get("eval_source", "epa"),
+            fallback=bool(plan.get("fallback")),
+            method=align.get("method"),
+            scale=None if scale is None else float(scale),
+            warnings=tuple(warned),
+        )
+        c._evaluation = kept
+    return kept
+
+
+def of_cases(cases) -> str:
+    """The marks of a cell holding ``cases`` (those with a result), as letters in :data:`ORDER`
+    joined by commas; "" for none."""
+    if not cases:
+        return ""
+    evals = [evaluation(c) for c in cases]
+    found = set()
+    if len({e.source for e in evals}) > 1:
+        found.add(SOURCES)
+    if len({e.method for e in evals}) > 1:
+        found.add(ALIGNMENTS)
+    if any(e.method == "sim3" for e in evals):
+        found.add(SIM3)
+    if any(e.warnings for e in evals):
+        found.add(FLAGGED)
+    return ",".join(k for k in ORDER if k in found)
+
+
+def tex(marks: str) -> str:
+    """A cell's marks after its numbers in LaTeX."""
+    return r"\textsuperscript{" + marks + "}" if marks else ""
+
+
+def notes(cells_by_row: dict[str, list]) -> list[tuple[str, str]]:
+    """(letter, what it means) for each letter the table's cells carry, in :data:`ORDER`.
+    ``cells_by_row``: each row's algorithm and its cells (``marks``, ``cases``)."""
+    used: dict[str, dict[str, dict[int, object]]] = {}  # letter -> algorithm -> its cases, once
+    for alg, cells in cells_by_row.items():
+        for cell in cells:
+            for k in filter(None, (cell.marks or "").split(",")):
+                held = used.setdefault(k, {}).setdefault(alg, {})
+                held.update((id(c), c) for c in cell.cases or ())
+    out = []
+    for k in ORDER:
+        if k not in used:
+            continue
+        evals = [evaluation(c) for held in used[k].values() for c in held.values()]
+        if k == SOURCES:
+            sources = ", ".join(sorted({e.source for e in evals}))
+            out.append(
+                (
+                    k,
+                    f"pools cases evaluated differently ({sources}; ov_eval: Step 1 or 2 not"
+                    " trusted, evaluated without them)",
+                )
+            )
+        elif k == ALIGNMENTS:
+            methods = ", ".join(sorted({str(e.method) for e in evals}))
+            out.append((k, f"pools cases of different Step 3 alignments ({methods})"))
+        elif k == SIM3:
+            scales = []
+            for alg, held in used[k].items():
+                s = [v for c in held.values() if (v := evaluation(c).scale) is not None]
+                if s:
+                    scales.append(f"{alg} {np.mean(s):.3f}")
+            out.append((k, "Sim3-aligned cases (mean Sim3 scale: " + ", ".join(scales) + ")"))
+        else:
+            keys = ", ".join(sorted({key for e in evals for key, _ in e.warnings}))
+            out.append(
+                (
+                    k,
+                    f"holds a flagged case: a metric warned ({keys}; see summary.csv's notes and"
+                    " the case report)",
+                )
+            )
+    return out
