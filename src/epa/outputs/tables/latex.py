@@ -77,7 +77,10 @@ class Built(NamedTuple):
     def note_rows(self) -> list[str]:
         """The footnotes as LaTeX rows spanning the table."""
         return [
-            rf"\multicolumn{{{self.ncols}}}{{l}}{{\footnotesize {mark.tex(k)} {latex_escape(t)}}} \\"
+            rf"\multicolumn{{{self.ncols}}}{{l}}{{\footnotesize "
+            + (mark.tex(k) + " " if k else "")
+            + latex_escape(t)
+            + r"} \\"
             for k, t in self.notes
         ]
 

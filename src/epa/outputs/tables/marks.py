@@ -6,12 +6,13 @@ the letters in the CSV's ``marks`` column) when its cases
 - ``e``: were evaluated by different sources (``eval_source``: epa, and the ov_eval way a case falls
   back to when Step 1 or 2 is not trusted);
 - ``a``: were aligned by different Step 3 methods (``05_align/transform.json`` ``method``);
-- ``s``: were Sim3-aligned (the fitted scale in the footnote, per algorithm);
 - ``f``: hold a flagged case: a registered metric's record carries a ``warning`` (the Sim3 scale
   check's, any other's), even a cell of one case.
 
 Every letter is of the cases a cell pools: a dataset's runs, or every run of the algorithm for its
-Average and the per-segment and per-algorithm tables.
+Average and the per-segment and per-algorithm tables. Rows with Sim3-aligned cases are named in a
+footnote with their mean fitted scale, not marked cell by cell (a grid of monocular systems would
+mark every cell).
 """
 
 from __future__ import annotations
@@ -22,8 +23,8 @@ import numpy as np
 
 from epa.metrics import registry
 
-SOURCES, ALIGNMENTS, SIM3, FLAGGED = "e", "a", "s", "f"
-ORDER = (SOURCES, ALIGNMENTS, SIM3, FLAGGED)
+SOURCES, ALIGNMENTS, FLAGGED = "e", "a", "f"
+ORDER = (SOURCES, ALIGNMENTS, FLAGGED)
 
 
 @dataclass(frozen=True)
@@ -72,8 +73,6 @@ def of_cases(cases) -> str:
         found.add(SOURCES)
     if len({e.method for e in evals}) > 1:
         found.add(ALIGNMENTS)
-    if any(e.method == "sim3" for e in evals):
-        found.add(SIM3)
     if any(e.warnings for e in evals):
         found.add(FLAGGED)
     return ",".join(k for k in ORDER if k in found)
@@ -85,45 +84,40 @@ def tex(marks: str) -> str:
 
 
 def notes(cells_by_row: dict[str, list]) -> list[tuple[str, str]]:
-    """(letter, what it means) for each letter the table's cells carry, in :data:`ORDER`.
+    """(letter, what it means) for each letter the table's cells carry, in :data:`ORDER`, then
+    ("", the rows with Sim3-aligned cases and their mean scale) where there are any.
     ``cells_by_row``: each row's algorithm and its cells (``marks``, ``cases``)."""
-    used: dict[str, dict[str, dict[int, object]]] = {}  # letter -> algorithm -> its cases, once
+    used: dict[str, dict[int, object]] = {}  # letter -> the cases of the cells marked so, once
+    sim3: dict[str, dict[int, float]] = {}  # algorithm -> the scale of each Sim3-aligned case
     for alg, cells in cells_by_row.items():
         for cell in cells:
+            for c in cell.cases or ():
+                if (scale := evaluation(c).scale) is not None:
+                    sim3.setdefault(alg, {})[id(c)] = scale
             for k in filter(None, (cell.marks or "").split(",")):
-                held = used.setdefault(k, {}).setdefault(alg, {})
-                held.update((id(c), c) for c in cell.cases or ())
+                used.setdefault(k, {}).update((id(c), c) for c in cell.cases or ())
     out = []
     for k in ORDER:
         if k not in used:
             continue
-        evals = [evaluation(c) for held in used[k].values() for c in held.values()]
+        evals = [evaluation(c) for c in used[k].values()]
         if k == SOURCES:
             sources = ", ".join(sorted({e.source for e in evals}))
-            out.append(
-                (
-                    k,
-                    f"pools cases evaluated differently ({sources}; ov_eval: Step 1 or 2 not"
-                    " trusted, evaluated without them)",
-                )
+            what = (
+                f"pools cases evaluated differently ({sources}; ov_eval: Step 1 or 2 not trusted,"
+                " evaluated without them)"
             )
         elif k == ALIGNMENTS:
             methods = ", ".join(sorted({str(e.method) for e in evals}))
-            out.append((k, f"pools cases of different Step 3 alignments ({methods})"))
-        elif k == SIM3:
-            scales = []
-            for alg, held in used[k].items():
-                s = [v for c in held.values() if (v := evaluation(c).scale) is not None]
-                if s:
-                    scales.append(f"{alg} {np.mean(s):.3f}")
-            out.append((k, "Sim3-aligned cases (mean Sim3 scale: " + ", ".join(scales) + ")"))
+            what = f"pools cases of different Step 3 alignments ({methods})"
         else:
             keys = ", ".join(sorted({key for e in evals for key, _ in e.warnings}))
-            out.append(
-                (
-                    k,
-                    f"holds a flagged case: a metric warned ({keys}; see summary.csv's notes and"
-                    " the case report)",
-                )
+            what = (
+                f"holds a flagged case: a metric warned ({keys}; see summary.csv's notes and the"
+                " case report)"
             )
+        out.append((k, what))
+    if sim3:
+        rows = ", ".join(f"{alg} {np.mean(list(s.values())):.3f}" for alg, s in sim3.items())
+        out.append(("", f"Sim3-aligned rows (mean Sim3 scale of their cases): {rows}"))
     return out

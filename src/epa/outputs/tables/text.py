@@ -65,7 +65,7 @@ def report_text(
             table.title,
             RULE_LONG,
             *(_MARKS.sub(r" [\1]", r.replace(" $\\pm$ ", " ± ")) for r in table.rows),
-            *(f"[{k}] {text}" for k, text in table.notes),
+            *((f"[{k}] " if k else "") + text for k, text in table.notes),
             RULE_LONG,
         ]
     return "\n".join(lines + count_lines(grid)) + "\n"
