@@ -353,3 +353,22 @@ def test_the_end_of_run_summary_names_each_flagged_case_and_its_fix(sim3_grid):
     assert all("sim3_check: Sim3 scale 2" in line and "metric_scale" in line for line in lines[3:])
     assert len(tables.failure_report(out / "summary.csv", most=1).splitlines()) == 5
     assert tables.failure_report(out / "summary.csv", most=1).endswith("  ... and 1 more flagged")
+
+
+def test_rpg_tables_mark_their_cells_as_the_others_do():
+    from epa.outputs.tables import rpg
+
+    flagged = _case("r1", method="sim3", scale=3.0, sim3_check={"warning": "w"})
+    held = [[[_case("r2"), _case("r3")], [flagged]], [[_case("r4")], []]]
+    tex = rpg._tex("T", [["0.100", "0.200"], ["0.300", "-"]], ["a", "b"], ["x", "y"], "hline", held)
+    lines = tex.splitlines()
+    assert lines[3:5] == [r"a & 0.100 & 0.200\textsuperscript{f} \\", r"b & 0.300 & - \\"]
+    assert lines[5] == r"\hline" and "holds a flagged case" in lines[6]
+    assert lines[7] == (
+        r"\multicolumn{3}{l}{\footnotesize Sim3-aligned rows (mean Sim3 scale of their cases):"
+        r" a 3.000} \\"
+    )
+    # without marks: the table as it was
+    plain = rpg._tex("T", [["0.100"]], ["a"], ["x"], "hline", [[[_case("r5")]]])
+    assert plain == rpg._tex("T", [["0.100"]], ["a"], ["x"], "hline")
+    assert plain.splitlines()[-2:] == [r"a & 0.100 \\", r"\end{tabular}"]

@@ -40,7 +40,7 @@ class Evaluation:
 
 def evaluation(c) -> Evaluation:
     """A case's :class:`Evaluation`, made once per case (a cell of every table asks for it)."""
-    kept = getattr(c, "_evaluation", None)
+    kept = c._evaluation
     if kept is None:
         m = c.metrics
         align = m.get("alignment") or {}
