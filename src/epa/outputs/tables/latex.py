@@ -203,7 +203,11 @@ def _per_segment(layout: _Layout, segments, name: str, title: str, fn):
     rows = []
     for a in layout.algs:
         runs = ok_runs(layout.grid, a)
-        rows.append((a, a, [_marked(fn(runs, s), runs) for s in segments]))
+        marks = mark.of_cases(runs)  # every cell of the row holds the same runs
+        cells = [fn(runs, s) for s in segments]
+        for cell in cells:
+            cell.cases, cell.marks = runs, marks if cell.values is not None else ""
+        rows.append((a, a, cells))
     return _built(
         name,
         title + SPREAD_TITLE[layout.spread].replace("RUNS]", "RUNS OF ALL DATASETS]"),

@@ -67,14 +67,16 @@ def of_cases(cases) -> str:
     joined by commas; "" for none."""
     if not cases:
         return ""
-    evals = [evaluation(c) for c in cases]
+    first = evaluation(cases[0])
     found = set()
-    if len({e.source for e in evals}) > 1:
-        found.add(SOURCES)
-    if len({e.method for e in evals}) > 1:
-        found.add(ALIGNMENTS)
-    if any(e.warnings for e in evals):
-        found.add(FLAGGED)
+    for c in cases:  # one pass: every table's every cell asks (0.3 s of 1,000 cases' tables)
+        e = c._evaluation or evaluation(c)
+        if e.source != first.source:
+            found.add(SOURCES)
+        if e.method != first.method:
+            found.add(ALIGNMENTS)
+        if e.warnings:
+            found.add(FLAGGED)
     return ",".join(k for k in ORDER if k in found)
 
 
