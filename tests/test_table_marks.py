@@ -372,3 +372,77 @@ def test_rpg_tables_mark_their_cells_as_the_others_do():
     plain = rpg._tex("T", [["0.100"]], ["a"], ["x"], "hline", [[[_case("r5")]]])
     assert plain == rpg._tex("T", [["0.100"]], ["a"], ["x"], "hline")
     assert plain.splitlines()[-2:] == [r"a & 0.100 \\", r"\end{tabular}"]
+
+
+# ----------------------------------------------------------------------------- real data
+GT = "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt"
+ORB = "spsingh37_ORB_SLAM3_ubuntu22/f_dataset-MH01_{}.txt"
+
+
+def _warned(record: dict) -> bool:
+    """Whether any metric's record in metrics.json carries a warning (the test's own reading)."""
+    return any(isinstance(v, dict) and v.get("warning") for v in record.values())
+
+
+def test_real_orb_slam3_mono_and_stereo_pooled_in_one_cell_are_marked(data, tmp_path):
+    """ORB-SLAM3 mono and stereo on EuRoC MH_01 as two runs of one algorithm, default settings: the
+    monocular run's Step 2 is not trusted (its scale), so it is evaluated the ov_eval way and its
+    cell pools two evaluations; the stereo-only algorithm's row is one recipe. The expected marks
+    are read from each case's metrics.json, not from the tables' code."""
+    import json
+
+    (tmp_path / "truth").mkdir()
+    (tmp_path / "truth/MH_01.txt").symlink_to(data / GT)
+    runs = {"orb/MH_01/mono": "mono", "orb/MH_01/stereo": "stereo", "stereo/MH_01/run1": "stereo"}
+    for key, kind in runs.items():
+        (tmp_path / "algorithms" / key).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / "algorithms" / f"{key}.txt").symlink_to(data / ORB.format(kind))
+    cfg = settings.resolve(
+        {
+            "truth_dir": str(tmp_path / "truth"),
+            "algorithms_dir": str(tmp_path / "algorithms"),
+            "report": {"per_case": False},
+        }
+    )
+    cases = [
+        {
+            "key": k,
+            "truth": str(tmp_path / "truth/MH_01.txt"),
+            "estimate": str(tmp_path / f"algorithms/{k}.txt"),
+        }
+        for k in runs
+    ]
+    out = tmp_path / "results"
+    run_stages(cases, out, cfg, stages=chain.NAMES[:-1])
+    assert tables.make(sorted(runs), out, cfg) == []
+    m = {k: json.loads((out / "cases" / k / "06_metrics/metrics.json").read_text()) for k in runs}
+    assert m["orb/MH_01/mono"]["eval_source"] == "ov_eval"  # Step 2 not trusted: its scale
+    assert m["orb/MH_01/stereo"]["eval_source"] == "epa"
+
+    def expected(keys):
+        letters = []
+        if len({m[k]["eval_source"] for k in keys}) > 1:
+            letters.append("e")
+        if len({m[k]["alignment"]["method"] for k in keys}) > 1:
+            letters.append("a")
+        if any(_warned(m[k]) for k in keys):
+            letters.append("f")
+        return ",".join(letters)
+
+    orb, stereo = expected(["orb/MH_01/mono", "orb/MH_01/stereo"]), expected(["stereo/MH_01/run1"])
+    assert orb.startswith("e")
+    frame = epa.read_cells(out)
+    ate = frame[frame.metric == "ate"].groupby("algorithm").marks.agg(set)
+    assert ate["orb"] == {orb} and ate["stereo"] == {stereo}
+    tex = (out / "tables/ate.tex").read_text()
+    assert f"\\textsuperscript{{{orb}}} \\\\" in next(
+        r for r in tex.splitlines() if r.startswith("orb &")
+    )
+    assert "pools cases evaluated differently (epa, ov\\_eval;" in tex
+    fell_back = sum(bool(r["calibrate"]["plan"]["fallback"]) for r in m.values())
+    text = (out / "error_comparison.txt").read_text()
+    assert (
+        f"FELL BACK (STEP 1 OR 2 NOT TRUSTED, EVALUATED THE OV_EVAL WAY): {fell_back} of 3" in text
+    )
+    report = tables.failure_report(out / "summary.csv")
+    assert f"  orb: {fell_back} of 2 cases fell back to the ov_eval way" in report
