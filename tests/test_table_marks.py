@@ -446,3 +446,19 @@ def test_real_orb_slam3_mono_and_stereo_pooled_in_one_cell_are_marked(data, tmp_
     )
     report = tables.failure_report(out / "summary.csv")
     assert f"  orb: {fell_back} of 2 cases fell back to the ov_eval way" in report
+
+
+def test_error_comparison_counts_only_what_there_is():
+    from epa.outputs.tables.text import count_lines
+
+    plain = [_case("r1"), _case("r2")]
+    assert count_lines(plain) == []  # the file ends as it always did
+    fell_back = _case("r3", source="ov_eval", fallback=True)
+    by_choice = _case("r4", source="ov_eval")  # mode ov_eval: no fallback
+    warned = _case("r5", kitti={"warning": "w"})
+    failed = CaseResult(Case.unchecked("alg/ds/r6"), status="failed: load: x")
+    assert count_lines([*plain, fell_back, by_choice, warned, failed]) == [
+        "FELL BACK (STEP 1 OR 2 NOT TRUSTED, EVALUATED THE OV_EVAL WAY): 1 of 5 cases with a result",
+        "FLAGGED (A METRIC WARNED, SEE summary.csv NOTES): 1 of 5 cases with a result",
+        "=" * 44,
+    ]

@@ -68,11 +68,11 @@ class Built(NamedTuple):
     title: str
     rows: list[str]
     ncols: int
-    body: list[tuple[str, str, list[Cell]]] = []
-    columns: list[str] = []
-    kind: str = "per_dataset"
-    decimals: int = 3
-    notes: list[tuple[str, str]] = []
+    body: list[tuple[str, str, list[Cell]]]
+    columns: list[str]
+    kind: str
+    decimals: int
+    notes: list[tuple[str, str]]
 
     def note_rows(self) -> list[str]:
         """The footnotes as LaTeX rows spanning the table."""
