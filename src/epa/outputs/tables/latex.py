@@ -61,8 +61,8 @@ def _latex_rows(
 class Built(NamedTuple):
     """A table as built: its file name, title, LaTeX rows (header first), number of columns, and
     for its CSV the cells themselves (``body``: algorithm, row name, cells), the column labels,
-    what its numbers are (``kind``: per_dataset, per_segment, per_algorithm), the decimals they are
-    printed with and the footnotes of its marks ((letter, text))."""
+    what its columns are (``kind``: per_dataset, per_segment, per_algorithm) and the footnotes of
+    its marks ((letter, text))."""
 
     name: str
     title: str
@@ -71,18 +71,21 @@ class Built(NamedTuple):
     body: list[tuple[str, str, list[Cell]]]
     columns: list[str]
     kind: str
-    decimals: int
     notes: list[tuple[str, str]]
 
     def note_rows(self) -> list[str]:
-        """The footnotes as LaTeX rows spanning the table."""
-        return [
-            rf"\multicolumn{{{self.ncols}}}{{l}}{{\footnotesize "
-            + (mark.tex(k) + " " if k else "")
-            + latex_escape(t)
-            + r"} \\"
-            for k, t in self.notes
-        ]
+        return note_rows(self.notes, self.ncols)
+
+
+def note_rows(notes: list[tuple[str, str]], ncols: int) -> list[str]:
+    """Footnotes ((letter, text)) as LaTeX rows spanning a table of ``ncols`` columns."""
+    return [
+        rf"\multicolumn{{{ncols}}}{{l}}{{\footnotesize "
+        + (mark.tex(k) + " " if k else "")
+        + latex_escape(t)
+        + r"} \\"
+        for k, t in notes
+    ]
 
 
 def _built(name, title, header, body, layout, kind, decimals=None) -> Built:
@@ -97,7 +100,6 @@ def _built(name, title, header, body, layout, kind, decimals=None) -> Built:
         body,
         list(header),
         kind,
-        dec,
         mark.notes({alg: cells for alg, _, cells in body}),
     )
 
@@ -127,9 +129,9 @@ def build_tables(
     *,
     time_delta: float,
 ) -> list[Built]:
-    """Every table (:class:`Built`: file name, title, latex row lines, number of columns, ...), in report order: the
-    base tables, each registered metric's (``metrics``: the enabled ones) after the base table it
-    names or at the end. With ``spread`` (std / ci) each cell with runs also shows its spread over
+    """Every table (:class:`Built`: file name, title, latex row lines, number of columns, cells),
+    in report order: the base tables, each registered metric's (``metrics``: the enabled ones)
+    after the base table it names or at the end. With ``spread`` (std / ci) each cell with runs also shows its spread over
     them and their number. ``text``: only the tables error_comparison.txt shows. ``time_delta``:
     ``metrics.time_delta``, which names the time RPE's tables."""
     layout = _Layout.of(grid, decimals, spread)

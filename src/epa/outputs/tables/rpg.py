@@ -37,7 +37,7 @@ from epa.artifacts.case import CaseFolder
 from epa.metrics import rpg
 from epa.outputs.tables import marks as mark
 from epa.outputs.tables.cells import Cell, ok_runs
-from epa.outputs.tables.latex import latex_escape, restyle, tex_document
+from epa.outputs.tables.latex import latex_escape, note_rows, restyle, tex_document
 from epa.outputs.tables.results import CaseResult
 
 FILES = ("rpg_translation_rmse.txt", "rpg_rel_err.txt")
@@ -76,16 +76,9 @@ def _tex(
         + r" \\"
         for name, row, marked in zip(rows, values, cells)
     ]
-    notes = mark.notes(dict(zip(rows, cells)))
     ncols = len(cols) + 1
-    note_rows = [
-        rf"\multicolumn{{{ncols}}}{{l}}{{\footnotesize "
-        + (mark.tex(k) + " " if k else "")
-        + latex_escape(t)
-        + r"} \\"
-        for k, t in notes
-    ]
-    return restyle(tex_document(title, lines, ncols, note_rows), style)
+    notes = note_rows(mark.notes(dict(zip(rows, cells))), ncols)
+    return restyle(tex_document(title, lines, ncols, notes), style)
 
 
 def _held(trials: list[CaseResult]) -> Cell:
