@@ -1,4 +1,4 @@
-# error_comparison.txt, one .tex per LaTeX table, summary.csv, comparison, results/consistency/:
+# error_comparison.txt, one .tex and .csv per LaTeX table, cells.csv, summary.csv, comparison, results/consistency/:
 # every case, failed ones marked; mode rpg: rpg's summary tables too; provenance.json and
 # config.resolved.yaml (scripts/tables.py, which also runs on its own).
 rule tables:
@@ -17,6 +17,8 @@ rule tables:
             category="Tables",
         ),
         tex=[f"{RESULTS}/tables/{name}.tex" for name in epa_tables.table_names(EPA)],
+        csv=[f"{RESULTS}/tables/{name}.csv" for name in epa_tables.cell_tables(EPA)],
+        cells=f"{RESULTS}/cells.csv",
         mode_files=[f"{RESULTS}/{name}" for name in epa_tables.mode_files(EPA)],
         across_runs=f"{RESULTS}/consistency/summary.csv",
         comparison=report(

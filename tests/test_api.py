@@ -160,7 +160,7 @@ def test_the_api_page_runs_as_written(grid, tmp_path, monkeypatch):
     (checkout / "example").symlink_to(ROOT / "example")
     (checkout / "results").symlink_to(grid)
     blocks = python_blocks(ROOT / "docs/api.md")
-    assert len(blocks) == 7
+    assert len(blocks) == 8
     if DATA.is_dir():
         (tmp_path / "shared").mkdir()
         (tmp_path / "shared/data").symlink_to(DATA)

@@ -7,11 +7,11 @@ lives there.
 
 The Python API (:mod:`epa.api`, docs/api.md) is reached from here lazily, so ``import epa`` stays
 light (no Snakemake, matplotlib or pandas): :func:`evaluate`, :func:`read_results`,
-:func:`read_case`, :class:`Result`.
+:func:`read_cells`, :func:`read_case`, :class:`Result`.
 """
 
 __version__ = "0.1.0"
-__all__ = ["Result", "evaluate", "read_case", "read_results"]
+__all__ = ["Result", "evaluate", "read_case", "read_cells", "read_results"]
 
 
 def __getattr__(name: str):

@@ -1,7 +1,8 @@
 """The Python API, for notebooks and scripts: :func:`evaluate` one reference and estimate (the stages
-of ``epa eval``, in this process), :func:`read_results` a grid's results as a table, :func:`read_case`
-one case's records and per-pose errors. ``import epa`` reaches these lazily: it imports neither
-Snakemake nor matplotlib, and pandas only when a table is asked for.
+of ``epa eval``, in this process), :func:`read_results` a grid's results as a table,
+:func:`read_cells` every cell of its tables, :func:`read_case` one case's records and per-pose
+errors. ``import epa`` reaches these lazily: it imports neither Snakemake nor matplotlib, and pandas
+only when a table is asked for.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import numpy as np
 from epa.artifacts.case import Case, CaseData, CaseFolder, read_record
 from epa.core.errors import EpaError
 
-__all__ = ["Result", "evaluate", "read_case", "read_results"]
+__all__ = ["Result", "evaluate", "read_case", "read_cells", "read_results"]
 
 # the name `epa eval` gives its one estimate in `sources.algorithms` (the same settings apply)
 ESTIMATE = "estimate"
@@ -236,4 +237,23 @@ def read_results(results_dir):
     if extra:
         frame = pandas.concat([frame, pandas.DataFrame(extra)], ignore_index=True)
     frame["folder"] = [str(root / "cases" / key) for key in frame["case"]]
+    return frame
+
+
+def read_cells(results_dir):
+    """Every cell of a grid's tables as a pandas DataFrame, one row per number (``cells.csv``):
+    ``algorithm``, ``dataset`` (``Average``: the table's Average column; ``all``: a cell pooling
+    every dataset), ``metric`` (the table's name, or ``cases`` / ``alignment``), ``statistic``,
+    ``value``, ``spread``, ``n`` and ``marks`` (docs/outputs.md)."""
+    import pandas
+
+    path = Path(results_dir) / "cells.csv"
+    if not path.is_file():
+        raise EpaError("no cells.csv: run the workflow (or its tables) first", path=str(path))
+    # names stay text (a dataset "01", an algorithm "nan"); an empty number is missing
+    text = dict.fromkeys(("algorithm", "dataset", "metric", "statistic", "marks"), str)
+    missing = {"value": [""], "spread": [""], "n": [""]}
+    frame = pandas.read_csv(
+        path, dtype={**text, "n": "Int64"}, keep_default_na=False, na_values=missing
+    )
     return frame

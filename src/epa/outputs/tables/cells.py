@@ -27,11 +27,16 @@ def nanmean(values) -> float:
 class Cell:
     """A table cell: missing (None: no successful run), or numbers that may be nan.
     ``pair`` cells hold rot / trans; the others a single number. ``runs`` (runs x numbers) holds
-    each run's own value of those numbers, for the spread over runs."""
+    each run's own value of those numbers, for the spread over runs. ``n``: the runs it holds
+    (those with numbers); ``cases``: the cases it was made of and ``marks`` their marks
+    (:mod:`epa.outputs.tables.marks`), set by the table that shows it."""
 
-    def __init__(self, values=None, pair: bool = True, runs=None):
+    def __init__(self, values=None, pair: bool = True, runs=None, n: int | None = None):
         self.values, self.pair = values, pair
         self._runs = runs
+        self.n = n
+        self.cases: list | None = None
+        self.marks = ""
 
     @property
     def runs(self) -> np.ndarray | None:
@@ -60,6 +65,19 @@ class Cell:
         n = f" (n={len(self.runs)})" if spread != "none" and self.runs is not None else ""
         return " / ".join(parts) + n
 
+    def spreads(self, kind: str) -> tuple:
+        """Each number's spread over the runs as ``fmt`` prints it (``kind``: std / ci); None where
+        it prints none (no spread asked, fewer than two runs, a number that is nan or none)."""
+        if self.values is None:
+            return ()
+        out = []
+        for k, v in enumerate(self.values):
+            pm = np.nan
+            if kind != "none" and self.runs is not None and v is not None and not np.isnan(v):
+                pm = statistics.spread(self.runs[:, k], kind)
+            out.append(None if np.isnan(pm) else float(pm))
+        return tuple(out)
+
 
 def average_cell(cells: list[Cell], pair=True) -> Cell:
     have = [c.values for c in cells if c.values is not None]
@@ -67,7 +85,10 @@ def average_cell(cells: list[Cell], pair=True) -> Cell:
         return Cell(None, pair)
     arr = np.array([[num(v) for v in values] for values in have], float)
     none = [all(values[k] is None for values in have) for k in range(arr.shape[1])]
-    return Cell(tuple(None if none[k] else nanmean(arr[:, k]) for k in range(arr.shape[1])), pair)
+    n = sum(c.n or 0 for c in cells if c.values is not None)  # the runs of its datasets
+    return Cell(
+        tuple(None if none[k] else nanmean(arr[:, k]) for k in range(arr.shape[1])), pair, n=n
+    )
 
 
 def position_only(c) -> bool:
@@ -122,7 +143,7 @@ def mean_over_runs(runs, of) -> Cell:
     if not runs:
         return Cell(None)
     per_run = [tuple(num(x) for x in of(c)) for c in runs]
-    return Cell(tuple(nanmean(v) for v in zip(*per_run)), runs=per_run)
+    return Cell(tuple(nanmean(v) for v in zip(*per_run)), runs=per_run, n=len(per_run))
 
 
 def ate_cell(runs, valid: bool) -> Cell:
@@ -160,12 +181,13 @@ def _pooled_cell(runs, table, valid, length, of, width: int) -> Cell:
     per_run = _per_run(runs, table, valid, length)
     rot, trans = (np.concatenate([r[k] for r in per_run]) for k in (0, 1))
     if _all_nan_valid(runs, valid) or rot.size == 0:
-        return Cell((np.nan,) * width)
+        return Cell((np.nan,) * width, n=0)
     # each run's own numbers taken again if a spread asks for them: kept, the selections of every
     # cell of a table would stay in memory until it is written
     return Cell(
         of(rot, trans),
         runs=lambda: [of(r, t) for r, t in _per_run(runs, table, valid, length) if r.size],
+        n=sum(1 for r, _ in per_run if r.size),  # the runs its spread is over
     )
 
 

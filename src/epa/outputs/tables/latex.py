@@ -4,9 +4,11 @@ and the registered metrics' (:mod:`epa.metrics.registry`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from epa.metrics import accuracy
 from epa.metrics.accuracy import segment_key, time_rpe_key, time_rpe_name
+from epa.outputs.tables import marks as mark
 from epa.outputs.tables.cells import (
     Cell,
     ate_cell,
@@ -48,9 +50,66 @@ def _latex_rows(
     ]
     for name, cells in rows:
         lines.append(
-            latex_escape(name) + " & " + " & ".join(c.fmt(decimals, spread) for c in cells) + r" \\"
+            latex_escape(name)
+            + " & "
+            + " & ".join(c.fmt(decimals, spread) + mark.tex(c.marks) for c in cells)
+            + r" \\"
         )
     return lines
+
+
+class Built(NamedTuple):
+    """A table as built: its file name, title, LaTeX rows (header first), number of columns, and
+    for its CSV the cells themselves (``body``: algorithm, row name, cells), the column labels,
+    what its columns are (``kind``: per_dataset, per_segment, per_algorithm) and the footnotes of
+    its marks ((letter, text))."""
+
+    name: str
+    title: str
+    rows: list[str]
+    ncols: int
+    body: list[tuple[str, str, list[Cell]]]
+    columns: list[str]
+    kind: str
+    notes: list[tuple[str, str]]
+
+    def note_rows(self) -> list[str]:
+        return note_rows(self.notes, self.ncols)
+
+
+def note_rows(notes: list[tuple[str, str]], ncols: int) -> list[str]:
+    """Footnotes ((letter, text)) as LaTeX rows spanning a table of ``ncols`` columns."""
+    return [
+        rf"\multicolumn{{{ncols}}}{{l}}{{\footnotesize "
+        + (mark.tex(k) + " " if k else "")
+        + latex_escape(t)
+        + r"} \\"
+        for k, t in notes
+    ]
+
+
+def _built(name, title, header, body, layout, kind, decimals=None) -> Built:
+    """A table of ``body`` rows (algorithm, row name, cells) under ``header``."""
+    dec = layout.decimals if decimals is None else decimals
+    rows = [(label, cells) for _, label, cells in body]
+    return Built(
+        name,
+        title,
+        _latex_rows(header, rows, dec, layout.spread),
+        len(header) + 1,
+        body,
+        list(header),
+        kind,
+        mark.notes({alg: cells for alg, _, cells in body}),
+    )
+
+
+def _marked(cell: Cell, cases) -> Cell:
+    """``cell`` with the cases it was made of (unless its maker named them) and their marks."""
+    if cell.cases is None:
+        cell.cases = list(cases)
+    cell.marks = mark.of_cases(cell.cases) if cell.values is not None else ""
+    return cell
 
 
 SPREAD_TITLE = {
@@ -69,10 +128,10 @@ def build_tables(
     text: bool = False,
     *,
     time_delta: float,
-) -> list[tuple[str, str, list[str], int]]:
-    """(file name, title, latex row lines, number of columns) for every table, in report order: the
-    base tables, each registered metric's (``metrics``: the enabled ones) after the base table it
-    names or at the end. With ``spread`` (std / ci) each cell with runs also shows its spread over
+) -> list[Built]:
+    """Every table (:class:`Built`: file name, title, latex row lines, number of columns, cells),
+    in report order: the base tables, each registered metric's (``metrics``: the enabled ones)
+    after the base table it names or at the end. With ``spread`` (std / ci) each cell with runs also shows its spread over
     them and their number. ``text``: only the tables error_comparison.txt shows. ``time_delta``:
     ``metrics.time_delta``, which names the time RPE's tables."""
     layout = _Layout.of(grid, decimals, spread)
@@ -113,27 +172,29 @@ class _Layout:
         return cls(grid, algs, sorted({c.dataset for c in grid}), decimals, spread)
 
     def rows_per_dataset(self, cell_of, pair=True, marked=_unmarked):
-        """A row per algorithm: a cell per dataset and their Average; an algorithm ``marked`` (by
-        what it lacks) is named so, its cells empty, never faked."""
+        """A row per algorithm (algorithm, row name, cells): a cell per dataset and their Average;
+        an algorithm ``marked`` (by what it lacks) is named so, its cells empty, never faked. Each
+        cell carries the marks of the cases it holds (the Average: those of its datasets' cells)."""
         rows = []
         for a in self.algs:
             missing = marked(a)
-            cells = [
-                Cell(None, pair) if missing else cell_of(ok_runs(self.grid, a, d))
-                for d in self.datasets
-            ]
-            rows.append((f"{a} ({missing})" if missing else a, cells + [average_cell(cells, pair)]))
+            cells = []
+            for d in self.datasets:
+                if missing:
+                    cells.append(Cell(None, pair))
+                    continue
+                runs = ok_runs(self.grid, a, d)
+                cells.append(_marked(cell_of(runs), runs))
+            held = [c for cell in cells if cell.values is not None for c in cell.cases or ()]
+            average = _marked(average_cell(cells, pair), held)
+            rows.append((a, f"{a} ({missing})" if missing else a, cells + [average]))
         return rows
 
-    def per_dataset(self, name: str, title: str, rows, decimals: int | None = None):
+    def per_dataset(self, name: str, title: str, rows, decimals: int | None = None) -> Built:
         """A table of ``rows_per_dataset`` rows."""
         header = self.datasets + ["Average"]
-        dec = self.decimals if decimals is None else decimals
-        return (
-            name,
-            title + SPREAD_TITLE[self.spread],
-            _latex_rows(header, rows, dec, self.spread),
-            len(header) + 1,
+        return _built(
+            name, title + SPREAD_TITLE[self.spread], header, rows, self, "per_dataset", decimals
         )
 
 
@@ -141,18 +202,25 @@ def _per_segment(layout: _Layout, segments, name: str, title: str, fn):
     """A table with a row per algorithm and a column per segment length."""
     seg_labels = [f"{segment_key(s)}m" for s in segments]
     # these pool an algorithm's datasets: the spread is over every run of every dataset
-    rows = [(a, [fn(ok_runs(layout.grid, a), s) for s in segments]) for a in layout.algs]
-    return (
+    rows = []
+    for a in layout.algs:
+        runs = ok_runs(layout.grid, a)
+        marks = mark.of_cases(runs)  # every cell of the row holds the same runs
+        cells = [fn(runs, s) for s in segments]
+        for cell in cells:
+            cell.cases, cell.marks = runs, marks if cell.values is not None else ""
+        rows.append((a, a, cells))
+    return _built(
         name,
         title + SPREAD_TITLE[layout.spread].replace("RUNS]", "RUNS OF ALL DATASETS]"),
-        _latex_rows(seg_labels, rows, layout.decimals, layout.spread),
-        len(segments) + 1,
+        seg_labels,
+        rows,
+        layout,
+        "per_segment",
     )
 
 
-def _base_tables(
-    layout: _Layout, segments, time_delta: float
-) -> list[tuple[str, str, list[str], int]]:
+def _base_tables(layout: _Layout, segments, time_delta: float) -> list[Built]:
     """The tables every report has: success rates, then ATE and RPE of the full trajectories and
     of their drift-valid parts."""
 
@@ -228,22 +296,17 @@ def _metric_table(layout: _Layout, metric, spec):
     if spec.per_algorithm is not None:  # one row per algorithm with the metric, over all its runs
         rows = []
         for a in layout.algs:
-            records = [
-                c.record_of(metric) for c in cases_of(grid, a) if spec.has(c.record_of(metric))
-            ]
-            if records:
-                rows.append((a, [Cell((v,), pair=False) for v in spec.per_algorithm(records)]))
-        return (
-            spec.name,
-            spec.title,
-            _latex_rows(list(spec.header), rows, layout.decimals, layout.spread),
-            len(spec.header) + 1,
-        )
+            held = [c for c in cases_of(grid, a) if spec.has(c.record_of(metric))]
+            if held:
+                values = spec.per_algorithm([c.record_of(metric) for c in held])
+                cells = [Cell((v,), pair=False, n=len(held)) for v in values]
+                rows.append((a, a, [_marked(cell, [c for c in held if c.ok]) for cell in cells]))
+        return _built(spec.name, spec.title, list(spec.header), rows, layout, "per_algorithm", None)
 
     def cell_of(runs):
         runs = [c for c in runs if spec.has(c.record_of(metric))]
         cell = mean_over_runs(runs, lambda c: spec.per_run(c.record_of(metric)))
-        cell.pair = spec.pair
+        cell.pair, cell.cases = spec.pair, runs
         return rotation_marked(cell, runs) if spec.pair else cell
 
     def marked(alg):
@@ -254,11 +317,8 @@ def _metric_table(layout: _Layout, metric, spec):
         return spec.missing
 
     rows = layout.rows_per_dataset(cell_of, spec.pair, marked)
-    if spec.note is not None:  # rows are in the order of algs
-        rows = [
-            (_noted(name, alg, grid, metric, spec), cells)
-            for alg, (name, cells) in zip(layout.algs, rows)
-        ]
+    if spec.note is not None:
+        rows = [(alg, _noted(name, alg, grid, metric, spec), cells) for alg, name, cells in rows]
     return layout.per_dataset(spec.name, spec.title, rows)
 
 
@@ -269,10 +329,14 @@ def _noted(name: str, alg: str, grid, metric, spec) -> str:
     return f"{name} ({text})" if text else name
 
 
-def tex_document(title: str, rows: list[str], ncols: int) -> str:
-    """A table that \\input's into a paper: a tabular with the report's rows, titled in a comment."""
+def tex_document(title: str, rows: list[str], ncols: int, notes: list[str] | None = None) -> str:
+    """A table that \\input's into a paper: a tabular with the report's rows, titled in a comment,
+    and its ``notes`` (the footnotes of its marks) as rows spanning it under a rule."""
     spec = "l" + "c" * (ncols - 1)
-    return "\n".join([f"% {title}", r"\begin{tabular}{" + spec + "}", *rows, r"\end{tabular}", ""])
+    under = [r"\hline", *notes] if notes else []
+    return "\n".join(
+        [f"% {title}", r"\begin{tabular}{" + spec + "}", *rows, *under, r"\end{tabular}", ""]
+    )
 
 
 TABLE_STYLES = ("hline", "booktabs")
@@ -285,9 +349,15 @@ def restyle(tex: str, style: str = "hline") -> str:
         return tex
     if style != "booktabs":
         raise ValueError(f"tables.style: {style!r} is not one of {TABLE_STYLES}")
-    out = []
-    for line in tex.split("\n"):
-        if line.startswith(r"\end{tabular}"):
+    out: list[str] = []
+    ruled = False  # the bottom rule goes over the footnotes, where a table has them
+    lines = tex.split("\n")
+    for k, line in enumerate(lines):
+        if line == r"\hline" and k + 1 < len(lines) and lines[k + 1].startswith(r"\multicolumn"):
+            out.append(r"\bottomrule")
+            ruled = True
+            continue
+        if line.startswith(r"\end{tabular}") and not ruled:
             out.append(r"\bottomrule")
         out.append(line.replace(r" \hline", r" \midrule"))
         if line.startswith(r"\begin{tabular}"):

@@ -8,7 +8,7 @@ from epa.metrics import ate_2d
 from epa.outputs.tables.cells import ok_runs, pooled, run_ate
 from epa.outputs.tables.latex import latex_escape
 from epa.outputs.tables.results import CaseResult
-from epa.outputs.tables.text import RULE_LONG
+from epa.outputs.tables.text import RULE_LONG, count_lines
 
 
 def _c(x: float, fmt: str) -> str:
@@ -115,4 +115,5 @@ def ov_eval_text(grid: list[CaseResult], segments, idle_truths: dict | None = No
             row += f" & {rot.mean():.3f} / {trans.mean():.3f}" if rot.size else " & - / -"
         lines.append(row + " \\\\")
     lines.append(RULE_LONG)
-    return out + "\n".join(lines) + "\n"
+    # epica's own lines after ov_eval's, only where a case fell back or is flagged
+    return out + "\n".join(lines + count_lines(grid)) + "\n"

@@ -34,6 +34,8 @@ class CaseResult:
     time: dict = field(default_factory=dict)
     ape: dict = field(default_factory=dict)
     records: dict = field(default_factory=dict)
+    # how it was evaluated (marks.evaluation), made when a table first asks
+    _evaluation: object = field(default=None, repr=False, compare=False)
 
     algorithm = property(lambda self: self.case.algorithm)
     dataset = property(lambda self: self.case.dataset)

@@ -18,7 +18,8 @@ a failed trial, left out as rpg leaves it out. The statistics over trials are rp
 Both are rpg's ``results_writer.write_tex_table`` bytes: the header ``'      &      '`` then the columns
 joined by ``' & '``, each row ``'<name> &     '`` then its cells, the last one after a space, no ``\\\\``
 and no escaping (rpg's text is pasted into a tabular by hand). ``tables/rpg_*.tex`` hold the same cells
-in epica's tabular (names escaped, ``tables.style`` rules).
+in epica's tabular (names escaped, ``tables.style`` rules), marked as the other tables' cells are
+(:mod:`epa.outputs.tables.marks`: trials evaluated differently, flagged).
 
 Where rpg stops, these tables say so: a cell without a successful run reads ``-`` (rpg asserts that
 every case folder exists and fails on a case without a successful trial), and so does an algorithm
@@ -34,8 +35,9 @@ import numpy as np
 
 from epa.artifacts.case import CaseFolder
 from epa.metrics import rpg
-from epa.outputs.tables.cells import ok_runs
-from epa.outputs.tables.latex import latex_escape, restyle, tex_document
+from epa.outputs.tables import marks as mark
+from epa.outputs.tables.cells import Cell, ok_runs
+from epa.outputs.tables.latex import latex_escape, note_rows, restyle, tex_document
 from epa.outputs.tables.results import CaseResult
 
 FILES = ("rpg_translation_rmse.txt", "rpg_rel_err.txt")
@@ -59,12 +61,30 @@ def write_tex_table(values: list[list[str]], rows: list[str], cols: list[str]) -
     return out
 
 
-def _tex(title: str, values: list[list[str]], rows: list[str], cols: list[str], style: str) -> str:
+def _tex(
+    title: str, values: list[list[str]], rows: list[str], cols: list[str], style: str, held=None
+) -> str:
+    """A table of rpg's cells; ``held`` (per row, per cell: its trials) marks the cells whose
+    trials were evaluated differently or are flagged (:mod:`epa.outputs.tables.marks`)."""
+    held = held or [[[] for _ in row] for row in values]
+    cells = [[_held(trials) for trials in row] for row in held]
     header = " & " + " & ".join(r"\textbf{" + c + "}" for c in cols) + r" \\ \hline"
     lines = [header] + [
-        latex_escape(name) + " & " + " & ".join(row) + r" \\" for name, row in zip(rows, values)
+        latex_escape(name)
+        + " & "
+        + " & ".join(v + mark.tex(c.marks) for v, c in zip(row, marked))
+        + r" \\"
+        for name, row, marked in zip(rows, values, cells)
     ]
-    return restyle(tex_document(title, lines, len(cols) + 1), style)
+    ncols = len(cols) + 1
+    notes = note_rows(mark.notes(dict(zip(rows, cells))), ncols)
+    return restyle(tex_document(title, lines, ncols, notes), style)
+
+
+def _held(trials: list[CaseResult]) -> Cell:
+    cell = Cell(() if trials else None)
+    cell.cases, cell.marks = trials, mark.of_cases(trials)
+    return cell
 
 
 def rmse_table(grid: list[CaseResult], median_only: bool = False):
@@ -143,10 +163,14 @@ def write_rpg_tables(grid: list[CaseResult], results_dir, cfg: dict, write) -> N
         "MEDIAN OVER RUNS)" if median else "OVER RUNS: MEAN, MEDIAN (MIN - MAX))"
     )
     tex_cols = [latex_escape(c) for c in cols]
+    held = [[_trials(grid, a, d) for d in cols] for a in rows]
     write(
-        results_dir / "tables/rpg_translation_rmse.tex", _tex(title, values, rows, tex_cols, style)
+        results_dir / "tables/rpg_translation_rmse.tex",
+        _tex(title, values, rows, tex_cols, style, held),
     )
     values, rows, cols = rel_err_table(grid, results_dir)
     write(results_dir / "rpg_rel_err.txt", write_tex_table(values, rows, cols))
     title = "RPG RELATIVE ERROR LATEX TABLE (MEAN OVER EVERY PAIR, DISTANCE, DATASET AND RUN)"
-    write(results_dir / "tables/rpg_rel_err.tex", _tex(title, values, rows, cols, style))
+    every = {a: [c for c in ok_runs(grid, a) if c.metrics.get("rpg")] for a in rows}
+    held = [[every[a] for _ in cols] for a in rows]
+    write(results_dir / "tables/rpg_rel_err.tex", _tex(title, values, rows, cols, style, held))

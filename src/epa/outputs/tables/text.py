@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from epa.metrics.accuracy import segment_key, time_rpe_name
+from epa.outputs.tables import marks
 from epa.outputs.tables.cells import ate_cell, nanmean, pooled
 from epa.outputs.tables.latex import build_tables
 from epa.outputs.tables.results import CaseResult
@@ -54,17 +57,41 @@ def report_text(
         f"TOOL SOURCE: {_sources(sources)}",
         RULE_LONG,
     ]
-    for _, title, rows, _ in build_tables(
+    for table in build_tables(
         grid, segments, decimals, metrics, spread, text=True, time_delta=time_delta
     ):
         lines += [
             RULE_LONG,
-            title,
+            table.title,
             RULE_LONG,
-            *(r.replace(" $\\pm$ ", " ± ") for r in rows),
+            *(_MARKS.sub(r" [\1]", r.replace(" $\\pm$ ", " ± ")) for r in table.rows),
+            *((f"[{k}] " if k else "") + text for k, text in table.notes),
             RULE_LONG,
         ]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + count_lines(grid)) + "\n"
+
+
+_MARKS = re.compile(r"\\textsuperscript\{([a-z,]+)\}")  # a cell's marks (marks.tex)
+
+
+def count_lines(grid: list[CaseResult]) -> list[str]:
+    """The end of error_comparison.txt: how many cases fell back to the ov_eval way and how many a
+    metric flagged, each only when there are any (then a rule)."""
+    evals = [marks.evaluation(c) for c in grid if c.ok]
+    fallback = sum(e.fallback for e in evals)
+    flagged = sum(bool(e.warnings) for e in evals)
+    out = []
+    if fallback:
+        out.append(
+            f"FELL BACK (STEP 1 OR 2 NOT TRUSTED, EVALUATED THE OV_EVAL WAY): {fallback} of"
+            f" {len(evals)} cases with a result"
+        )
+    if flagged:
+        out.append(
+            f"FLAGGED (A METRIC WARNED, SEE summary.csv NOTES): {flagged} of {len(evals)} cases"
+            " with a result"
+        )
+    return out + [RULE_LONG] if out else []
 
 
 def _reference_line(info: dict | None, dataset: str) -> str:

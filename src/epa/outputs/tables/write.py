@@ -11,6 +11,7 @@ from epa.artifacts import files
 from epa.core.errors import EpaError
 from epa.metrics import accuracy, registry
 from epa.outputs.tables import rpg as rpg_tables
+from epa.outputs.tables import tidy
 from epa.outputs.tables.across_runs import write_across_runs
 from epa.outputs.tables.comparison import comparison_tex, comparison_text, comparisons
 from epa.outputs.tables.latex import build_tables, restyle, tex_document
@@ -33,10 +34,13 @@ def enabled_metrics(cfg: dict) -> tuple:
 
 def table_names(cfg: dict) -> tuple[str, ...]:
     """The .tex files the tables rule writes under these settings."""
-    return (
-        accuracy.base_tables(cfg["metrics"]["time_delta"])
-        + tuple(t.name for m in enabled_metrics(cfg) for t in m.tables)
-        + mode_tables(cfg)
+    return cell_tables(cfg) + mode_tables(cfg)
+
+
+def cell_tables(cfg: dict) -> tuple[str, ...]:
+    """The tables whose cells are also a tables/<name>.csv (all but the mode's own)."""
+    return accuracy.base_tables(cfg["metrics"]["time_delta"]) + tuple(
+        t.name for m in enabled_metrics(cfg) for t in m.tables
     )
 
 
@@ -72,12 +76,16 @@ def write_all(
         results_dir / "summary.csv",
         summary_csv(grid, segments, time_delta, enabled_metrics(cfg)),
     )
-    for name, title, rows, n in build_tables(
+    built = build_tables(
         grid, segments, decimals, metrics=enabled_metrics(cfg), spread=spread, time_delta=time_delta
-    ):
+    )
+    for table in built:
+        tex = tex_document(table.title, table.rows, table.ncols, table.note_rows())
+        files.write_text(results_dir / "tables" / f"{table.name}.tex", restyle(tex, style))
         files.write_text(
-            results_dir / "tables" / f"{name}.tex", restyle(tex_document(title, rows, n), style)
+            results_dir / "tables" / f"{table.name}.csv", tidy.table_csv(table, spread)
         )
+    files.write_text(results_dir / "cells.csv", tidy.cells_csv(tidy.cell_rows(built, spread, grid)))
     files.write_text(
         results_dir / "success_curves.csv", records_csv(SUCCESS_CURVE_COLUMNS, success_curves(grid))
     )
@@ -137,14 +145,86 @@ def reference_info(path, cfg: dict, dataset: str) -> dict:
 
 
 def failure_report(summary_path, most: int = 20) -> str:
-    """A short end-of-run list of the cases without a result (empty when every case has one)."""
+    """A short end-of-run list of the cases without a result, then per algorithm how many cases fell
+    back to the ov_eval way or were flagged, and each flagged case's warning (which names the setting
+    that fixes it), from cells.csv beside summary.csv; empty when every case has a result and none
+    fell back or is flagged. With flags but no failure it starts with "every case has a result"."""
     with open(summary_path, encoding="utf-8", newline="") as fh:
         rows = list(csv.DictReader(fh))
     bad = [r for r in rows if not has_result(r["status"])]
-    if not bad:
-        return ""
-    lines = [f"epica: {len(bad)} of {len(rows)} cases have no result (see {summary_path}):"]
-    lines += [f"  {r['algorithm']}/{r['dataset']}/{r['run']}: {r['status']}" for r in bad[:most]]
-    if len(bad) > most:
-        lines.append(f"  ... and {len(bad) - most} more")
-    return "\n".join(lines)
+    lines = []
+    if bad:
+        lines = [f"epica: {len(bad)} of {len(rows)} cases have no result (see {summary_path}):"]
+        lines += [
+            f"  {r['algorithm']}/{r['dataset']}/{r['run']}: {r['status']}" for r in bad[:most]
+        ]
+        if len(bad) > most:
+            lines.append(f"  ... and {len(bad) - most} more")
+    marked = _marked_report(Path(summary_path).parent, rows, most)
+    if marked and not bad:
+        lines = [f"epica: every case has a result ({len(rows)} cases)"]
+    return "\n".join(lines + marked)
+
+
+def _marked_report(results_dir: Path, rows: list[dict], most: int) -> list[str]:
+    """The fallbacks and flags of the end-of-run summary (cells.csv's ``cases`` rows); the
+    warnings of at most ``most`` flagged cases, read from their records."""
+    path = results_dir / "cells.csv"
+    if not path.is_file():  # tables written before cells.csv existed
+        return []
+    counts: dict[str, dict[str, int]] = {}
+    flagged_cells = []
+    with open(path, encoding="utf-8", newline="") as fh:
+        for r in csv.DictReader(fh):
+            if r["metric"] != "cases" or r["statistic"] not in ("fallback", "flagged"):
+                continue
+            n = int(r["value"])
+            by = counts.setdefault(r["algorithm"], {"fallback": 0, "flagged": 0})
+            by[r["statistic"]] += n
+            if r["statistic"] == "flagged" and n:
+                flagged_cells.append((r["algorithm"], r["dataset"]))
+    cases: dict[str, int] = {}
+    for r in rows:
+        cases[r["algorithm"]] = cases.get(r["algorithm"], 0) + 1
+    lines = []
+    for alg, by in sorted(counts.items()):
+        if by["fallback"] or by["flagged"]:
+            lines.append(
+                f"  {alg}: {by['fallback']} of {cases.get(alg, 0)} cases fell back to the ov_eval"
+                f" way (Step 1 or 2 not trusted), {by['flagged']} flagged"
+            )
+    if not lines:
+        return []
+    out = ["epica: cases evaluated without Steps 1-2 or flagged (marked in the tables; cells.csv):"]
+    out += lines
+    warned = _flagged_warnings(results_dir, rows, set(flagged_cells), most + 1)
+    out += [f"  {key}: {text}" for key, text in warned[:most]]
+    if len(warned) > most:
+        total = sum(by["flagged"] for by in counts.values())
+        out.append(f"  ... and {total - most} more flagged")
+    return out
+
+
+def _flagged_warnings(results_dir: Path, rows: list[dict], cells: set, most: int) -> list:
+    """(case key, "metric: warning") of the first ``most`` flagged cases of ``cells``."""
+    from epa.artifacts.case import Case, CaseFolder
+
+    out = []
+    for r in rows:
+        if (r["algorithm"], r["dataset"]) not in cells or not has_result(r["status"]):
+            continue
+        key = f"{r['algorithm']}/{r['dataset']}/{r['run']}"
+        folder = CaseFolder.of(results_dir, Case.from_key(key))
+        metrics, failed = folder.record_or_failure("metrics", "metrics.json")
+        for metric in registry.REGISTRY:
+            if metric.stage == "metrics":
+                record = (metrics or {}).get(metric.key) if failed is None else None
+            elif folder.has(metric.stage, f"{metric.stage}.json"):
+                record, _ = folder.record_or_failure(metric.stage, f"{metric.stage}.json")
+            else:
+                record = None
+            if isinstance(record, dict) and record.get("warning"):
+                out.append((key, f"{metric.key}: {record['warning']}"))
+        if len(out) >= most:
+            break
+    return out
