@@ -41,7 +41,13 @@ def _fit_rmse(src, dst, with_scale):
     return np.sqrt(np.mean(np.sum((xd - s * xs @ r.T) ** 2, 1))), s
 
 
-CFG = {"max_log_scale": 0.05, "max_ate_ratio": 10.0, "min_error_removed": 0.5, "enabled": True}
+CFG = {
+    "max_log_scale": 0.05,
+    "max_ate_ratio": 10.0,
+    "min_error_removed": 0.5,
+    "max_residual_path_pct": 1.0,
+    "enabled": True,
+}
 
 
 def _check(ref, est, metric_scale=None, first_n=-1):

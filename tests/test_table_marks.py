@@ -190,7 +190,7 @@ def test_each_csv_holds_the_numbers_its_tex_prints(example):
             if n is not None:
                 assert r["n"] == n
             assert r["marks"] == mark, (name, label, r["column"])
-    assert checked == 276  # every number of the 14 tables but those printed - or nan
+    assert checked == 300  # every number of the 15 tables but those printed - or nan
 
 
 def test_cells_csv_is_every_table_cell_and_read_cells_returns_it(example):

@@ -17,8 +17,10 @@ poses as the Sim3 fit (``align.first_n``). One Umeyama fit and one ATE: linear i
 
 Under an alignment without scale (se3, posyaw, none) the check is the mirror: a Sim3 fit of the
 aligned estimate beside its ATE. A scale beyond ``max_log_scale`` whose fit removes more than
-``min_error_removed`` of the ATE RMSE is a warning (unless the algorithm is declared not metric): an
-undeclared monocular estimate, whose SE3 numbers mean nothing. One Umeyama fit, positions only.
+``min_error_removed`` of the ATE RMSE, leaving under ``max_residual_path_pct`` of the path, is a
+warning (unless the algorithm is declared not metric): an undeclared monocular estimate, whose SE3
+numbers mean nothing. (A diverged run's Sim3 fit shrinks it and still leaves metres: drift
+detection's finding, not a scale to declare.) One Umeyama fit, positions only.
 Every case is checked (``metrics.sim3_check.enabled``, on by default).
 """
 
@@ -122,14 +124,23 @@ def sim3_beside(
 
 
 def unscaled_findings(
-    scale: float, fitted_rmse: float, sim3_rmse: float, metric_scale: bool | None, c: dict
+    scale: float,
+    fitted_rmse: float,
+    sim3_rmse: float,
+    metric_scale: bool | None,
+    c: dict,
+    path_m: float,
 ) -> list[str]:
     """The warning of a case aligned without scale whose Sim3 fit finds one far from 1 that removes
-    most of its error (empty: none): the recipe does not fit the estimate."""
+    most of its error, leaving little (under ``max_residual_path_pct`` of the ``path_m`` metres of
+    matched reference path): the recipe does not fit the estimate. Empty: none. A fit that still
+    leaves much is a run that failed, whatever its scale: drift detection's finding, not this one."""
     if metric_scale is False or not fitted_rmse > 0:
         return []
     removed = 1.0 - sim3_rmse / fitted_rmse
     if abs(math.log(scale)) <= c["max_log_scale"] or removed <= c["min_error_removed"]:
+        return []
+    if not path_m > 0 or 100.0 * sim3_rmse / path_m > c["max_residual_path_pct"]:
         return []
     what = (
         "for an algorithm declared metric (metric_scale: true): its scale is wrong"
@@ -173,7 +184,7 @@ def compute(
     transform: dict,
     estimate_source: dict,
     calibrate_record: dict | None = None,
-    ate: dict | None = None,
+    accuracy: dict | None = None,
     pair_rows: np.ndarray | None = None,
 ) -> tuple[dict, dict, list[str]]:
     c = cfg["metrics"]["sim3_check"]
@@ -182,15 +193,16 @@ def compute(
     if fitted.get("method") != "sim3":  # the recipe fitted no scale: does the estimate need one?
         # the case's own ATE, as its tables print it
         fitted_rmse = (
-            float(ate["trans_m"]["rmse"])
-            if ate is not None
+            float(accuracy["ate"]["trans_m"]["rmse"])
+            if accuracy is not None
             else float(np.sqrt(np.mean(np.sum(np.square(est.p - ref.p), axis=1))))
         )
         if len(ref) < 3 or not np.ptp(est.p, axis=0).any():
             reason = "fewer than 3 matched poses" if len(ref) < 3 else "the estimate does not move"
             return {"available": False, "reason": f"no Sim3 fit: {reason}"}, {}, []
         scale, sim3_rmse = sim3_beside(ref, est, fitted["first_n"], pair_rows)
-        warnings = unscaled_findings(scale, fitted_rmse, sim3_rmse, declared, c)
+        path = float(accuracy["ref_length_m"]) if accuracy is not None else ref.length()
+        warnings = unscaled_findings(scale, fitted_rmse, sim3_rmse, declared, c, path)
         record = {
             "available": True,
             "fitted": fitted.get("method"),
@@ -204,6 +216,7 @@ def compute(
             "thresholds": {
                 "max_log_scale": c["max_log_scale"],
                 "min_error_removed": c["min_error_removed"],
+                "max_residual_path_pct": c["max_residual_path_pct"],
             },
             "warning": "; ".join(warnings) or None,
         }
@@ -279,7 +292,7 @@ METRIC = Metric(
     compute=compute,
     after="ate",  # beside the (Sim3) ATE in metrics.json
     # Step 3's scale; the metric_scale declaration; Step 2's scale
-    inputs=("transform", "estimate_source", "calibrate_record", "ate", "pair_rows"),
+    inputs=("transform", "estimate_source", "calibrate_record", "accuracy", "pair_rows"),
     summary_columns=("alignment", "scale", "scale_std"),
     tables=_TABLES,
 )

@@ -23,7 +23,7 @@ INPUTS = (
     "printed_quaternions",
     "pair_rows",
     "calibrate_record",
-    "ate",
+    "accuracy",
 )
 
 
@@ -81,8 +81,8 @@ class Metric:
       cropped estimate, the image stamps of metrics.eth3d.image_stamps or None, the reference's and
       the estimate's files read again with their quaternions as printed, each None where its
       source prints none, :func:`epa.core.geometry.pair_rows` of the aligned matched poses, None
-      where a side is position-only, ``04_calibrate/calibrate.json``, the ATE record the metrics
-      stage computed); each is read only when such a metric is on;
+      where a side is position-only, ``04_calibrate/calibrate.json``, the accuracy record the
+      metrics stage computed: ``ref_length_m``, ``ate``, ...); each is read only when such a metric is on;
     - ``protocol``: one of the field's published scoring protocols (TUM RGB-D, TartanAir, ...), turned on by ``epa eval
       --protocol <key>`` or ``metrics.<key>.enabled``;
     - ``arrays``: its own per-case files; ``tables``: its paper tables;

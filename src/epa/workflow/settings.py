@@ -167,7 +167,8 @@ def _deepest(err):
     (a wrong word: the words it may be)."""
     if err.validator != "anyOf" or not err.context:
         return err
-    kind = {list: "array", str: "string"}.get(type(err.instance))
+    kinds: dict[type, str] = {list: "array", str: "string"}
+    kind = kinds.get(type(err.instance))
     branches = [b.get("type") for b in err.validator_value]
     if kind in branches:  # the form its type says it was meant as: that form's first error
         meant = [e for e in err.context if e.relative_schema_path[0] == branches.index(kind)]

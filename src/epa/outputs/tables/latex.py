@@ -131,9 +131,10 @@ def build_tables(
 ) -> list[Built]:
     """Every table (:class:`Built`: file name, title, latex row lines, number of columns, cells),
     in report order: the base tables, each registered metric's (``metrics``: the enabled ones)
-    after the base table it names or at the end. With ``spread`` (std / ci) each cell with runs also shows its spread over
-    them and their number. ``text``: only the tables error_comparison.txt shows. ``time_delta``:
-    ``metrics.time_delta``, which names the time RPE's tables."""
+    after the base table it names or at the end. With ``spread`` (std / ci) each cell with runs
+    also shows its spread over them and their number. ``text``: only the tables
+    error_comparison.txt shows. ``time_delta``: ``metrics.time_delta``, which names the time RPE's
+    tables."""
     layout = _Layout.of(grid, decimals, spread)
     out = _base_tables(layout, segments, time_delta)
     # a Table.after names a base table as BASE_TABLES spells it: the time RPE's under the default

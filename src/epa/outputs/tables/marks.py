@@ -6,8 +6,8 @@ the letters in the CSV's ``marks`` column) when its cases
 - ``e``: were evaluated by different sources (``eval_source``: epa, and the ov_eval way a case falls
   back to when Step 1 or 2 is not trusted);
 - ``a``: were aligned by different Step 3 methods (``05_align/transform.json`` ``method``);
-- ``f``: hold a flagged case: a registered metric's record carries a ``warning`` (the Sim3 scale
-  check's, any other's), even a cell of one case.
+- ``f``: hold a flagged case: drift's record or a registered metric's carries a ``warning`` (the
+  scale check's, the drift thresholds' misfit, any other), even a cell of one case.
 
 Every letter is of the cases a cell pools: a dataset's runs, or every run of the algorithm for its
 Average and the per-segment and per-algorithm tables. Rows with Sim3-aligned cases are named in a
@@ -34,7 +34,7 @@ class Evaluation:
     source: str  # metrics.json eval_source
     fallback: bool  # the ov_eval way because Step 1 or 2 was not trusted (not by choice)
     method: str | None  # Step 3's method (se3, sim3, posyaw, none)
-    scale: float | None  # Step 3's Sim3 scale
+    scale: float | None  # a Sim3 case's scale (Step 2's times Step 3's where both fitted one)
     warnings: tuple[tuple[str, str], ...]  # (metric key, warning) of every metric that warned
 
 
@@ -45,8 +45,12 @@ def evaluation(c) -> Evaluation:
         m = c.metrics
         align = m.get("alignment") or {}
         plan = (m.get("calibrate") or {}).get("plan") or {}
+        # the scale the case was evaluated with: Step 2's times Step 3's (a monocular estimate's
+        # Step 3 scale is about 1 once Step 2 solved it), else Step 3's Sim3 scale
+        used = ((m.get("sim3_check") or {}).get("evaluated_scale") or {}).get("value")
         scale = align.get("scale") if align.get("method") == "sim3" else None
-        warned = []
+        scale = used if scale is not None and used is not None else scale
+        warned = [("drift", str(c.drift["warning"]))] if c.drift.get("warning") else []
         for metric in registry.REGISTRY:
             record = c.record_of(metric)
             if isinstance(record, dict) and record.get("warning"):
