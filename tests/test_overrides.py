@@ -186,6 +186,19 @@ def test_with_defaults_an_undeclared_monocular_estimate_is_flagged(grid):
         r for r in (results / "summary.csv").read_text().splitlines() if r.startswith("mono,office")
     )
     assert "metric_scale: false" in row
+    # the end-of-run summary names the case and the setting that fixes it, for its algorithm
+    from epa.outputs import tables
+
+    summary = tables.failure_report(results / "summary.csv")
+    assert (
+        "mono: 0 of 2 cases fell back to the ov_eval way (Step 1 or 2 not trusted), 2 flagged"
+        in summary
+    )
+    assert "mono/office/run1: sim3_check: " in summary
+    assert "declare sources.algorithms.mono.metric_scale: false" in summary
+    # and every table marks its cells
+    assert "mono & " in (results / "tables/ate.tex").read_text()
+    assert "\\textsuperscript{f}" in (results / "tables/ate.tex").read_text()
 
 
 def _planned(root) -> set[str]:

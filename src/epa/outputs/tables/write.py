@@ -198,7 +198,10 @@ def _marked_report(results_dir: Path, rows: list[dict], most: int) -> list[str]:
     out = ["epica: cases evaluated without Steps 1-2 or flagged (marked in the tables; cells.csv):"]
     out += lines
     warned = _flagged_warnings(results_dir, rows, set(flagged_cells), most + 1)
-    out += [f"  {key}: {text}" for key, text in warned[:most]]
+    # a warning names the setting that fixes it; here, for the case's own algorithm
+    out += [
+        f"  {key}: {text.replace('<algorithm>', key.split('/')[0])}" for key, text in warned[:most]
+    ]
     if len(warned) > most:
         total = sum(by["flagged"] for by in counts.values())
         out.append(f"  ... and {total - most} more flagged")
@@ -216,6 +219,10 @@ def _flagged_warnings(results_dir: Path, rows: list[dict], cells: set, most: int
         key = f"{r['algorithm']}/{r['dataset']}/{r['run']}"
         folder = CaseFolder.of(results_dir, Case.from_key(key))
         metrics, failed = folder.record_or_failure("metrics", "metrics.json")
+        if folder.has("drift", "drift.json"):  # its thresholds do not fit the dataset
+            drift, _ = folder.record_or_failure("drift", "drift.json")
+            if isinstance(drift, dict) and drift.get("warning"):
+                out.append((key, f"drift: {drift['warning']}"))
         for metric in registry.REGISTRY:
             if metric.stage == "metrics":
                 record = (metrics or {}).get(metric.key) if failed is None else None
