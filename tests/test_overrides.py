@@ -394,6 +394,10 @@ def test_a_real_mixed_grid_evaluates_each_cell_as_it_fits(mixed):
     # one table: the lengths of both datasets, each cell from the datasets that have it
     tex = (mixed / "tables/rpe_distance.tex").read_text()
     assert "\\textbf{48m} & \\textbf{100m}" in tex and "\\textbf{800m}" in tex
+    assert (
+        "segment lengths per dataset: KITTI\\_00 100, 200, 300, 400, 500, 600, 700, 800 m;"
+        " MH\\_01 8, 16, 24, 32, 40, 48 m"
+    ) in tex
     rows = {
         r.split(",")[0] + "/" + r.split(",")[1]: r
         for r in (mixed / "summary.csv").read_text().splitlines()

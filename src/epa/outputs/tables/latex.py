@@ -22,7 +22,7 @@ from epa.outputs.tables.cells import (
     success_auc_cell,
     success_cell,
 )
-from epa.outputs.tables.results import CaseResult
+from epa.outputs.tables.results import CaseResult, segments_by_dataset
 
 _LATEX_SPECIAL = {
     "\\": r"\textbackslash{}",
@@ -211,13 +211,27 @@ def _per_segment(layout: _Layout, segments, name: str, title: str, fn):
         for cell in cells:
             cell.cases, cell.marks = runs, marks if cell.values is not None else ""
         rows.append((a, a, cells))
-    return _built(
+    built = _built(
         name,
         title + SPREAD_TITLE[layout.spread].replace("RUNS]", "RUNS OF ALL DATASETS]"),
         seg_labels,
         rows,
         layout,
         "per_segment",
+    )
+    lengths = lengths_note(layout.grid)
+    return built._replace(notes=built.notes + [("", lengths)]) if lengths else built
+
+
+def lengths_note(grid: list[CaseResult]) -> str | None:
+    """Where datasets were evaluated at different segment lengths (overrides, ``segments: auto``):
+    each dataset's, for a table whose columns are lengths. None where they share one list."""
+    by_dataset = segments_by_dataset(grid)
+    if len({tuple(v) for v in by_dataset.values()}) <= 1:
+        return None
+    return "segment lengths per dataset: " + "; ".join(
+        f"{ds} {', '.join(segment_key(s) for s in lengths)} m"
+        for ds, lengths in sorted(by_dataset.items())
     )
 
 

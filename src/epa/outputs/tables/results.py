@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 from epa.artifacts.case import Case, CaseFolder
 from epa.core.errors import EpaError
-from epa.metrics import drift
+from epa.metrics import accuracy, drift
 from epa.outputs import parallel
 
 
@@ -135,3 +135,13 @@ AFTER_DRIFT = ("consistency", "efficiency")  # stages whose failure leaves the a
 def failed_cases(grid: list[CaseResult]) -> list[tuple[str, str]]:
     """(case key, status) of every case without a result, for the end-of-run list."""
     return [(f"{c.algorithm}/{c.dataset}/{c.run}", c.status) for c in grid if not c.ok]
+
+
+def segments_by_dataset(grid: list[CaseResult]) -> dict[str, list[float]]:
+    """Each dataset's distance-RPE segment lengths, as its cases were evaluated (the first case with
+    a result of each dataset; its settings may be its own: overrides, ``segments: auto``)."""
+    out: dict[str, list[float]] = {}
+    for c in grid:
+        if c.ok and c.dataset not in out and c.metrics.get("rpe_distance") is not None:
+            out[c.dataset] = accuracy.recorded_lengths(c.metrics)
+    return out

@@ -16,7 +16,13 @@ from epa.outputs.tables.across_runs import write_across_runs
 from epa.outputs.tables.comparison import comparison_tex, comparison_text, comparisons
 from epa.outputs.tables.latex import build_tables, restyle, tex_document
 from epa.outputs.tables.ov_eval import ov_eval_text
-from epa.outputs.tables.results import CaseResult, collect, failed_cases, has_result
+from epa.outputs.tables.results import (
+    CaseResult,
+    collect,
+    failed_cases,
+    has_result,
+    segments_by_dataset,
+)
 from epa.outputs.tables.summary import (
     SUCCESS_CURVE_COLUMNS,
     records_csv,
@@ -95,16 +101,6 @@ def write_all(
     write_across_runs(grid, results_dir)
     if cfg.get("mode") == "rpg":
         rpg_tables.write_rpg_tables(grid, results_dir, cfg, files.write_text)
-
-
-def segments_by_dataset(grid: list[CaseResult]) -> dict[str, list[float]]:
-    """Each dataset's distance-RPE segment lengths, as its cases were evaluated (the first case with
-    a result of each dataset; its settings may be its own: overrides, ``segments: auto``)."""
-    out: dict[str, list[float]] = {}
-    for c in grid:
-        if c.ok and c.dataset not in out and c.metrics.get("rpe_distance") is not None:
-            out[c.dataset] = accuracy.recorded_lengths(c.metrics)
-    return out
 
 
 def grid_segments(grid: list[CaseResult], configured) -> list[float]:
