@@ -247,8 +247,8 @@ def metric_warnings(doc: dict, say=_as_is) -> list[str]:
     """The warnings of a case: drift detection's (its thresholds do not fit the dataset), then the
     registered metrics' (their records' ``warning``), in registry order; each said by ``say``."""
     drift = doc.get("drift")
-    warned = isinstance(drift, dict) and drift.get("warning")
-    out = [f"drift: {say(drift['warning'])}"] if warned else []
+    warning = drift.get("warning") if isinstance(drift, dict) else None
+    out = [f"drift: {say(warning)}"] if warning else []
     for metric in registry.REGISTRY:
         metrics = doc.get("metrics", {})
         record = metrics.get(metric.key) if metric.stage == "metrics" else doc.get(metric.stage)
