@@ -243,7 +243,7 @@ def clause(text: str) -> str:
 
 def _numbered(m: re.Match) -> list[str]:
     """The unnamed groups of a match, in order (the numbers)."""
-    names = {i for i in m.re.groupindex.values()}
+    names = set(m.re.groupindex.values())
     return [m[i] for i in range(1, (m.re.groups or 0) + 1) if i not in names]
 
 
