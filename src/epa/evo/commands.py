@@ -52,7 +52,6 @@ def add_parsers(sub) -> None:
 
 
 def _add_options(f, kind: str, timed: bool) -> None:
-    from epa.evo.plots import PLOT_MODES, X_DIMENSIONS
     from epa.metrics import relations
 
     choices = list(relations.RELATIONS) if kind == "rpe" else list(relations.RELATIONS[:-1])
@@ -121,6 +120,13 @@ def _add_options(f, kind: str, timed: bool) -> None:
             action="store_true",
             help="epica: estimate the time offset (Step 1) and add it to --t_offset",
         )
+    _add_output_options(f)
+
+
+def _add_output_options(f) -> None:
+    """What evo's commands write: the result file, the figures, the printed block."""
+    from epa.evo.plots import PLOT_MODES, X_DIMENSIONS
+
     f.add_argument(
         "--unsorted",
         default="error",

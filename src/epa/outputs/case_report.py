@@ -16,7 +16,12 @@ import numpy as np
 
 from epa import __version__
 from epa.metrics import accuracy, registry
-from epa.outputs import provenance
+from epa.outputs import provenance, zh_reasons
+
+
+def _as_is(reason: str) -> str:
+    return reason
+
 
 TEXT: dict[str, dict[str, Any]] = {
     "en": {
@@ -76,8 +81,8 @@ TEXT: dict[str, dict[str, Any]] = {
         "nees": "NEES orientation {r:.3f}, position {p:.3f} (3 = consistent); {o:.2f} % of the errors outside ±3σ.",
         "eff": "Frame time mean {m:.2f} ms (p95 {p:.2f} ms) at {hz:g} Hz; {over:.1f} % of the frames over the sensor period; EA-Drift {ea:.4f} %.",
         "fail": "Fail segments",
-        "start": "start [s]",
-        "end": "end [s]",
+        "start": "start [s after the first matched pose]",
+        "end": "end [s after the first matched pose]",
         "none": "none",
         "figures": "Figures",
         "not_drawn": "Not drawn (each bundle holds the figure's data; the command draws it, from this folder):",
@@ -94,6 +99,9 @@ TEXT: dict[str, dict[str, Any]] = {
         "grid_prov": "The whole run's provenance (versions of every dependency, the resolved settings): `{path}`; `epa verify` checks the hashes and regenerates the numbers.",
         "missing": "missing",
         "every_key": "Every number of every record: `metrics_summary.csv` (section, metric, value) and `metrics.json`.",
+        # the records' reasons and warnings, said in this language (the records keep English)
+        "say": _as_is,
+        "sep": "; ",
     },
     "zh": {
         "title": "评估：",
@@ -152,8 +160,8 @@ TEXT: dict[str, dict[str, Any]] = {
         "nees": "NEES 姿态 {r:.3f}，位置 {p:.3f}（3 = 一致）；{o:.2f} % 的误差超出 ±3σ。",
         "eff": "平均帧时间 {m:.2f} ms（p95 {p:.2f} ms），传感器 {hz:g} Hz；{over:.1f} % 的帧超过传感器周期；EA-Drift {ea:.4f} %。",
         "fail": "失效区段",
-        "start": "开始 [s]",
-        "end": "结束 [s]",
+        "start": "开始 [s，自首个匹配位姿起]",
+        "end": "结束 [s，自首个匹配位姿起]",
         "none": "无",
         "figures": "图",
         "not_drawn": "未绘制（每个 bundle 含该图的数据；在本文件夹运行命令即可绘制）：",
@@ -170,6 +178,8 @@ TEXT: dict[str, dict[str, Any]] = {
         "grid_prov": "整次运行的来源（所有依赖的版本、解析后的设置）：`{path}`；`epa verify` 校验哈希并重新生成数字。",
         "missing": "缺失",
         "every_key": "每条记录的每个数字：`metrics_summary.csv`（section, metric, value）与 `metrics.json`。",
+        "say": zh_reasons.say,
+        "sep": "；",
     },
 }
 
@@ -233,16 +243,17 @@ def metrics_table(m: dict, T: dict) -> list[str]:
     return lines
 
 
-def metric_warnings(doc: dict) -> list[str]:
+def metric_warnings(doc: dict, say=_as_is) -> list[str]:
     """The warnings of a case: drift detection's (its thresholds do not fit the dataset), then the
-    registered metrics' (their records' ``warning``), in registry order."""
+    registered metrics' (their records' ``warning``), in registry order; each said by ``say``."""
     drift = doc.get("drift")
-    out = [f"drift: {drift['warning']}"] if isinstance(drift, dict) and drift.get("warning") else []
+    warning = drift.get("warning") if isinstance(drift, dict) else None
+    out = [f"drift: {say(warning)}"] if warning else []
     for metric in registry.REGISTRY:
         metrics = doc.get("metrics", {})
         record = metrics.get(metric.key) if metric.stage == "metrics" else doc.get(metric.stage)
         if isinstance(record, dict) and record.get("warning"):
-            out.append(f"{metric.key}: {record['warning']}")
+            out.append(f"{metric.key}: {say(record['warning'])}")
     return out
 
 
@@ -276,7 +287,7 @@ def steps_lines(m: dict, T: dict) -> list[str]:
         one = T["s1_not"].format(
             status=s1.get("status"),
             meaning=_meaning(s1.get("status"), T),
-            reason=s1.get("reason", ""),
+            reason=T["say"](s1.get("reason", "")),
             ms=_num(sync.get("offset_s")) * 1000,
         )
     ext = calib.get("extrinsic") or {}
@@ -300,9 +311,9 @@ def steps_lines(m: dict, T: dict) -> list[str]:
             else ""
         )
         # a position-only estimate's Step 2 is off for its own reason, not by the settings
-        meaning = calib.get("step2_reason") or _meaning(status, T)
+        meaning = T["say"](calib.get("step2_reason")) or _meaning(status, T)
         two = found + T["s2_not"].format(
-            status=status, meaning=meaning, reason=plan.get("reason", "")
+            status=status, meaning=meaning, reason=T["say"](plan.get("reason", ""))
         )
     three = step3_text(m, align, T)
     lines = [
@@ -311,9 +322,8 @@ def steps_lines(m: dict, T: dict) -> list[str]:
         f"- **{T['step3']}**: {three}",
     ]
     if plan.get("fallback"):
-        lines.append(
-            f"- {T['fallback'].format(dropped='; '.join(plan.get('dropped') or []) or '-')}"
-        )
+        dropped = T["sep"].join(T["say"](d) for d in plan.get("dropped") or []) or "-"
+        lines.append(f"- {T['fallback'].format(dropped=dropped)}")
     return lines
 
 
@@ -412,6 +422,7 @@ def report_md(
     lang: str,
     fail: dict,
     *,
+    t0: float,
     bundles=(),
     every_figure: tuple = (),
     cfg_report: dict | None = None,
@@ -426,7 +437,7 @@ def report_md(
     for key in ("consistency", "efficiency"):
         lines += ["", f"## {T[key]}", "", record_line(key, doc.get(key, {}), T)]
     lines += ["", f"## {T['fail']}", ""]
-    lines += fail_lines(fail, T)
+    lines += fail_lines(fail, T, t0)
     lines += ["", f"## {T['figures']}", ""]
     lines += figure_lines(drawn, set(bundles), every_figure, cfg_report or {}, T)
     lines += ["", f"## {T['provenance']}", ""]
@@ -438,6 +449,7 @@ def lead_lines(doc: dict, case_name: str, T: dict) -> list[str]:
     """The title, what was evaluated and how, the metric warnings and the metrics table."""
     m = doc.get("metrics", {})
     sync, align = m.get("sync", {}), m.get("alignment", {})
+    warnings = metric_warnings(doc, T["say"])
     return [
         f"# {T['title']} {case_name}",
         "",
@@ -453,8 +465,8 @@ def lead_lines(doc: dict, case_name: str, T: dict) -> list[str]:
             align=align.get("method"),
         ),
         "",
-        *(f"**{T['warning']}**: {w}" for w in metric_warnings(doc)),
-        *([""] if metric_warnings(doc) else []),
+        *(f"**{T['warning']}**: {w}" for w in warnings),
+        *([""] if warnings else []),
         f"## {T['metrics']}",
         "",
         T["metrics_note"],
@@ -487,7 +499,7 @@ def drift_lines(d: dict, T: dict) -> list[str]:
 def record_line(key: str, rec: dict, T: dict) -> str:
     """The one line of the consistency or the efficiency record, or why it is unavailable."""
     if not rec.get("available"):
-        return f"{T['unavailable']}: {rec.get('reason', rec.get('failed', ''))}"
+        return f"{T['unavailable']}: {T['say'](rec.get('reason', rec.get('failed', '')))}"
     if key == "consistency":
         return T["nees"].format(
             r=_num(rec.get("nees_rot_mean")),
@@ -503,12 +515,13 @@ def record_line(key: str, rec: dict, T: dict) -> str:
     )
 
 
-def fail_lines(fail: dict, T: dict) -> list[str]:
-    """The fail segments, a row each, or the word for none."""
+def fail_lines(fail: dict, T: dict, t0: float) -> list[str]:
+    """The fail segments, a row each, in seconds after ``t0`` (the first matched reference pose's
+    stamp: the figures' zero; 07_drift/fail_segments.csv keeps the stamps), or the word for none."""
     starts = np.asarray(fail.get("t_start", []), float)
     if not starts.size:
         return [T["none"]]
-    # stamps of the reference clock, as in 07_drift/fail_segments.csv
+    ends = np.asarray(fail["t_end"], float)
     return [f"| {T['start']} | {T['end']} |", "|---:|---:|"] + [
-        f"| {s:.3f} | {e:.3f} |" for s, e in zip(starts, np.asarray(fail["t_end"], float))
+        f"| {s:.3f} | {e:.3f} |" for s, e in zip(starts - t0, ends - t0)
     ]

@@ -34,13 +34,19 @@ DRAW_ORDER = ("rmse_time", "success_curve", "ate", "drift_rate", "success_rate")
 
 # ----------------------------------------------------------------------------- case artifacts
 # ----------------------------------------------------------------------------- case bundles
+def time_zero(data: CaseData) -> float:
+    """The zero of a case's time axes (figures, the reports' fail segments): the stamp of the first
+    matched reference pose."""
+    return float(data.matched[0].t[0])
+
+
 def case_bundles(data: CaseData) -> dict[str, dict]:
     """Every per-case figure's bundle, from a case's artifacts."""
     p = data.folder.path
     ref, aligned, ape, fail = data.matched[0], data.aligned, data.ape, data.fail_segments
     drift = files.read_json(p("drift", "drift.json"))
     sync = files.read_json(p("sync", "sync.json"))
-    t0 = float(ref.t[0])
+    t0 = time_zero(data)
     k = figures.thin(len(ref))
     out = {
         "trajectory": figures.bundle(
@@ -224,6 +230,7 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
             drawn,
             lang,
             data.fail_segments,
+            t0=time_zero(data),
             bundles=bundles,
             every_figure=CASE_FIGURES,
             cfg_report=c,
