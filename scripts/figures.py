@@ -1,5 +1,6 @@
 """The figures rule's body: the grid's figures (PNG and vector PDF, with their plot bundles) from
-summary.csv, success_curves.csv and results/consistency/.
+summary.csv, success_curves.csv and results/consistency/, and each dataset's from the per-case
+reports' files.
 
 Snakemake runs it for the ``figures`` rule (``script:``). It also runs on its own, on a results folder
 whose tables are written:
@@ -14,8 +15,10 @@ import sys
 from epa.outputs import report
 
 
-def write(results_dir, segments, log_path, workers: int = 1) -> list:
-    written = report.write_grid_figures(results_dir, segments, workers=workers)
+def write(results_dir, segments, log_path, workers: int = 1, per_dataset: bool = True) -> list:
+    written = report.write_grid_figures(
+        results_dir, segments, workers=workers, per_dataset=per_dataset
+    )
     with open(log_path, "w", encoding="utf-8") as fh:
         fh.write("\n".join(map(str, written)) + "\n")
     return written
@@ -36,7 +39,11 @@ def main(argv=None) -> int:
         return 2
     results = cfg["results_dir"]
     written = write(
-        results, cfg["metrics"]["segments"], f"{results}/logs/figures.log", workers=os.cpu_count()
+        results,
+        cfg["metrics"]["segments"],
+        f"{results}/logs/figures.log",
+        workers=os.cpu_count(),
+        per_dataset=cfg["report"]["per_case"],
     )
     print(f"{len(written)} files in {results}/figures")
     return 0
@@ -45,6 +52,12 @@ def main(argv=None) -> int:
 if __name__ == "__main__":
     if "snakemake" in globals():  # run by the figures rule
         sm = globals()["snakemake"]
-        write(sm.params.results, sm.params.segments, sm.log[0], workers=sm.threads)
+        write(
+            sm.params.results,
+            sm.params.segments,
+            sm.log[0],
+            workers=sm.threads,
+            per_dataset=sm.params.per_dataset,
+        )
     else:
         sys.exit(main())

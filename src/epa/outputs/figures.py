@@ -615,6 +615,111 @@ def _lines(plt, b, w, h):
     return fig
 
 
+def _overlay(plt, b, w, h):
+    """A dataset's trajectories: the reference and one line per algorithm, top view to scale (its
+    height follows the data) over a side view stretched in z; start (circle) and end (square) marked.
+    The legend is beside the top view: a trajectory fills its axes."""
+    d = b["data"]
+    colors = d.get("colors") or OKABE_ITO
+    ref = _arr(d["ref"]).reshape(-1, 3)
+    lines = [
+        (
+            f"{line['label']} ({line['run']})" if line.get("run") else line["label"],
+            _arr(line["xyz"]).reshape(-1, 3),
+            colors[line.get("color", k) % len(colors)],
+        )
+        for k, line in enumerate(d["lines"])
+    ]
+    pts = np.vstack([ref, *(xyz for _, xyz, _ in lines)])[:, :2]
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    left, right, bottom, top, gap, side = 0.62, 1.75, 0.4, 0.3, 0.3, 0.9
+    aw = w - left - right
+    span = np.ptp(pts, axis=0) if len(pts) else np.ones(2)
+    # in steps of 0.05 in, as the case figure's: datasets of one shape share a layout
+    th = round(float(np.clip(aw * span[1] / max(span[0], 1e-9), 1.2, 3.6)) / 0.05) * 0.05
+    fh = bottom + side + gap + th + top
+
+    def make():
+        fig = plt.figure(figsize=(w, fh))
+        ax_top = fig.add_axes([left / w, (bottom + side + gap) / fh, aw / w, th / fh])
+        fig.add_axes([left / w, bottom / fh, aw / w, side / fh], sharex=ax_top)
+        ax_top.tick_params(labelbottom=False)
+        return fig
+
+    fig = _layout(plt, "overlay", (w, fh), make)
+    ax_top, ax_side = fig.axes
+    for ax, j, label in ((ax_top, 1, "y [m]"), (ax_side, 2, "z [m]")):
+        if len(ref):
+            ax.plot(ref[:, 0], ref[:, j], color="0.75", lw=2.2, label="reference", zorder=1)
+        for name, xyz, color in lines:
+            ax.plot(xyz[:, 0], xyz[:, j], color=color, lw=0.9, label=name, zorder=2)
+        for xyz, color in [(ref, "0.55"), *((xyz, c) for _, xyz, c in lines)]:
+            if len(xyz):
+                ax.plot(*xyz[0, [0, j]], "o", color=color, ms=4, mec="white", mew=0.5, zorder=3)
+                ax.plot(*xyz[-1, [0, j]], "s", color=color, ms=4, mec="white", mew=0.5, zorder=3)
+        ax.set_ylabel(label)
+    ax_top.set_aspect("equal", adjustable="datalim")
+    ax_side.set_xlabel("x [m]")
+    ax_top.set_title(d.get("dataset", ""), loc="left")
+    handles, labels = ax_top.get_legend_handles_labels()
+    for marker, name in (("o", "start"), ("s", "end")):
+        (h_,) = ax_top.plot([], [], marker, color="0.3", ms=4, ls="none")
+        handles.append(h_)
+        labels.append(name)
+    ax_top.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0)
+    return fig
+
+
+def _boxes(plt, b, w, h):
+    """Boxes per algorithm at each segment length: translation beside rotation, from box statistics
+    (``med``, ``q1``, ``q3``, ``whislo``, ``whishi``) computed over the pooled segments."""
+    d = b["data"]
+    colors = d.get("colors") or OKABE_ITO
+    lengths, algs = d["lengths"], d["algorithms"]
+    rows = -(-max(len(algs), 1) // 5)  # legend rows above the panels
+    top = 0.25 + 0.16 * rows
+    fig, axes = plt.subplots(1, 2, figsize=(w, h))
+    fig.subplots_adjust(
+        left=0.6 / w, right=1 - 0.1 / w, bottom=0.45 / h, top=1 - top / h, wspace=0.3
+    )
+    width = 0.8 / max(len(algs), 1)
+    for ax, key, ylabel in zip(axes, ("trans", "rot"), d["ylabels"]):
+        for a, alg in enumerate(algs):
+            color = colors[alg.get("color", a) % len(colors)]
+            have = [(j, s) for j, s in enumerate(alg[key]) if s is not None]
+            if have:
+                bp = ax.bxp(
+                    [{**s, "fliers": []} for _, s in have],
+                    positions=[j - 0.4 + width * (a + 0.5) for j, _ in have],
+                    widths=width * 0.8,
+                    showfliers=False,
+                    patch_artist=True,
+                    manage_ticks=False,
+                    medianprops={"color": "black", "lw": 0.8},
+                    whiskerprops={"lw": 0.6},
+                    capprops={"lw": 0.6},
+                )
+                for box in bp["boxes"]:
+                    box.set(facecolor=color, alpha=0.8, lw=0.5)
+            if key == "trans":
+                ax.plot([], [], color=color, lw=4, label=alg["label"])
+        ax.set_xticks(np.arange(len(lengths)), [f"{v:g}" for v in lengths])
+        ax.set_xlim(-0.5, max(len(lengths), 1) - 0.5)
+        ax.set_xlabel("segment length [m]")
+        ax.set_ylabel(ylabel)
+    axes[0].set_title(d.get("dataset", ""), loc="left")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(
+        handles,
+        labels,
+        loc="upper right",
+        bbox_to_anchor=(1 - 0.1 / w, 1.0),
+        ncols=min(len(labels), 5) or 1,
+        borderaxespad=0.1,
+    )
+    return fig
+
+
 def _log_axis(ax):
     """A log y axis labelled in plain numbers: 1-2-5 steps over up to two decades, decades beyond."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
@@ -639,4 +744,6 @@ RENDERERS = {
     "sigma3": _sigma3,
     "grouped": _grouped,
     "lines": _lines,
+    "overlay": _overlay,
+    "boxes": _boxes,
 }

@@ -21,7 +21,7 @@ import numpy as np
 from epa.artifacts import files
 from epa.artifacts.case import CaseData
 from epa.metrics.accuracy import segment_key
-from epa.outputs import case_report, figures, parallel, tables
+from epa.outputs import case_report, dataset_figures, figures, parallel, tables
 
 CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")
 GRID_FIGURES = ("ate", "success_rate", "success_curve", "drift_rate", "rmse_time")
@@ -209,6 +209,8 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
     bundles = case_bundles(data)
     for fig_name, b in bundles.items():
         figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b)
+    # what the grid's per-dataset figures read of this case (its relative errors, thinned)
+    figures.write_bundle(folder / dataset_figures.SAMPLES_FILE, dataset_figures.case_samples(case))
     why = flags(doc)
     draw = c["figures"] == "all" or (c["figures"] == "flagged" and failed(doc))
     drawn = list(bundles) if draw else []
@@ -391,15 +393,21 @@ def _success_curve_bundle(curves_path: Path, algs: list[str], datasets: list[str
     )
 
 
-def write_grid_figures(results_dir, segments, style: str = "wide", workers: int = 1) -> list[Path]:
-    """The grid figures and their bundles. ``workers`` > 1 draws them in that many forked processes:
+def write_grid_figures(
+    results_dir, segments, style: str = "wide", workers: int = 1, per_dataset: bool = True
+) -> list[Path]:
+    """The grid figures and their bundles; with ``per_dataset`` (the per-case reports were
+    written: ``report.per_case``) also each dataset's trajectories and relative-error boxes
+    (:mod:`epa.outputs.dataset_figures`). ``workers`` > 1 draws them in that many forked processes:
     the figures rule is the run's serial tail, and drawing (PDF font subsetting most of all) is most
     of its time. Each figure is drawn from its bundle alone, so the bytes do not depend on it."""
     results_dir = Path(results_dir)
     jobs = []
-    for name, b in grid_bundles(
-        results_dir / "summary.csv", results_dir / "consistency", segments
-    ).items():
+    made = grid_bundles(results_dir / "summary.csv", results_dir / "consistency", segments)
+    if per_dataset:
+        rows = dataset_figures.read_summary(results_dir / "summary.csv")
+        made.update(dataset_figures.grid_bundles(results_dir, rows, tables.has_result))
+    for name, b in made.items():
         figures.write_bundle(results_dir / "figures" / "bundles" / f"{name}.json", b)
         jobs.append((b, results_dir / "figures" / name))
     if workers > 1:
