@@ -100,24 +100,22 @@ def box_stats(parts) -> dict | None:
     -------
     dict or None
         ``med``, ``q1``, ``q3``, ``whislo``, ``whishi``, ``n`` (segments), ``runs``; None without a
-        segment. Each stored value stands for n / (values stored) segments; with every segment
-        stored, the quartiles are numpy's (linear) percentiles of the pooled segments and the
-        whiskers matplotlib's: the farthest segment within 1.5 IQR of the box.
+        segment. The quartiles are numpy's (linear) percentiles of the pooled segments, the whiskers
+        matplotlib's (the farthest segment within 1.5 IQR of the box): exactly where every segment
+        is stored. Otherwise a run's segments between two stored ones are taken as evenly spread
+        in value between them (each stored value keeps its rank).
     """
-    parts = [(int(n), np.asarray(q, float)) for n, q in parts if n and len(q)]
-    if not parts:
+    from epa.outputs.figures import thin
+
+    pooled = [
+        q if len(q) == n else np.interp(np.arange(n), thin(n, len(q)), q)
+        for n, q in ((int(n), np.asarray(q, float)) for n, q in parts)
+        if n and len(q)
+    ]
+    if not pooled:
         return None
-    x = np.concatenate([q for _, q in parts])
-    w = np.concatenate([np.full(len(q), n / len(q)) for n, q in parts])
-    order = np.argsort(x, kind="stable")
-    x, w = x[order], w[order]
-    if len(x) == 1:
-        q1 = med = q3 = float(x[0])
-    else:
-        # the weighted plotting positions: i / (N - 1) when every weight is 1
-        cum = np.cumsum(w)
-        pos = (cum - w) / (cum[-1] - w[-1])
-        q1, med, q3 = (float(v) for v in np.interp([0.25, 0.5, 0.75], pos, x))
+    x = np.concatenate(pooled)
+    q1, med, q3 = (float(v) for v in np.percentile(x, [25, 50, 75]))
     iqr = q3 - q1
     lo = x[x >= q1 - WHISKER * iqr]
     hi = x[x <= q3 + WHISKER * iqr]
@@ -127,8 +125,8 @@ def box_stats(parts) -> dict | None:
         "q3": q3,
         "whislo": min(float(lo.min()), q1) if lo.size else q1,
         "whishi": max(float(hi.max()), q3) if hi.size else q3,
-        "n": int(sum(n for n, _ in parts)),
-        "runs": len(parts),
+        "n": len(x),
+        "runs": len(pooled),
     }
 
 
@@ -163,23 +161,46 @@ def _report_folder(results_dir: Path, row: dict) -> Path:
     return results_dir / "cases" / row["algorithm"] / row["dataset"] / row["run"] / folder("report")
 
 
-def grid_bundles(results_dir, rows: list[dict], has_result) -> dict[str, dict]:
-    """Every per-dataset figure's bundle, from summary.csv's ``rows`` (``has_result(status)``: a case
-    with numbers) and the per-case files of the report stage: one colour per algorithm, by its place
-    in the grid's sorted algorithms, as in the other grid figures."""
-    results_dir = Path(results_dir)
+def cells_by_dataset(rows: list[dict], has_result) -> list[tuple[str, list]]:
+    """Per dataset (sorted): per algorithm of the grid (sorted; its place is its colour, as in the
+    other grid figures) ``(place, algorithm, its summary.csv rows with a result)``."""
     algs = sorted({r["algorithm"] for r in rows})
     datasets = sorted({r["dataset"] for r in rows})
     cells: dict[tuple[str, str], list[dict]] = {}
     for r in rows:
         if has_result(r["status"]):
             cells.setdefault((r["dataset"], r["algorithm"]), []).append(r)
+    return [(d, [(k, a, cells.get((d, a), [])) for k, a in enumerate(algs)]) for d in datasets]
+
+
+def dataset_bundles(results_dir, dataset: str, here) -> dict[str, dict]:
+    """A dataset's two bundles, from its cells (:func:`cells_by_dataset`) and the per-case files."""
+    results_dir = Path(results_dir)
+    return {
+        f"trajectories_{dataset}": _overlay_bundle(results_dir, dataset, here),
+        f"relative_error_{dataset}": _boxes_bundle(results_dir, dataset, here),
+    }
+
+
+def grid_bundles(results_dir, rows: list[dict], has_result) -> dict[str, dict]:
+    """Every per-dataset figure's bundle, from summary.csv's ``rows`` (``has_result(status)``: a case
+    with numbers) and the per-case files of the report stage."""
     out = {}
-    for d in datasets:
-        here = [(k, a, cells.get((d, a), [])) for k, a in enumerate(algs)]
-        out[f"trajectories_{d}"] = _overlay_bundle(results_dir, d, here)
-        out[f"relative_error_{d}"] = _boxes_bundle(results_dir, d, here)
+    for d, here in cells_by_dataset(rows, has_result):
+        out.update(dataset_bundles(results_dir, d, here))
     return out
+
+
+def draw_dataset(results_dir, dataset: str, here, style: str = "wide") -> list[Path]:
+    """A dataset's figures and their bundles (``results/figures/``): one job of the figures rule."""
+    from epa.outputs import figures
+
+    results_dir = Path(results_dir)
+    written = []
+    for name, b in dataset_bundles(results_dir, dataset, here).items():
+        figures.write_bundle(results_dir / "figures" / "bundles" / f"{name}.json", b)
+        written += figures.render(b, results_dir / "figures" / name, style=style)
+    return written
 
 
 def _overlay_bundle(results_dir: Path, dataset: str, here) -> dict:

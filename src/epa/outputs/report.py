@@ -9,7 +9,6 @@ figure's bundle in ``bundles/<name>.json``, and ``<run>.zip`` (every artifact pl
 from __future__ import annotations
 
 import csv
-import functools
 import hashlib
 import io as _io
 import json
@@ -400,20 +399,32 @@ def write_grid_figures(
     written: ``report.per_case``) also each dataset's trajectories and relative-error boxes
     (:mod:`epa.outputs.dataset_figures`). ``workers`` > 1 draws them in that many forked processes:
     the figures rule is the run's serial tail, and drawing (PDF font subsetting most of all) is most
-    of its time. Each figure is drawn from its bundle alone, so the bytes do not depend on it."""
+    of its time; a dataset's job also reads its cases' files. Each figure is drawn from its bundle
+    alone, so the bytes do not depend on it."""
     results_dir = Path(results_dir)
     jobs = []
-    made = grid_bundles(results_dir / "summary.csv", results_dir / "consistency", segments)
+    for name, b in grid_bundles(
+        results_dir / "summary.csv", results_dir / "consistency", segments
+    ).items():
+        figures.write_bundle(results_dir / "figures" / "bundles" / f"{name}.json", b)
+        jobs.append(("draw", b, results_dir / "figures" / name, style))
+    rank = {name: k for k, name in enumerate(DRAW_ORDER)}
+    order = sorted(range(len(jobs)), key=lambda k: rank.get(jobs[k][2].name, len(rank)))
     if per_dataset:
         rows = dataset_figures.read_summary(results_dir / "summary.csv")
-        made.update(dataset_figures.grid_bundles(results_dir, rows, tables.has_result))
-    for name, b in made.items():
-        figures.write_bundle(results_dir / "figures" / "bundles" / f"{name}.json", b)
-        jobs.append((b, results_dir / "figures" / name))
+        cells = dataset_figures.cells_by_dataset(rows, tables.has_result)
+        # a dataset's two figures cost more than any one of the others: first
+        order = list(range(len(jobs), len(jobs) + len(cells))) + order
+        jobs += [("dataset", results_dir, d, here, style) for d, here in cells]
     if workers > 1:
         figures.prepare(style)  # matplotlib imported once, before the fork
-    draw = functools.partial(figures.render, style=style)
-    rank = {name: k for k, name in enumerate(DRAW_ORDER)}
-    order = sorted(range(len(jobs)), key=lambda k: rank.get(jobs[k][1].name, len(rank)))
-    drawn = dict(zip(order, parallel.map_forked(draw, [jobs[k] for k in order], workers)))
+    drawn = dict(zip(order, parallel.map_forked(_grid_job, [jobs[k] for k in order], workers)))
     return [path for k in range(len(jobs)) for path in drawn[k]]  # in the bundles' order
+
+
+def _grid_job(what: str, *args) -> list[Path]:
+    """One job of :func:`write_grid_figures`: draw a bundle, or a dataset's figures."""
+    if what == "draw":
+        b, stem, style = args
+        return figures.render(b, stem, style=style)
+    return dataset_figures.draw_dataset(*args)
