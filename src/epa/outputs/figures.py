@@ -619,31 +619,44 @@ def _lines(plt, b, w, h):
     return fig
 
 
+OUT_OF_VIEW = 0.5  # a line more than half the reference's extent outside it leaves the view
+
+
 def _overlay(plt, b, w, h):
     """A dataset's trajectories: the reference and one line per algorithm, top view to scale (its
     height follows the data) over a side view stretched in z; start (circle) and end (square) marked.
-    The legend is beside the top view: a trajectory fills its axes."""
+    The view holds the reference and every line that stays near it: a line that goes farther than
+    half the reference's extent (a diverged run, kilometres away) is drawn cut at the view's edge
+    and says so in the legend, instead of shrinking the others to a dot. The legend, titled with
+    the dataset, is beside the top view: a trajectory fills its axes."""
     d = b["data"]
     colors = d.get("colors") or OKABE_ITO
     ref = _arr(d["ref"]).reshape(-1, 3)
-    lines = [
-        (
-            f"{line['label']} ({line['run']})" if line.get("run") else line["label"],
-            _arr(line["xyz"]).reshape(-1, 3),
-            colors[line.get("color", k) % len(colors)],
-        )
-        for k, line in enumerate(d["lines"])
-    ]
-    pts = np.vstack([ref, *(xyz for _, xyz, _ in lines)])[:, :2]
-    pts = pts[np.isfinite(pts).all(axis=1)]
-    left, right, bottom, top, gap, side = 0.62, 1.75, 0.4, 0.3, 0.3, 0.9
+    ref = ref[np.isfinite(ref).all(axis=1)]
+    lines = []
+    for k, line in enumerate(d["lines"]):
+        xyz = _arr(line["xyz"]).reshape(-1, 3)
+        xyz = xyz[np.isfinite(xyz).all(axis=1)]
+        out = False
+        if len(ref) and len(xyz):
+            lo, hi = ref[:, :2].min(axis=0), ref[:, :2].max(axis=0)
+            tol = OUT_OF_VIEW * max(float(np.max(hi - lo)), 1.0)
+            out = bool(((xyz[:, :2] < lo - tol) | (xyz[:, :2] > hi + tol)).any())
+        name = f"{line['label']} ({line['run']})" if line.get("run") else line["label"]
+        lines.append((name + (", leaves the view" if out else ""), xyz, out, k, line))
+    shown = np.vstack([ref, *(xyz for _, xyz, out, _, _ in lines if not out), np.zeros((0, 3))])
+    if not len(shown):
+        shown = np.zeros((1, 3))
+    lo, hi = shown.min(axis=0), shown.max(axis=0)
+    pad = 0.04 * np.maximum(hi - lo, 1e-3)
+    lo, hi = lo - pad, hi + pad
+    left, right, bottom, top, gap, side = 0.62, 1.75, 0.4, 0.15, 0.3, 0.9
     aw, most = w - left - right, 3.6
-    span = np.ptp(pts, axis=0) if len(pts) else np.ones(2)
-    ratio = span[1] / max(span[0], 1e-9)
-    # the top view at least as tall as the data at this width (the equal aspect then widens y,
+    ratio = (hi[1] - lo[1]) / (hi[0] - lo[0])
+    # the top view at least as tall as the view at this width (the equal aspect then widens y,
     # never cuts it: x is shared); a tall trajectory narrows both views instead. In steps of 0.05 in
     # (rounded up), as the case figure's: datasets of one shape share a layout.
-    aw = min(aw, most / ratio) if ratio > 0 else aw
+    aw = min(aw, most / ratio)
     th = float(np.ceil(np.clip(aw * ratio, 1.2, most) / 0.05 - 1e-9) * 0.05)
     fh = bottom + side + gap + th + top
 
@@ -659,24 +672,40 @@ def _overlay(plt, b, w, h):
     for ax, j, label in ((ax_top, 1, "y [m]"), (ax_side, 2, "z [m]")):
         if len(ref):
             ax.plot(ref[:, 0], ref[:, j], color="0.75", lw=2.2, label="reference", zorder=1)
-        for name, xyz, color in lines:
+        ends = [(ref, "0.55")] if len(ref) else []
+        for name, xyz, _, k, line in lines:
+            color = colors[line.get("color", k) % len(colors)]
             ax.plot(xyz[:, 0], xyz[:, j], color=color, lw=0.9, label=name, zorder=2)
-        ends = [(xyz, c) for xyz, c in [(ref, "0.55"), *((x, c) for _, x, c in lines)] if len(xyz)]
+            if len(xyz):
+                ends.append((xyz, color))
         if ends:  # one scatter for the starts, one for the ends: not a line per marker
             for k, marker in ((0, "o"), (-1, "s")):
                 pts = np.array([xyz[k, [0, j]] for xyz, _ in ends])
                 kw = {"marker": marker, "s": 16, "edgecolors": "white", "linewidths": 0.5}
                 ax.scatter(pts[:, 0], pts[:, 1], c=[c for _, c in ends], zorder=3, **kw)
         ax.set_ylabel(label)
-    ax_top.set_aspect("equal", adjustable="datalim")
+    # to scale: the top view's y range is its x range times its height over its width (never less
+    # than the view's: th >= aw * ratio above), set here rather than by an equal aspect, which would
+    # override these limits with a warning
+    half = 0.5 * (hi[0] - lo[0]) * th / aw
+    ax_top.set_xlim(lo[0], hi[0])
+    ax_top.set_ylim(0.5 * (lo[1] + hi[1]) - half, 0.5 * (lo[1] + hi[1]) + half)
+    ax_side.set_ylim(lo[2], hi[2])
     ax_side.set_xlabel("x [m]")
-    ax_top.set_title(d.get("dataset", ""), loc="left")
     handles, labels = ax_top.get_legend_handles_labels()
     for marker, name in (("o", "start"), ("s", "end")):
         (h_,) = ax_top.plot([], [], marker, color="0.3", ms=4, ls="none")
         handles.append(h_)
         labels.append(name)
-    ax_top.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0)
+    ax_top.legend(
+        handles,
+        labels,
+        loc="upper left",
+        bbox_to_anchor=(1.03, 1.0),
+        borderaxespad=0,
+        title=d.get("dataset") or None,
+        alignment="left",
+    )
     return fig
 
 
@@ -690,7 +719,7 @@ def _boxes(plt, b, w, h):
     d = b["data"]
     colors = d.get("colors") or OKABE_ITO
     lengths, algs = d["lengths"], d["algorithms"]
-    rows = -(-max(len(algs), 1) // 5)  # legend rows above the panels
+    rows = -(-max(len(algs), 1) // 5) + 1  # legend rows above the panels, and its title
     top = 0.25 + 0.16 * rows
 
     def make():
@@ -731,21 +760,36 @@ def _boxes(plt, b, w, h):
             )
             ax.add_collection(LineCollection(medians, colors="black", lw=0.8, zorder=3))
             ax.autoscale_view()
+            _log_if_spread(ax, np.array([seg[0][1] for seg in medians]), np.array(whiskers))
         ax.set_xticks(np.arange(len(lengths)), [f"{v:g}" for v in lengths])
         ax.set_xlim(-0.5, max(len(lengths), 1) - 0.5)
         ax.set_xlabel("segment length [m]")
         ax.set_ylabel(ylabel)
-    axes[0].set_title(d.get("dataset", ""), loc="left")
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(
         handles,
         labels,
-        loc="upper right",
-        bbox_to_anchor=(1 - 0.1 / w, 1.0),
+        loc="upper left",
+        bbox_to_anchor=(0.6 / w, 1.0),
         ncols=min(len(labels), 5) or 1,
         borderaxespad=0.1,
+        title=d.get("dataset") or None,
+        alignment="left",
     )
     return fig
+
+
+def _log_if_spread(ax, medians: np.ndarray, segments: np.ndarray) -> None:
+    """A log axis where the medians span more than two decades (a diverged run would flatten the
+    others), from the smallest positive value drawn: an error of zero sits on the bottom edge."""
+    positive = medians[medians > 0]
+    if not positive.size or positive.max() <= 100 * positive.min():
+        return
+    ys = segments[..., 1].ravel()
+    ys = ys[ys > 0]
+    ax.set_yscale("log")
+    ax.set_ylim(ys.min() / 1.5, ys.max() * 1.5)
+    _log_axis(ax)
 
 
 def _log_axis(ax):
