@@ -12,7 +12,7 @@ artifacts, so 10,000 cases stay cheap):
 The report stage writes each case's relative errors to ``10_report/grid_samples.json``
 (:func:`case_samples`): per segment length the number of segments and at most
 :data:`MAX_ORDER_STATISTICS` of their sorted values, evenly spread in rank (all of them when there
-are no more), about 10 kB a case.
+are no more), about 13 kB a case.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import numpy as np
 from epa.artifacts import files
 from epa.artifacts.stage import folder
 from epa.core.errors import EpaError
+from epa.outputs import figures
 
 PREFIXES = ("trajectories", "relative_error")
 SAMPLES_FILE = "grid_samples.json"
@@ -46,10 +47,8 @@ def names(datasets) -> list[str]:
 def order_statistics(values, most: int = MAX_ORDER_STATISTICS) -> tuple[int, np.ndarray]:
     """The number of finite ``values`` and at most ``most`` of them, sorted, evenly spread in rank
     (the smallest and the largest kept)."""
-    from epa.outputs.figures import thin
-
     v = np.sort(np.asarray(values, float)[np.isfinite(values)])
-    return len(v), v[thin(len(v), most)]
+    return len(v), v[figures.thin(len(v), most)]
 
 
 def case_samples(case) -> dict:
@@ -75,7 +74,7 @@ def case_samples(case) -> dict:
 
 
 def _read_samples(path: Path) -> dict | None:
-    """A case's samples, or None where the report stage wrote none (report.per_case off)."""
+    """A case's samples, or None where the report stage wrote none (it failed)."""
     try:
         doc = json.loads(path.read_bytes())
     except FileNotFoundError:
@@ -105,10 +104,8 @@ def box_stats(parts) -> dict | None:
         is stored. Otherwise a run's segments between two stored ones are taken as evenly spread
         in value between them (each stored value keeps its rank).
     """
-    from epa.outputs.figures import thin
-
     pooled = [
-        q if len(q) == n else np.interp(np.arange(n), thin(n, len(q)), q)
+        q if len(q) == n else np.interp(np.arange(n), figures.thin(n, len(q)), q)
         for n, q in ((int(n), np.asarray(q, float)) for n, q in parts)
         if n and len(q)
     ]
@@ -131,30 +128,28 @@ def box_stats(parts) -> dict | None:
 
 
 # ----------------------------------------------------------------------------- grid bundles
-def _finite(row: dict, key: str) -> float:
+def _number(row: dict, key: str) -> float:
+    """A summary.csv row's number (nan where empty)."""
     try:
-        v = float(row[key])
+        return float(row[key])
     except (KeyError, ValueError):
         return np.nan
-    return v
 
 
 def median_run(rows: list[dict]) -> dict | None:
     """The run whose ATE RMSE is the median of the cell's (the lower of the two middle ones for an
     even number; ties by run name); None without a finite ATE."""
     runs = sorted(
-        (r for r in rows if np.isfinite(_finite(r, "ate_trans_rmse_m"))),
-        key=lambda r: (_finite(r, "ate_trans_rmse_m"), r["run"]),
+        (r for r in rows if np.isfinite(_number(r, "ate_trans_rmse_m"))),
+        key=lambda r: (_number(r, "ate_trans_rmse_m"), r["run"]),
     )
     return runs[(len(runs) - 1) // 2] if runs else None
 
 
 def _thin_rows(rows, most: int) -> np.ndarray:
     """At most ``most`` of a bundle's points, evenly spread (first and last kept): for the picture."""
-    from epa.outputs.figures import thin
-
     a = np.array(rows, dtype=float)  # a null (None) is nan
-    return a[thin(len(a), most)]
+    return a[figures.thin(len(a), most)]
 
 
 def _report_folder(results_dir: Path, row: dict) -> Path:
@@ -193,8 +188,6 @@ def grid_bundles(results_dir, rows: list[dict], has_result) -> dict[str, dict]:
 
 def draw_dataset(results_dir, dataset: str, here, style: str = "wide") -> list[Path]:
     """A dataset's figures and their bundles (``results/figures/``): one job of the figures rule."""
-    from epa.outputs import figures
-
     results_dir = Path(results_dir)
     written = []
     for name, b in dataset_bundles(results_dir, dataset, here).items():
@@ -204,20 +197,18 @@ def draw_dataset(results_dir, dataset: str, here, style: str = "wide") -> list[P
 
 
 def _overlay_bundle(results_dir: Path, dataset: str, here) -> dict:
-    from epa.outputs import figures
-
     lines, ref, ref_n = [], None, -1
     for k, a, runs in here:
         row = median_run(runs)
         if row is None:
             continue
         path = _report_folder(results_dir, row) / "bundles" / "trajectory.json"
-        if not path.is_file():  # report.per_case off: no bundle to draw from
+        if not path.is_file():  # its report stage failed: nothing to draw from
             continue
         d = figures.read_bundle(path)["data"]
         est = _thin_rows(d["est"], OVERLAY_POINTS)
         lines.append({"label": a, "run": row["run"], "color": k, "xyz": est})
-        n = int(_finite(row, "n_matched")) if np.isfinite(_finite(row, "n_matched")) else 0
+        n = np.nan_to_num(_number(row, "n_matched"), nan=0.0)
         if n > ref_n:  # the reference over the most matched poses of the runs drawn
             ref, ref_n = _thin_rows(d["ref"], OVERLAY_POINTS), n
     return figures.bundle(
@@ -233,8 +224,6 @@ def _overlay_bundle(results_dir: Path, dataset: str, here) -> dict:
 
 
 def _boxes_bundle(results_dir: Path, dataset: str, here) -> dict:
-    from epa.outputs import figures
-
     per_alg: dict[int, dict[float, dict[str, list]]] = {}
     rotation = set()
     for k, _, runs in here:

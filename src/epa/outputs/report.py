@@ -402,7 +402,7 @@ def write_grid_figures(
     of its time; a dataset's job also reads its cases' files. Each figure is drawn from its bundle
     alone, so the bytes do not depend on it."""
     results_dir = Path(results_dir)
-    jobs = []
+    jobs: list[tuple] = []
     for name, b in grid_bundles(
         results_dir / "summary.csv", results_dir / "consistency", segments
     ).items():
