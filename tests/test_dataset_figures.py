@@ -236,3 +236,17 @@ def test_the_paper_captions_a_dataset_figure_with_its_kinds_caption(tmp_path):
     assert r"\includegraphics[width=0.9\linewidth]{figures/trajectories_MH_01.pdf}" in tex
     assert r"\caption{MH\_01: Trajectories, aligned.}" in tex
     assert r"\caption{relative error V1}" in tex  # no caption file: its name
+
+
+@pytest.mark.parametrize("content", ["{not json", '{"format": "something else"}', "[]"])
+def test_a_bad_samples_file_is_one_line_naming_it(tmp_path, content):
+    from epa.core.errors import EpaError
+
+    (tmp_path / "summary.csv").write_text(HEAD + "\na,d1,run1,ok,5,0.3\n")
+    path = tmp_path / "cases/a/d1/run1/10_report" / df.SAMPLES_FILE
+    path.parent.mkdir(parents=True)
+    path.write_text(content)
+    with pytest.raises(EpaError) as err:
+        df.grid_bundles(tmp_path, df.read_summary(tmp_path / "summary.csv"), tables.has_result)
+    line = err.value.one_line()
+    assert str(path) in line and "not a grid samples file" in line and "\n" not in line
