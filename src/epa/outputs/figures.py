@@ -622,21 +622,18 @@ def _lines(plt, b, w, h):
 OUT_OF_VIEW = 0.5  # a line more than half the reference's extent outside it leaves the view
 
 
-def _overlay(plt, b, w, h):
-    """A dataset's trajectories: the reference and one line per algorithm, top view to scale (its
-    height follows the data) over a side view stretched in z; start (circle) and end (square) marked.
-    The view holds the reference and every line that stays near it: a line that goes farther than
-    half the reference's extent (a diverged run, kilometres away) is drawn cut at the view's edge
-    and says so in the legend, instead of shrinking the others to a dot. The legend, titled with
-    the dataset, is beside the top view: a trajectory fills its axes."""
-    d = b["data"]
-    colors = d.get("colors") or OKABE_ITO
-    ref = _arr(d["ref"]).reshape(-1, 3)
-    ref = ref[np.isfinite(ref).all(axis=1)]
+def _finite_rows(rows) -> np.ndarray:
+    xyz = _arr(rows).reshape(-1, 3)
+    return xyz[np.isfinite(xyz).all(axis=1)]
+
+
+def _overlay_view(d: dict):
+    """The overlay's reference, its lines ``(legend label, xyz, out of view, index, line)`` and the
+    view's corners (x, y, z): the reference and the lines that stay near it, padded by 4 %."""
+    ref = _finite_rows(d["ref"])
     lines = []
     for k, line in enumerate(d["lines"]):
-        xyz = _arr(line["xyz"]).reshape(-1, 3)
-        xyz = xyz[np.isfinite(xyz).all(axis=1)]
+        xyz = _finite_rows(line["xyz"])
         out = False
         if len(ref) and len(xyz):
             lo, hi = ref[:, :2].min(axis=0), ref[:, :2].max(axis=0)
@@ -649,7 +646,19 @@ def _overlay(plt, b, w, h):
         shown = np.zeros((1, 3))
     lo, hi = shown.min(axis=0), shown.max(axis=0)
     pad = 0.04 * np.maximum(hi - lo, 1e-3)
-    lo, hi = lo - pad, hi + pad
+    return ref, lines, lo - pad, hi + pad
+
+
+def _overlay(plt, b, w, h):
+    """A dataset's trajectories: the reference and one line per algorithm, top view to scale (its
+    height follows the data) over a side view stretched in z; start (circle) and end (square) marked.
+    The view holds the reference and every line that stays near it: a line that goes farther than
+    half the reference's extent (a diverged run, kilometres away) is drawn cut at the view's edge
+    and says so in the legend, instead of shrinking the others to a dot. The legend, titled with
+    the dataset, is beside the top view: a trajectory fills its axes."""
+    d = b["data"]
+    colors = d.get("colors") or OKABE_ITO
+    ref, lines, lo, hi = _overlay_view(d)
     left, right, bottom, top, gap, side = 0.62, 1.75, 0.4, 0.15, 0.3, 0.9
     aw, most = w - left - right, 3.6
     ratio = (hi[1] - lo[1]) / (hi[0] - lo[0])
