@@ -8,6 +8,9 @@ docs/performance.md and the closing note, never in a timed test.
    `report` rule and the grid's `figures` rule; wall time with and without per-case reports.
 2. In one process: the time to build each case figure's bundle and to draw each kind (median over
    the example's cases, after matplotlib is imported), and bytes per case folder.
+3. With ``--grid RESULTS`` (a grid's results folder, its cases' reports written) only: the grid
+   figures in one process, CPU and wall seconds, without and with the per-dataset figures
+   (docs/performance.md, "The per-dataset figures").
 """
 
 from __future__ import annotations
@@ -114,10 +117,36 @@ def in_process(results: Path) -> dict:
     }
 
 
+def grid_figures(results: Path, workers: int = 2, repeat: int = 2) -> dict:
+    """The grid figures of a results folder without and with the per-dataset figures: (wall, CPU)
+    seconds of each repetition, CPU including the forked workers'."""
+    import resource
+
+    from epa.outputs import figures, report
+
+    def cpu():
+        me, kids = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+        return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+    figures.prepare("wide")
+    segments = yaml.safe_load((results / "config.resolved.yaml").read_text())["metrics"]["segments"]
+    out: dict = {False: [], True: []}
+    for _ in range(repeat):
+        for per_dataset in (False, True):
+            t, c = time.perf_counter(), cpu()
+            report.write_grid_figures(results, segments, workers=workers, per_dataset=per_dataset)
+            out[per_dataset].append((round(time.perf_counter() - t, 2), round(cpu() - c, 2)))
+    return {"five figures": out[False], "with the per-dataset figures": out[True]}
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, help="working folder (default: a temporary one)")
+    ap.add_argument("--grid", type=Path, help="only time the grid figures of this results folder")
     args = ap.parse_args()
+    if args.grid:
+        print("grid figures (wall s, CPU s):", grid_figures(args.grid))
+        return
     tmp = args.out or Path(tempfile.mkdtemp(prefix="epa-figbench-"))
     tmp.mkdir(parents=True, exist_ok=True)
     from epa import simulate

@@ -5,6 +5,9 @@ rule paper:
         tex=rules.tables.output.tex,
         comparison_tex=rules.tables.output.comparison_tex,
         figures=[f"{RESULTS}/figures/{name}.pdf" for name in epa_report.GRID_FIGURES],
+        dataset_figures=[
+            f"{RESULTS}/figures/{name}.pdf" for name, _, _ in PER_DATASET_FIGURES
+        ],
     output:
         tex=report(
             f"{RESULTS}/paper/paper.tex",
@@ -17,6 +20,9 @@ rule paper:
         ],
         figures=[
             f"{RESULTS}/paper/figures/{name}.pdf" for name in epa_report.GRID_FIGURES
+        ],
+        dataset_figures=[
+            f"{RESULTS}/paper/figures/{name}.pdf" for name, _, _ in PER_DATASET_FIGURES
         ],
     log:
         f"{RESULTS}/logs/paper.log",

@@ -1,5 +1,6 @@
 """The figures rule's body: the grid's figures (PNG and vector PDF, with their plot bundles) from
-summary.csv, success_curves.csv and results/consistency/.
+summary.csv, success_curves.csv and results/consistency/, and each dataset's from the per-case
+reports' files.
 
 Snakemake runs it for the ``figures`` rule (``script:``). It also runs on its own, on a results folder
 whose tables are written:
@@ -27,9 +28,11 @@ def summary_segments(results_dir) -> list[float]:
     ]
 
 
-def write(results_dir, log_path, workers: int = 1) -> list:
+def write(results_dir, log_path, workers: int = 1, per_dataset: bool = True) -> list:
     segments = summary_segments(results_dir)
-    written = report.write_grid_figures(results_dir, segments, workers=workers)
+    written = report.write_grid_figures(
+        results_dir, segments, workers=workers, per_dataset=per_dataset
+    )
     with open(log_path, "w", encoding="utf-8") as fh:
         fh.write("\n".join(map(str, written)) + "\n")
     return written
@@ -49,7 +52,12 @@ def main(argv=None) -> int:
         print(f"epa: error: {exc.one_line()}", file=sys.stderr)
         return 2
     results = cfg["results_dir"]
-    written = write(results, f"{results}/logs/figures.log", workers=os.cpu_count())
+    written = write(
+        results,
+        f"{results}/logs/figures.log",
+        workers=os.cpu_count(),
+        per_dataset=cfg["report"]["per_case"],
+    )
     print(f"{len(written)} files in {results}/figures")
     return 0
 
@@ -57,6 +65,6 @@ def main(argv=None) -> int:
 if __name__ == "__main__":
     if "snakemake" in globals():  # run by the figures rule
         sm = globals()["snakemake"]
-        write(sm.params.results, sm.log[0], workers=sm.threads)
+        write(sm.params.results, sm.log[0], workers=sm.threads, per_dataset=sm.params.per_dataset)
     else:
         sys.exit(main())

@@ -229,6 +229,9 @@ def _single(plt, w, h, top: float = 0.12):
     return fig, fig.axes[0]
 
 
+# Kinds whose tick labels print "-" for minus, not U+2212: that one glyph makes a PDF embed a
+# second subset of the font (0.1-0.3 s of a trajectory overlay's 0.5; the kinds before these keep it)
+ASCII_MINUS = ("overlay", "boxes")
 MAX_WIDTH_IN = 100.0  # a figure wider than this is a typo (centimetres, points)
 
 
@@ -270,12 +273,13 @@ def render(
         meta = {"CreationDate": None} if fmt == "pdf" else {}
         # fixed margins, not bbox_inches="tight": that draws the figure twice (half the cost of a figure);
         # fast PNG compression: a few ms less per figure, for 11 % more bytes
-        fig.savefig(
-            tmp,
-            format=fmt,
-            metadata=meta,
-            **({"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}),
-        )
+        with plt.rc_context({"axes.unicode_minus": False} if b["kind"] in ASCII_MINUS else {}):
+            fig.savefig(
+                tmp,
+                format=fmt,
+                metadata=meta,
+                **({"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}),
+            )
         tmp.replace(path)
         out.append(path)
     key = getattr(fig, "_epa_layout", None)
@@ -615,6 +619,188 @@ def _lines(plt, b, w, h):
     return fig
 
 
+OUT_OF_VIEW = 0.5  # a line more than half the reference's extent outside it leaves the view
+
+
+def _finite_rows(rows) -> np.ndarray:
+    xyz = _arr(rows).reshape(-1, 3)
+    return xyz[np.isfinite(xyz).all(axis=1)]
+
+
+def _overlay_view(d: dict):
+    """The overlay's reference, its lines ``(legend label, xyz, out of view, index, line)`` and the
+    view's corners (x, y, z): the reference and the lines that stay near it, padded by 4 %."""
+    ref = _finite_rows(d["ref"])
+    lines = []
+    for k, line in enumerate(d["lines"]):
+        xyz = _finite_rows(line["xyz"])
+        out = False
+        if len(ref) and len(xyz):
+            lo, hi = ref[:, :2].min(axis=0), ref[:, :2].max(axis=0)
+            tol = OUT_OF_VIEW * max(float(np.max(hi - lo)), 1.0)
+            out = bool(((xyz[:, :2] < lo - tol) | (xyz[:, :2] > hi + tol)).any())
+        name = f"{line['label']} ({line['run']})" if line.get("run") else line["label"]
+        lines.append((name + (", leaves the view" if out else ""), xyz, out, k, line))
+    shown = np.vstack([ref, *(xyz for _, xyz, out, _, _ in lines if not out), np.zeros((0, 3))])
+    if not len(shown):
+        shown = np.zeros((1, 3))
+    lo, hi = shown.min(axis=0), shown.max(axis=0)
+    pad = 0.04 * np.maximum(hi - lo, 1e-3)
+    return ref, lines, lo - pad, hi + pad
+
+
+def _overlay(plt, b, w, h):
+    """A dataset's trajectories: the reference and one line per algorithm, top view to scale (its
+    height follows the data) over a side view stretched in z; start (circle) and end (square) marked.
+    The view holds the reference and every line that stays near it: a line that goes farther than
+    half the reference's extent (a diverged run, kilometres away) is drawn cut at the view's edge
+    and says so in the legend, instead of shrinking the others to a dot. The legend, titled with
+    the dataset, is beside the top view: a trajectory fills its axes."""
+    d = b["data"]
+    colors = d.get("colors") or OKABE_ITO
+    ref, lines, lo, hi = _overlay_view(d)
+    left, right, bottom, top, gap, side = 0.62, 1.75, 0.4, 0.15, 0.3, 0.9
+    aw, most = w - left - right, 3.6
+    ratio = (hi[1] - lo[1]) / (hi[0] - lo[0])
+    # the top view at least as tall as the view at this width (the equal aspect then widens y,
+    # never cuts it: x is shared); a tall trajectory narrows both views instead. In steps of 0.05 in
+    # (rounded up), as the case figure's: datasets of one shape share a layout.
+    aw = min(aw, most / ratio)
+    th = float(np.ceil(np.clip(aw * ratio, 1.2, most) / 0.05 - 1e-9) * 0.05)
+    fh = bottom + side + gap + th + top
+
+    def make():
+        fig = plt.figure(figsize=(w, fh))
+        ax_top = fig.add_axes([left / w, (bottom + side + gap) / fh, aw / w, th / fh])
+        fig.add_axes([left / w, bottom / fh, aw / w, side / fh], sharex=ax_top)
+        ax_top.tick_params(labelbottom=False)
+        return fig
+
+    fig = _layout(plt, "overlay", (w, fh), make)
+    ax_top, ax_side = fig.axes
+    for ax, j, label in ((ax_top, 1, "y [m]"), (ax_side, 2, "z [m]")):
+        if len(ref):
+            ax.plot(ref[:, 0], ref[:, j], color="0.75", lw=2.2, label="reference", zorder=1)
+        ends = [(ref, "0.55")] if len(ref) else []
+        for name, xyz, _, k, line in lines:
+            color = colors[line.get("color", k) % len(colors)]
+            ax.plot(xyz[:, 0], xyz[:, j], color=color, lw=0.9, label=name, zorder=2)
+            if len(xyz):
+                ends.append((xyz, color))
+        if ends:  # one scatter for the starts, one for the ends: not a line per marker
+            for k, marker in ((0, "o"), (-1, "s")):
+                pts = np.array([xyz[k, [0, j]] for xyz, _ in ends])
+                kw = {"marker": marker, "s": 16, "edgecolors": "white", "linewidths": 0.5}
+                ax.scatter(pts[:, 0], pts[:, 1], c=[c for _, c in ends], zorder=3, **kw)
+        ax.set_ylabel(label)
+    # to scale: the top view's y range is its x range times its height over its width (never less
+    # than the view's: th >= aw * ratio above), set here rather than by an equal aspect, which would
+    # override these limits with a warning
+    half = 0.5 * (hi[0] - lo[0]) * th / aw
+    ax_top.set_xlim(lo[0], hi[0])
+    ax_top.set_ylim(0.5 * (lo[1] + hi[1]) - half, 0.5 * (lo[1] + hi[1]) + half)
+    ax_side.set_ylim(lo[2], hi[2])
+    ax_side.set_xlabel("x [m]")
+    handles, labels = ax_top.get_legend_handles_labels()
+    for marker, name in (("o", "start"), ("s", "end")):
+        (h_,) = ax_top.plot([], [], marker, color="0.3", ms=4, ls="none")
+        handles.append(h_)
+        labels.append(name)
+    ax_top.legend(
+        handles,
+        labels,
+        loc="upper left",
+        bbox_to_anchor=(1.03, 1.0),
+        borderaxespad=0,
+        title=d.get("dataset") or None,
+        alignment="left",
+    )
+    return fig
+
+
+def _boxes(plt, b, w, h):
+    """Boxes per algorithm at each segment length: translation beside rotation, from box statistics
+    (``med``, ``q1``, ``q3``, ``whislo``, ``whishi``) computed over the pooled segments. Drawn as
+    three collections a panel (boxes, whiskers and caps, medians): a line per whisker, cap and
+    median made the figure six times slower on 10 algorithms and 6 lengths."""
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    d = b["data"]
+    colors = d.get("colors") or OKABE_ITO
+    lengths, algs = d["lengths"], d["algorithms"]
+    rows = -(-max(len(algs), 1) // 5) + 1  # legend rows above the panels, and its title
+    top = 0.25 + 0.16 * rows
+
+    def make():
+        fig, _ = plt.subplots(1, 2, figsize=(w, h))
+        fig.subplots_adjust(
+            left=0.6 / w, right=1 - 0.1 / w, bottom=0.45 / h, top=1 - top / h, wspace=0.3
+        )
+        return fig
+
+    fig = _layout(plt, "boxes", (w, h, top), make)
+    axes = fig.axes
+    width = 0.8 / max(len(algs), 1)
+    half, cap = 0.4 * width, 0.2 * width
+    for ax, key, ylabel in zip(axes, ("trans", "rot"), d["ylabels"]):
+        boxes, faces, whiskers, medians = [], [], [], []
+        for a, alg in enumerate(algs):
+            color = colors[alg.get("color", a) % len(colors)]
+            for j, s in enumerate(alg[key]):
+                if s is None:
+                    continue
+                x = j - 0.4 + width * (a + 0.5)
+                lo, q1, med, q3, hi = s["whislo"], s["q1"], s["med"], s["q3"], s["whishi"]
+                boxes.append([(x - half, q1), (x + half, q1), (x + half, q3), (x - half, q3)])
+                faces.append(color)
+                whiskers += [
+                    [(x, lo), (x, q1)],
+                    [(x, q3), (x, hi)],
+                    [(x - cap, lo), (x + cap, lo)],
+                    [(x - cap, hi), (x + cap, hi)],
+                ]
+                medians.append([(x - half, med), (x + half, med)])
+            if key == "trans":
+                ax.plot([], [], color=color, lw=4, label=alg["label"])
+        if boxes:
+            ax.add_collection(LineCollection(whiskers, colors="black", lw=0.6, zorder=1))
+            ax.add_collection(
+                PolyCollection(boxes, facecolors=faces, edgecolors="black", lw=0.5, alpha=0.8)
+            )
+            ax.add_collection(LineCollection(medians, colors="black", lw=0.8, zorder=3))
+            ax.autoscale_view()
+            _log_if_spread(ax, np.array([seg[0][1] for seg in medians]), np.array(whiskers))
+        ax.set_xticks(np.arange(len(lengths)), [f"{v:g}" for v in lengths])
+        ax.set_xlim(-0.5, max(len(lengths), 1) - 0.5)
+        ax.set_xlabel("segment length [m]")
+        ax.set_ylabel(ylabel)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(
+        handles,
+        labels,
+        loc="upper left",
+        bbox_to_anchor=(0.6 / w, 1.0),
+        ncols=min(len(labels), 5) or 1,
+        borderaxespad=0.1,
+        title=d.get("dataset") or None,
+        alignment="left",
+    )
+    return fig
+
+
+def _log_if_spread(ax, medians: np.ndarray, segments: np.ndarray) -> None:
+    """A log axis where the medians span more than two decades (a diverged run would flatten the
+    others), from the smallest positive value drawn: an error of zero sits on the bottom edge."""
+    positive = medians[medians > 0]
+    if not positive.size or positive.max() <= 100 * positive.min():
+        return
+    ys = segments[..., 1].ravel()
+    ys = ys[ys > 0]
+    ax.set_yscale("log")
+    ax.set_ylim(ys.min() / 1.5, ys.max() * 1.5)
+    _log_axis(ax)
+
+
 def _log_axis(ax):
     """A log y axis labelled in plain numbers: 1-2-5 steps over up to two decades, decades beyond."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
@@ -639,4 +825,6 @@ RENDERERS = {
     "sigma3": _sigma3,
     "grouped": _grouped,
     "lines": _lines,
+    "overlay": _overlay,
+    "boxes": _boxes,
 }

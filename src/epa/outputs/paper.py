@@ -49,7 +49,7 @@ def paper_tex(tables: list[Path], figures: list[Path], captions: dict | None = N
         ]
     lines.append(r"\section*{Figures}")
     for f in figures:
-        caption = captions.get(f.stem) or f.stem.replace("_", " ")
+        caption = captions.get(f.stem) or _dataset_caption(f.stem, captions)
         lines += [
             r"\begin{figure}[H]",
             r"\centering",
@@ -59,6 +59,16 @@ def paper_tex(tables: list[Path], figures: list[Path], captions: dict | None = N
         ]
     lines += [r"\end{document}", ""]
     return "\n".join(lines)
+
+
+def _dataset_caption(stem: str, captions: dict) -> str:
+    """A per-dataset figure's caption (``trajectories_<dataset>``): its kind's, after the dataset."""
+    from epa.outputs.dataset_figures import PREFIXES
+
+    for prefix in PREFIXES:
+        if stem.startswith(prefix + "_") and captions.get(prefix):
+            return f"{stem[len(prefix) + 1 :]}: {captions[prefix]}"
+    return stem.replace("_", " ")
 
 
 def write_paper(results_dir, captions: dict | None = None) -> list[Path]:

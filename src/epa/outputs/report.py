@@ -9,7 +9,6 @@ figure's bundle in ``bundles/<name>.json``, and ``<run>.zip`` (every artifact pl
 from __future__ import annotations
 
 import csv
-import functools
 import hashlib
 import io as _io
 import json
@@ -21,7 +20,7 @@ import numpy as np
 from epa.artifacts import files
 from epa.artifacts.case import CaseData
 from epa.metrics.accuracy import segment_key
-from epa.outputs import case_report, figures, parallel, tables
+from epa.outputs import case_report, dataset_figures, figures, parallel, tables
 
 CASE_FIGURES = ("trajectory", "ape_time", "rpe_box", "xcorr", "steps", "sigma3")
 GRID_FIGURES = ("ate", "success_rate", "success_curve", "drift_rate", "rmse_time")
@@ -215,6 +214,8 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
     bundles = case_bundles(data)
     for fig_name, b in bundles.items():
         figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b)
+    # what the grid's per-dataset figures read of this case (its relative errors, thinned)
+    figures.write_bundle(folder / dataset_figures.SAMPLES_FILE, dataset_figures.case_samples(case))
     why = flags(doc)
     draw = c["figures"] == "all" or (c["figures"] == "flagged" and failed(doc))
     drawn = list(bundles) if draw else []
@@ -398,21 +399,39 @@ def _success_curve_bundle(curves_path: Path, algs: list[str], datasets: list[str
     )
 
 
-def write_grid_figures(results_dir, segments, style: str = "wide", workers: int = 1) -> list[Path]:
-    """The grid figures and their bundles. ``workers`` > 1 draws them in that many forked processes:
+def write_grid_figures(
+    results_dir, segments, style: str = "wide", workers: int = 1, per_dataset: bool = True
+) -> list[Path]:
+    """The grid figures and their bundles; with ``per_dataset`` (the per-case reports were
+    written: ``report.per_case``) also each dataset's trajectories and relative-error boxes
+    (:mod:`epa.outputs.dataset_figures`). ``workers`` > 1 draws them in that many forked processes:
     the figures rule is the run's serial tail, and drawing (PDF font subsetting most of all) is most
-    of its time. Each figure is drawn from its bundle alone, so the bytes do not depend on it."""
+    of its time; a dataset's job also reads its cases' files. Each figure is drawn from its bundle
+    alone, so the bytes do not depend on it."""
     results_dir = Path(results_dir)
-    jobs = []
+    jobs: list[tuple] = []
     for name, b in grid_bundles(
         results_dir / "summary.csv", results_dir / "consistency", segments
     ).items():
         figures.write_bundle(results_dir / "figures" / "bundles" / f"{name}.json", b)
-        jobs.append((b, results_dir / "figures" / name))
+        jobs.append(("draw", b, results_dir / "figures" / name, style))
+    rank = {name: k for k, name in enumerate(DRAW_ORDER)}
+    order = sorted(range(len(jobs)), key=lambda k: rank.get(jobs[k][2].name, len(rank)))
+    if per_dataset:
+        rows = dataset_figures.read_summary(results_dir / "summary.csv")
+        cells = dataset_figures.cells_by_dataset(rows, tables.has_result)
+        # a dataset's two figures cost more than any one of the others: first
+        order = list(range(len(jobs), len(jobs) + len(cells))) + order
+        jobs += [("dataset", results_dir, d, here, style) for d, here in cells]
     if workers > 1:
         figures.prepare(style)  # matplotlib imported once, before the fork
-    draw = functools.partial(figures.render, style=style)
-    rank = {name: k for k, name in enumerate(DRAW_ORDER)}
-    order = sorted(range(len(jobs)), key=lambda k: rank.get(jobs[k][1].name, len(rank)))
-    drawn = dict(zip(order, parallel.map_forked(draw, [jobs[k] for k in order], workers)))
+    drawn = dict(zip(order, parallel.map_forked(_grid_job, [jobs[k] for k in order], workers)))
     return [path for k in range(len(jobs)) for path in drawn[k]]  # in the bundles' order
+
+
+def _grid_job(what: str, *args) -> list[Path]:
+    """One job of :func:`write_grid_figures`: draw a bundle, or a dataset's figures."""
+    if what == "draw":
+        b, stem, style = args
+        return figures.render(b, stem, style=style)
+    return dataset_figures.draw_dataset(*args)
