@@ -189,7 +189,8 @@ def load_case(c):
 
 def stage_case(key, stage):
     """What a later stage needs of one case: its key, and the sections of its own settings that
-    the stage reads (so an override re-runs only the batches of the cases it matches)."""
+    the stage reads (so an override re-runs only the batches of the cases it matches).
+    """
     own = CASE_SETTINGS.get(key)
     changed = own.for_stage(epa_chain.sections_for(stage)) if own is not None else None
     return {"key": key, "settings": changed} if changed else {"key": key}
