@@ -203,8 +203,18 @@ def test_the_resolved_config_is_written_as_pyyaml_writes_it():
     configs.append(edited)
     for cfg in configs:
         data = json.loads(json.dumps(cfg))
-        assert provenance._plain_yaml(data) == _safe_dump(data)
+        plain = provenance._plain_yaml(data)
+        # a key PyYAML quotes (an override's glob, `vo_*/urban_drive`) is left to PyYAML
+        quoted = any("*" in k for k in _keys(data.get("overrides") or {}))
+        assert (plain is None) is quoted and (quoted or plain == _safe_dump(data))
         assert provenance.config_yaml(cfg).endswith(_safe_dump(data))
+
+
+def _keys(tree: dict):
+    for k, v in tree.items():
+        yield k
+        if isinstance(v, dict):
+            yield from _keys(v)
 
 
 def test_plain_yaml_writes_pyyaml_text_or_leaves_it_to_pyyaml():
