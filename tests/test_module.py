@@ -50,7 +50,7 @@ def test_a_host_workflow_runs_the_example_through_the_module(tmp_path):
     (tmp_path / "Snakefile").write_text(HOST)
     (tmp_path / "config.yaml").write_text(CONFIG)
     out = subprocess.run(
-        [sys.executable, "-m", "snakemake", "--cores", "2", "--verbose"],
+        [sys.executable, "-m", "snakemake", "--cores", "2", "--force-use-threads", "--verbose"],
         capture_output=True,
         text=True,
         cwd=tmp_path,  # no profile: the host's folder has none, and epica's is not read
