@@ -19,6 +19,7 @@ rule all:
     default_target: True
     input:
         rules.tables.output,
+        rules.provenance.output,
         rules.figures.output,
         rules.paper.output,
         expand(manifest(epa_chain.NAMES[-1]), batch=BATCHES),  # the last stage

@@ -9,6 +9,7 @@ import epa
 from epa.core.errors import EpaError
 from snakemake.exceptions import WorkflowError
 from epa import readers as epa_readers
+from epa.artifacts import files as epa_files
 from epa.outputs import report as epa_report, tables as epa_tables
 from epa.outputs import paper as epa_paper, provenance as epa_provenance
 from epa.readers import bags as epa_bags
@@ -219,7 +220,7 @@ STAGE_RESOURCES = {
 if snakemake_compat.in_cluster_job(workflow):
     snakemake_compat.run_here(
         workflow,
-        [*epa_chain.NAMES, "tables", "figures", "paper"],
+        [*epa_chain.NAMES, "tables", "provenance", "figures", "paper"],
         epa_cluster.usable_cpus(),
     )
 
