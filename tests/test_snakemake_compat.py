@@ -85,7 +85,7 @@ onstart:
 
 
 onsuccess:
-    probe("main", "JobScheduler timer", lambda: len(c.scheduler_timers()))
+    probe("main", "JobScheduler timer", lambda: len(c.scheduler_timers()) > 0)
 """
 )
 INNER = (
@@ -134,8 +134,8 @@ def probed(tmp_path_factory):
         ("main", "remote_exec", "False"),
         ("main", "localrules+register_resource", "None"),
         ("main", "executor_plugin+executor_settings", "'local'"),
-        # a rule ran for 1.5 s: the scheduler's 1 s timer of its last round is still pending
-        ("main", "JobScheduler timer", "1"),
+        # a rule ran for 1.5 s: the 1 s timer of the scheduler's last round (or more) is pending
+        ("main", "JobScheduler timer", "True"),
     ],
 )
 def test_each_internal_is_there_on_this_snakemake(probed, where, name, expected):
@@ -204,10 +204,11 @@ def _descendants(pid: int) -> set[int]:
 
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux's /proc")
 def test_a_dry_run_starts_no_process(tmp_path):
-    """`snakemake -n` parses the Snakefile and plans: no worker pool, no fork server (it would
-    live until the run ends). Sampled every 10 ms; the one command Snakemake itself runs in a dry
-    run, `uname -p` (Python's platform.platform(), for its run record), is no worker; a process
-    seen between its fork and its exec still shows its parent's command line."""
+    """`snakemake -n` parses the Snakefile and plans: no worker pool, no fork server, no Python
+    process of any kind (the fork server would live until the run ends). Sampled every 10 ms. The
+    commands Snakemake and its plugins run themselves (`uname -p` for its run record, `which
+    squeue`) are no workers; a process seen between its fork and its exec still shows its parent's
+    command line."""
     cfg = tmp_path / "cfg.yaml"
     cfg.write_text(
         f"truth_dir: {ROOT / 'example/truth'}\nalgorithms_dir: {ROOT / 'example/algorithms'}\n"
@@ -228,10 +229,12 @@ def test_a_dry_run_starts_no_process(tmp_path):
     log = (tmp_path / "log").read_text()
     assert run.returncode == 0, log[-2000:]
     assert "rule load:" in log or "localrule load:" in log  # it planned the whole grid
-    others = {
-        pid: c for pid, c in started.items() if c.strip() not in ("uname -p", " ".join(cmd), "")
+    pythons = {
+        pid: c
+        for pid, c in started.items()
+        if ("python" in c or "multiprocessing" in c) and c.strip() != " ".join(cmd)
     }
-    assert others == {}
+    assert pythons == {}
 
 
 def test_the_fork_server_imports_a_scripts_imports_once(tmp_path, monkeypatch):
