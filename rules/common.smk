@@ -97,7 +97,7 @@ wildcard_constraints:
 
 # onstart runs in the main process only, after the DAG, never in a dry run, a cluster job or a
 # module (there the host's runs). The command line goes to provenance.json only (an environment
-# variable, not a rule parameter, so a new command line re-runs nothing). A cluster run: before
+# variable, not a parameter, so a new command line re-runs nothing). A cluster run: before
 # anything is submitted, the job-state query the slurm executor will rely on must answer, and some
 # node must have the CPUs a submission asks for (else the run waits forever).
 onstart:
@@ -223,6 +223,17 @@ if snakemake_compat.in_cluster_job(workflow):
         [*epa_chain.NAMES, "tables", "provenance", "figures", "paper"],
         epa_cluster.usable_cpus(),
     )
+
+
+def write_provenance(params, output, log):
+    """The provenance rule's body: provenance.json and config.resolved.yaml, then its log."""
+    written = epa_provenance.write(
+        os.path.dirname(output.provenance),
+        epa_provenance.document(
+            "grid", params.resolved, params.inputs, workflow_dir=params.workflow_dir
+        ),
+    )
+    epa_files.write_text(log[0], "".join(f"wrote {path}\n" for path in written))
 
 
 def idle_truths():

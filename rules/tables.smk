@@ -77,13 +77,4 @@ rule provenance:
         workflow_dir=EPICA_DIR,
         version=EPA_VERSION,
     run:
-        written = epa_provenance.write(
-            os.path.dirname(output.provenance),
-            epa_provenance.document(
-                "grid",
-                params.resolved,
-                params.inputs,
-                workflow_dir=params.workflow_dir,
-            ),
-        )
-        epa_files.write_text(log[0], "".join(f"wrote {path}\n" for path in written))
+        write_provenance(params, output, log)
