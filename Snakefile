@@ -1,7 +1,7 @@
 # epica: algorithm x dataset x run grid -> error_comparison tables. See README.md.
 from snakemake.utils import min_version
 
-min_version("9.0.0")  # and below 10: pyproject.toml
+min_version("9.1.4")  # and below 10: pyproject.toml
 
 
 configfile: "config/config.yaml"

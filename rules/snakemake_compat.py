@@ -14,7 +14,7 @@ from snakemake.exceptions import WorkflowError
 
 # The Snakemake releases every function below was checked on (the range in pyproject.toml; CI runs
 # the example on both ends).
-CHECKED = "9.0.0 to 9.27.1"
+CHECKED = "9.1.4 to 9.27.1"
 
 
 def _attribute(workflow, path: str, why: str):
@@ -27,7 +27,7 @@ def _attribute(workflow, path: str, why: str):
             raise WorkflowError(
                 f"epa: error: epica reads Snakemake's workflow.{path} ({why}), which Snakemake "
                 f"{snakemake.__version__} does not have; epica is checked on Snakemake {CHECKED} "
-                f"(pip install 'snakemake>=9,<10')"
+                f"(pip install 'snakemake>=9.1.4,<10')"
             ) from None
     return value
 

@@ -63,7 +63,7 @@ def test_a_host_workflow_runs_the_example_through_the_module(tmp_path):
         assert (results / name).read_text() == (GOLDEN / name).read_text(), name
     # a `run:` job Snakemake spawns into a new process says so at --verbose; none did
     assert "spawned job" not in log
-    assert re.search(r"^(local)?rule (epica_)?load:$", log, re.M)  # 9.0.0 prints the module's name
+    assert re.search(r"^(local)?rule (epica_)?load:$", log, re.M)  # 9.1.4 prints the module's name
     # the paper's captions and the provenance's checkout are epica's, not the host's folder
     assert (results / "paper/paper.tex").is_file()
     provenance = json.loads((results / "provenance.json").read_text())

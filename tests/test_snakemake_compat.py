@@ -1,6 +1,6 @@
 """rules/snakemake_compat.py, the one place the rules read Snakemake's internals: each internal is
 read on the installed Snakemake by a probe workflow (one run), and a Snakemake without it stops with
-one line naming it. Checked on Snakemake 9.0.0 and 9.27.1 (the ends of pyproject.toml's range).
+one line naming it. Checked on Snakemake 9.1.4 and 9.27.1 (the ends of pyproject.toml's range).
 Also: a dry run starts no process, and the worker pool's fork server imports the main script's
 imports once."""
 
