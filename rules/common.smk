@@ -58,7 +58,7 @@ def _snakemake_compat():
 
 snakemake_compat = _snakemake_compat()
 # Stage jobs run in this process's threads (their work in epica's worker pool): profiles/default
-# sets force-use-threads; a host workflow using epica as a module sets it itself (README).
+# sets force-use-threads; a host workflow using epica as a module sets it (docs/running.md).
 MODULE_NAME = snakemake_compat.module_name(workflow)  # None: the main workflow
 IS_MODULE = MODULE_NAME is not None
 COMMAND_LINE_CONFIG = snakemake_compat.command_line_config(workflow)
@@ -72,6 +72,7 @@ try:  # a mistake in the config or the folders is one line, not a traceback
         NAMED = epa_settings.check_user_configs(
             snakemake_compat.user_config_files(workflow), COMMAND_LINE_CONFIG
         )
+        # as Snakemake lists them: the --configfile files, else the Snakefile's configfile:
         CONFIG_SOURCE = ", ".join(
             map(str, snakemake_compat.user_config_files(workflow))
         ) or os.path.join("config", "config.yaml")
