@@ -67,6 +67,8 @@ rule provenance:
         ),
     log:
         f"{RESULTS}/logs/provenance.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/provenance.tsv"
     threads: 1
     resources:
         mem_mb=500,
