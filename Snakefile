@@ -1,7 +1,7 @@
 # epica: algorithm x dataset x run grid -> error_comparison tables. See README.md.
 from snakemake.utils import min_version
 
-min_version("8.0")
+min_version("9.1.4")  # and below 10: pyproject.toml
 
 
 configfile: "config/config.yaml"
@@ -19,6 +19,7 @@ rule all:
     default_target: True
     input:
         rules.tables.output,
+        rules.provenance.output,
         rules.figures.output,
         rules.paper.output,
         expand(manifest(epa_chain.NAMES[-1]), batch=BATCHES),  # the last stage

@@ -9,6 +9,7 @@ import epa
 from epa.core.errors import EpaError
 from snakemake.exceptions import WorkflowError
 from epa import readers as epa_readers
+from epa.artifacts import files as epa_files
 from epa.outputs import report as epa_report, tables as epa_tables
 from epa.outputs import paper as epa_paper, provenance as epa_provenance
 from epa.readers import bags as epa_bags
@@ -26,18 +27,16 @@ def workers():
     process may use: a cluster job is started with --cores all (the node's), but gets its
     allocation; without --cores (e.g. a remote job, or `snakemake --report`, where Snakemake
     refuses the question) one, in the calling thread."""
+    cores = given_cores()
+    return 1 if cores is None else max(1, min(cores, epa_cluster.usable_cpus()))
+
+
+def given_cores():
+    """--cores (the profile's `cores`), or None where Snakemake was given none."""
     try:
-        cores = int(workflow.cores)
+        return int(workflow.cores)
     except (TypeError, ValueError, WorkflowError):
-        return 1
-    return max(1, min(cores, epa_cluster.usable_cpus()))
-
-
-# The worker pool's fork server starts first of all, so that its imports overlap the parse and the
-# DAG's construction, where this process runs the jobs (no --jobs: a local run; or a cluster job). A
-# dry run cannot be told apart yet: it starts one too, which ends with it.
-if workers() > 1 and (workflow.remote_exec or workflow.nodes is None):
-    epa_jobs.warm_up()
+        return None
 
 
 # epica's own folder (this file's parent's): every internal path starts here, also where epica is
@@ -45,38 +44,42 @@ if workers() > 1 and (workflow.remote_exec or workflow.nodes is None):
 EPICA_DIR = os.path.dirname(str(workflow.current_basedir))
 
 
-def in_threads(execute):
-    """The stage rules' jobs run in this process's threads (their work in epica's worker pool),
-    whether or not profiles/default is read: a host workflow using epica as a module does not read
-    it, and a `run:` job would otherwise start a new Snakemake each (docs/performance.md). The
-    execution settings exist only once the run starts, after the parse: set there."""
+def _snakemake_compat():
+    """rules/snakemake_compat.py: the only place that reads Snakemake's internals."""
+    import importlib.util
 
-    def run(*args, **kwargs):
-        if workflow.execution_settings is not None:
-            workflow.execution_settings.use_threads = True
-        return execute(*args, **kwargs)
+    name = "epica_snakemake_compat"
+    if name not in sys.modules:
+        path = os.path.join(EPICA_DIR, "rules", "snakemake_compat.py")
+        spec = importlib.util.spec_from_file_location(name, path)
+        sys.modules[name] = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(sys.modules[name])
+    return sys.modules[name]
 
-    return run
 
-
-workflow.execute = in_threads(workflow.execute)
-IS_MODULE = workflow.modifier.namespace is not None  # the main workflow has none
+snakemake_compat = _snakemake_compat()
+# Stage jobs run in this process's threads (their work in epica's worker pool): profiles/default
+# sets force-use-threads; a host workflow using epica as a module sets it (docs/running.md).
+MODULE_NAME = snakemake_compat.module_name(workflow)  # None: the main workflow
+IS_MODULE = MODULE_NAME is not None
+COMMAND_LINE_CONFIG = snakemake_compat.command_line_config(workflow)
 
 try:  # a mistake in the config or the folders is one line, not a traceback
     # a module's config is the host's config["epica"], given whole: nothing bundled is merged in
     if IS_MODULE:
         NAMED = set(config)
-        CONFIG_SOURCE = f"config of module {workflow.modifier.namespace}"
+        CONFIG_SOURCE = f"config of module {MODULE_NAME}"
     else:
         NAMED = epa_settings.check_user_configs(
-            workflow.overwrite_configfiles, workflow.config_settings.overwrite_config
+            snakemake_compat.user_config_files(workflow), COMMAND_LINE_CONFIG
         )
-        CONFIG_SOURCE = ", ".join(map(str, workflow.configfiles)) or "config"
+        # as Snakemake lists them: the --configfile files, else the Snakefile's configfile:
+        CONFIG_SOURCE = ", ".join(
+            map(str, snakemake_compat.user_config_files(workflow))
+        ) or os.path.join("config", "config.yaml")
     EPA = epa_settings.resolve(
         epa_settings.without_bundled_folders(
-            epa_settings.coerce_overrides(
-                config, workflow.config_settings.overwrite_config
-            ),
+            epa_settings.coerce_overrides(config, COMMAND_LINE_CONFIG),
             NAMED,
         ),
         source=CONFIG_SOURCE,
@@ -87,9 +90,6 @@ try:  # a mistake in the config or the folders is one line, not a traceback
 except EpaError as exc:
     raise WorkflowError(f"epa: error: {exc.one_line()}") from None
 EPA_VERSION = epa.__version__
-# the command line, for provenance.json only (an environment variable, not a rule parameter, so a
-# new command line re-runs nothing)
-os.environ[epa_provenance.COMMAND_ENV] = shlex.join(["snakemake", *sys.argv[1:]])
 RESULTS = EPA["results_dir"]
 CASE_BY_KEY = {c.key: c for c in CASES}
 BATCHES = epa_jobs.batches(sorted(CASE_BY_KEY), EPA["grid"]["max_batches"])
@@ -99,16 +99,21 @@ wildcard_constraints:
     batch=".+",
 
 
-# A cluster run: before anything is submitted, the job-state query the slurm executor will rely on
-# must answer, and some node must have the CPUs a submission asks for (else the run waits forever).
-# onstart runs in the main process only, after the DAG, never in a dry run or a cluster job.
+# onstart runs in the main process only, after the DAG, never in a dry run, a cluster job or a
+# module (there the host's runs). The command line goes to provenance.json only (an environment
+# variable, not a parameter, so a new command line re-runs nothing). A cluster run: before
+# anything is submitted, the job-state query the slurm executor will rely on must answer, and some
+# node must have the CPUs a submission asks for (else the run waits forever).
 onstart:
-    if getattr(workflow.executor_plugin, "name", None) == "slurm":
-        plugin = workflow.executor_settings
+    os.environ[epa_provenance.COMMAND_ENV] = shlex.join(
+        ["snakemake", *sys.argv[1:]]
+    )
+    executor_name, executor_settings = snakemake_compat.executor(workflow)
+    if executor_name == "slurm":
         problem = epa_cluster.status_query_problem(
-            getattr(plugin, "status_command", None),
-            getattr(plugin, "init_seconds_before_status_checks", None),
-        ) or epa_cluster.cores_problem(workflow.resource_settings.cores)
+            getattr(executor_settings, "status_command", None),
+            getattr(executor_settings, "init_seconds_before_status_checks", None),
+        ) or epa_cluster.cores_problem(given_cores())
         if problem:
             raise WorkflowError(f"epa: error: {problem}")
 
@@ -231,10 +236,23 @@ STAGE_RESOURCES = {
 # local rule, instead of each under `srun` in a Snakemake of its own: one interpreter per submission.
 # The slurm executor starts it with --jobs 1; as many jobs as the job has CPUs run side by side (they
 # share the worker pool). No effect where the remote process's executor is local. docs/cluster.md.
-if workflow.remote_exec:
-    workflow.localrules(*epa_chain.NAMES, "tables", "figures", "paper")
-    if workflow.nodes is not None:
-        workflow.register_resource("_nodes", epa_cluster.usable_cpus())
+if snakemake_compat.in_cluster_job(workflow):
+    snakemake_compat.run_here(
+        workflow,
+        [*epa_chain.NAMES, "tables", "provenance", "figures", "paper"],
+        epa_cluster.usable_cpus(),
+    )
+
+
+def write_provenance(params, output, log):
+    """The provenance rule's body: provenance.json and config.resolved.yaml, then its log."""
+    written = epa_provenance.write(
+        os.path.dirname(output.provenance),
+        epa_provenance.document(
+            "grid", params.resolved, params.inputs, workflow_dir=params.workflow_dir
+        ),
+    )
+    epa_files.write_text(log[0], "".join(f"wrote {path}\n" for path in written))
 
 
 def idle_truths():
@@ -247,15 +265,14 @@ def idle_truths():
 
 def quick_exit():
     """Let the process end as soon as the run has: about 1.6 s of every run (docs/performance.md).
-    Snakemake's job-rate limiter starts a 1 s threading.Timer at each scheduling round, and the
-    process waits for the last one to fire; and the garbage collector's pass over everything
-    Snakemake built (0.6 s on the example) only delays the exit: nothing after this needs it.
+    The scheduler's last rate-limiter timer would keep the process up to 1 s more
+    (snakemake_compat.scheduler_timers), and the garbage collector's pass over everything Snakemake
+    built (0.6 s on the example) only delays the exit: nothing after this needs it. onsuccess and
+    onerror run in the main workflow only: a host workflow's process is never touched.
     """
     import gc
-    import threading
 
     epa_jobs.close_pool()
-    for thread in threading.enumerate():
-        if isinstance(thread, threading.Timer):
-            thread.cancel()
+    for timer in snakemake_compat.scheduler_timers():
+        timer.cancel()
     gc.freeze()

@@ -1,6 +1,8 @@
-# error_comparison.txt, one .tex and .csv per LaTeX table, cells.csv, summary.csv, comparison, results/consistency/:
-# every case, failed ones marked; mode rpg: rpg's summary tables too; provenance.json and
-# config.resolved.yaml (scripts/tables.py, which also runs on its own).
+# error_comparison.txt, one .tex and .csv per LaTeX table, cells.csv, summary.csv, comparison,
+# results/consistency/: every case, failed ones marked; mode rpg: rpg's summary tables too
+# (scripts/tables.py, which also runs on its own). Its params hold only the settings the tables
+# read: another section's change re-runs the stages that read it, and provenance below, not the
+# tables, figures and paper.
 rule tables:
     input:
         expand(manifest("efficiency"), batch=BATCHES),
@@ -28,16 +30,6 @@ rule tables:
         ),
         comparison_tex=f"{RESULTS}/comparison.tex",
         success_curves=f"{RESULTS}/success_curves.csv",
-        provenance=report(
-            f"{RESULTS}/provenance.json",
-            caption="../docs/captions/provenance.rst",
-            category="Provenance",
-        ),
-        config_resolved=report(
-            f"{RESULTS}/config.resolved.yaml",
-            caption="../docs/captions/provenance.rst",
-            category="Provenance",
-        ),
     log:
         f"{RESULTS}/logs/tables.log",
     benchmark:
@@ -55,9 +47,39 @@ rule tables:
         # the tables' sections and those the registered metrics declare (their settings)
         settings=epa_chain.tables_settings(EPA),
         version=EPA_VERSION,
-        # provenance.json: the resolved config, every input file (hashed when the rule runs), the checkout
+    script:
+        "../scripts/tables.py"
+
+
+# provenance.json and config.resolved.yaml: what made the results (the whole resolved config, every
+# input file hashed after the tables, the checkout). Its own rule, so that a setting only some
+# stages read (report:) re-writes these two files and not the tables. In this process (run:).
+rule provenance:
+    input:
+        rules.tables.output.summary,  # after the tables, and again whenever they change
+    output:
+        provenance=report(
+            f"{RESULTS}/provenance.json",
+            caption="../docs/captions/provenance.rst",
+            category="Provenance",
+        ),
+        config_resolved=report(
+            f"{RESULTS}/config.resolved.yaml",
+            caption="../docs/captions/provenance.rst",
+            category="Provenance",
+        ),
+    log:
+        f"{RESULTS}/logs/provenance.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/provenance.tsv"
+    threads: 1
+    resources:
+        mem_mb=500,
+        runtime=lambda wc: 2 + len(CASE_BY_KEY) // 2000,
+    params:
         resolved=EPA,
         inputs=lambda wc: epa_provenance.grid_inputs(EPA, CASES, idle_truths()),
         workflow_dir=EPICA_DIR,
-    script:
-        "../scripts/tables.py"
+        version=EPA_VERSION,
+    run:
+        write_provenance(params, output, log)

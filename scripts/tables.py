@@ -1,6 +1,7 @@
 """The tables rule's body: read every case's artifacts and write error_comparison.txt, the LaTeX
-tables, summary.csv, comparison.txt/.tex, results/consistency/, and provenance.json with
-config.resolved.yaml (what made them: docs/reproducibility.md).
+tables, summary.csv, comparison.txt/.tex, results/consistency/; on its own also provenance.json with
+config.resolved.yaml (what made them: docs/reproducibility.md; in the workflow the provenance rule
+writes these two).
 
 Snakemake runs it for the ``tables`` rule (``script:``). It also runs on its own, on a results folder
 a grid has filled, with the grid's config:
@@ -87,9 +88,6 @@ if __name__ == "__main__":
             sm.params.idle_truths,
             sm.log[0],
             workers=sm.threads,
-        )
-        write_provenance(
-            sm.params.results, sm.params.resolved, sm.params.inputs, sm.params.workflow_dir
         )
     else:
         sys.exit(main())

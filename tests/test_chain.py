@@ -206,27 +206,33 @@ def test_values_let_go_are_read_by_no_later_stage(offset_case, tmp_path):
     assert not (tmp_path / "out/04_calibrate/est.tum").exists()
 
 
-def test_pool_workers_do_not_rerun_the_main_script(tmp_path):
+def test_pool_workers_do_not_import_the_main_scripts_imports_again(tmp_path):
     """multiprocessing re-runs the parent's main script in every new worker; under Snakemake's
-    console script that is an import of its whole command line before the first job's work. The
-    pool's workers leave it out; any other process keeps it (the control)."""
+    console script that imports its whole command line before the first job's work. The fork
+    server imports the script's imports once (jobs._main_imports); the workers, forked from it,
+    find them imported. Nothing of multiprocessing is patched."""
     import subprocess
     import sys
 
     marker = tmp_path / "imported"
+    (tmp_path / "heavy.py").write_text(
+        f"import os\nopen({str(marker)!r}, 'a').write(f'{{os.getpid()}}\\n')\n"
+    )
     script = tmp_path / "main_script.py"
     script.write_text(
-        "import os, sys\n"
-        "if __name__ == '__mp_main__':\n"
-        f"    open({str(marker)!r}, 'a').write(sys.argv[-1] + '\\n')\n"
+        "import os\n"
+        "import heavy  # noqa: F401\n"
         "if __name__ == '__main__':\n"
-        "    import multiprocessing\n"
         "    from epa.workflow import jobs\n"
-        "    print(jobs.call(2, os.getpid))\n"
+        "    pool = jobs._pool(2)\n"
+        "    pids = {f.result() for f in [pool.submit(os.getpid) for _ in range(8)]}\n"
         "    jobs.close_pool()\n"
-        "    ctx = multiprocessing.get_context('forkserver')\n"
-        "    p = ctx.Process(target=os.getpid)\n"
-        "    p.start(); p.join()\n"
+        "    print(' '.join(map(str, pids)))\n"
     )
-    subprocess.run([sys.executable, str(script)], check=True, capture_output=True, cwd=tmp_path)
-    assert marker.read_text().count("\n") == 1  # the plain process only
+    out = subprocess.run(
+        [sys.executable, str(script)], check=True, capture_output=True, text=True, cwd=tmp_path
+    )
+    workers = set(map(int, out.stdout.split()))
+    importers = set(map(int, marker.read_text().split()))
+    assert workers and not workers & importers  # no worker imported it
+    assert len(importers) == 2  # the script itself and the fork server

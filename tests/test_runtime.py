@@ -4,7 +4,6 @@ import logging
 import platform
 import subprocess
 import sys
-from multiprocessing import spawn
 
 import numpy as np
 import pytest
@@ -27,10 +26,8 @@ def test_reset_empties_every_cache():
         "outputs.tables.cells.index",
         "workflow.jobs.inside",
         "workflow.jobs.pool",
-        "workflow.jobs.spawn_patch",
         "outputs.provenance.hashed",
     }
-    original = spawn.get_preparation_data
     epa_log = logging.getLogger("epa")
     before = (epa_log.propagate, epa_log.level)
 
@@ -48,16 +45,14 @@ def test_reset_empties_every_cache():
     figures._KEPT[("kind",)] = "figure"
     cells.ok_runs([], "alg")  # indexes this grid
     jobs._POOL = Pool()
-    jobs._context()  # patches multiprocessing.spawn
     jobs._enter_logging()
-    assert cells._INDEX and spawn.get_preparation_data is not original and not epa_log.propagate
+    assert cells._INDEX and not epa_log.propagate
 
     runtime.reset()
 
     assert not case._PARSED and not case._WRITTEN and not load._LOADED and not metrics._PRINTED
     assert not figures._KEPT and not cells._INDEX and not provenance._HASHED
     assert jobs._POOL is None and Pool.closed
-    assert spawn.get_preparation_data is original
     assert jobs._INSIDE["n"] == 0 and (epa_log.propagate, epa_log.level) == before
     runtime.reset()  # twice is harmless
 

@@ -209,6 +209,7 @@ def test_rerun_behaviour(grid):
         "efficiency": 1,
         "report": 1,
         "tables": 1,
+        "provenance": 1,
         "figures": 1,
         "paper": 1,
     }
@@ -226,6 +227,7 @@ def test_rerun_behaviour(grid):
         "efficiency": 6,
         "report": 6,
         "tables": 1,
+        "provenance": 1,
         "figures": 1,
         "paper": 1,
     }

@@ -15,15 +15,17 @@ No snakemake import here: the rules call :func:`run_job` with plain values.
 
 from __future__ import annotations
 
+import ast
 import logging
 import re
+import sys
 import threading
 import time
 import traceback
 import warnings
 import zlib
 from contextlib import contextmanager
-from multiprocessing import context, spawn
+from multiprocessing import context
 from pathlib import Path
 from typing import Any
 
@@ -191,7 +193,7 @@ _POOL_LOCK = threading.Lock()
 
 
 class EpaWorker(context.ForkServerProcess):
-    """A pool worker (named EpaWorker-N, which :func:`_without_main_module` recognises)."""
+    """A pool worker."""
 
     def run(self):
         # pandas is preloaded in the forkserver (_context): pyarrow's reader (which pandas imports,
@@ -206,46 +208,36 @@ class EpaContext(context.ForkServerContext):
 
 
 def _context():
-    if not getattr(spawn.get_preparation_data, "epa_without_main", False):
-        spawn.get_preparation_data = _without_main_module(spawn.get_preparation_data)
     ctx = EpaContext()
     # pandas: its C parser reads the artifacts (epa.artifacts.files); imported once here, and
     # pyarrow's reader, tried first where installed (a preload that is not installed is skipped)
-    ctx.set_forkserver_preload(["epa.workflow.jobs", "pandas", "pyarrow.csv"])
+    ctx.set_forkserver_preload(["epa.workflow.jobs", "pandas", "pyarrow.csv", *_main_imports()])
     return ctx
 
 
-def _without_main_module(get_preparation_data):
-    """multiprocessing re-runs the parent's main script in each new worker, so that functions
-    defined there can be unpickled. Under the ``snakemake`` console script that is an import of
-    Snakemake's whole command line (1-2.5 s per worker, before the first job's work). A worker runs
-    epa's functions only, so its preparation leaves the main module out; other processes keep it."""
+def _main_imports() -> list[str]:
+    """The modules the parent's main script imports, for the fork server to import once.
 
-    def prepared(name):
-        data = get_preparation_data(name)
-        if name.startswith(EpaWorker.__name__ + "-"):
-            data.pop("init_main_from_path", None)
-            data.pop("init_main_from_name", None)
-        return data
-
-    # marks of the patch, read back by _unpatch_spawn (through vars: a function's attributes are untyped)
-    vars(prepared).update(epa_without_main=True, epa_original=get_preparation_data)
-    return prepared
-
-
-def _unpatch_spawn() -> None:
-    """Undo :func:`_context`'s patch of ``multiprocessing.spawn`` (the next pool applies it again)."""
-    if getattr(spawn.get_preparation_data, "epa_without_main", False):
-        spawn.get_preparation_data = vars(spawn.get_preparation_data)["epa_original"]
-
-
-def warm_up() -> None:
-    """Start the worker pool's fork server now, without waiting for it: its imports (0.7 s) then
-    run while Snakemake builds the DAG, instead of before the first job's work."""
-    from multiprocessing import forkserver
-
-    _context()
-    forkserver.ensure_running()
+    multiprocessing runs the parent's main script again in every worker it starts, so that
+    functions defined there can be unpickled. Under the ``snakemake`` console script that script
+    imports Snakemake's whole command line (1.3 s of CPU per worker). Imported once in the fork
+    server, each worker forked from it runs the script's few remaining lines only. None where the
+    main module was run as a module (``python -m snakemake``: multiprocessing leaves it alone)."""
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    if path is None or getattr(main, "__spec__", None) is not None:
+        return []
+    try:
+        tree = ast.parse(Path(path).read_bytes())
+    except (OSError, SyntaxError, ValueError):  # not Python source (a frozen or binary launcher)
+        return []
+    names: list[str] = []
+    for node in tree.body:  # the top level only: what running the script imports for certain
+        if isinstance(node, ast.Import):
+            names += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            names.append(node.module)
+    return names
 
 
 def close_pool() -> None:
@@ -258,7 +250,6 @@ def close_pool() -> None:
 
 
 runtime.register("workflow.jobs.pool", reset=close_pool)
-runtime.register("workflow.jobs.spawn_patch", reset=_unpatch_spawn)
 
 
 def _pool(workers: int):
