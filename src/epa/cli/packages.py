@@ -4,6 +4,8 @@ imported only when the command runs."""
 
 from __future__ import annotations
 
+from epa.cli.common import deprecated_alias
+
 
 def add_parsers(sub) -> None:
     _add_verify(sub)
@@ -56,7 +58,9 @@ def _add_pack(sub) -> None:
     )
     p.set_defaults(func=_pack)
     p.add_argument("results", help="a results folder (or an `epa eval --out` folder)")
-    p.add_argument("-o", "--output", required=True, help="the archive to write (.tar.gz)")
+    out = p.add_mutually_exclusive_group(required=True)
+    out.add_argument("-o", "--out", help="the archive to write (.tar.gz)")
+    deprecated_alias(out, "--output", "--out", dest="out")
     p.add_argument(
         "--with-inputs",
         action="store_true",

@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from epa.cli.common import deprecated_alias
 from epa.core.errors import EpaError
 
 
@@ -46,8 +47,9 @@ def add_stage(sub) -> None:
     sg.add_argument("name", help="the stage: load, crop, sync, calibrate, align, metrics, ...")
     sg.add_argument("case_dir", help="the case folder, results/cases/<algorithm>/<dataset>/<run>")
     sg.add_argument(
-        "--configfile", default="config/config.yaml", help="the grid's config (its settings apply)"
+        "--config", default="config/config.yaml", help="the grid's config (its settings apply)"
     )
+    deprecated_alias(sg, "--configfile", "--config", dest="config")
 
 
 def add_simulate(sub) -> None:
@@ -117,7 +119,7 @@ def _config(args) -> None:
 def _stage(args) -> None:
     from epa.workflow import one_stage
 
-    elapsed, written = one_stage.run(args.name, args.case_dir, args.configfile)
+    elapsed, written = one_stage.run(args.name, args.case_dir, args.config)
     print(f"{args.name}: {elapsed:.3f} s, wrote " + ", ".join(map(str, written)))
 
 

@@ -247,5 +247,5 @@ def _check_manifest(manifest: dict, archive: Path) -> None:
 
 # ----------------------------------------------------------------------------- the command
 def run(args) -> int:
-    pack(args.results, args.output, with_inputs=args.with_inputs, data=args.data)
+    pack(args.results, args.out, with_inputs=args.with_inputs, data=args.data)
     return 0
