@@ -182,3 +182,51 @@ def test_each_sides_source_settings_reach_that_side():
     with pytest.raises(EpaError) as err:
         epa.evaluate(TRUTH, RUN1, reference_source={"topic": "/odom"})
     assert err.value.one_line().startswith(str(TRUTH) + ": a topic is set for this source")
+
+
+def _pair(folder: Path) -> tuple[Path, Path]:
+    """A 15 m helix and an estimate 1 cm off it: too short for the default segments (a warning)."""
+    t = 100 + np.arange(300) * 0.05
+    p = np.c_[np.cos(t), np.sin(t), 0.1 * t]
+    q = np.tile([0, 0, 0, 1.0], (len(t), 1))
+    for name, pos in (("ref.txt", p), ("est.txt", p + 0.01 * np.sin(7 * t)[:, None])):
+        np.savetxt(folder / name, np.c_[t, pos, q], fmt="%.6f")
+    return folder / "ref.txt", folder / "est.txt"
+
+
+WARNED = "mode ov_eval overrides sync.policy: 'evo' -> 'ov_eval'"
+
+
+@pytest.mark.parametrize("asked", [False, True])
+def test_evaluate_prints_nothing_unless_asked(tmp_path, asked):
+    """In a fresh interpreter (pytest's own log handlers would hide Python's last-resort printing):
+    the warnings go nowhere, or where the caller's logging configuration sends them."""
+    ref, est = _pair(tmp_path)
+    code = (
+        "import logging, sys, epa\n"
+        + ("logging.basicConfig(format='%(name)s: %(message)s')\n" if asked else "")
+        + f"r = epa.evaluate({str(ref)!r}, {str(est)!r}, mode='ov_eval', sync={{'policy': 'evo'}})\n"
+        "assert r.status == 'ok', r.reason\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == ""
+    if asked:  # each module's logger, a child of "epa"
+        assert f"epa.workflow.settings: {WARNED}\n" in done.stderr
+        assert "epa.workflow.stages.metrics: no 16 m segment fits" in done.stderr
+    else:
+        assert done.stderr == ""
+
+
+def test_a_case_log_still_takes_every_modules_records(tmp_path):
+    """The workflow's per-case log attaches to "epa": the modules' own loggers reach it."""
+    from epa.workflow import jobs
+
+    ref, est = _pair(tmp_path)
+    with jobs.case_log(tmp_path / "case.log"):
+        epa.evaluate(ref, est, mode="ov_eval", sync={"policy": "evo"})
+    lines = (tmp_path / "case.log").read_text().splitlines()
+    assert f"WARNING {WARNED}" in lines
+    assert "INFO consistency: the estimate has no covariance" in lines
+    assert sum("segment fits in the 15.023 m matched path" in line for line in lines) == 5

@@ -10,7 +10,15 @@ light (no Snakemake, matplotlib or pandas): :func:`evaluate`, :func:`read_result
 :func:`read_cells`, :func:`read_case`, :class:`Result`.
 """
 
+import logging
+
 __version__ = "0.1.0"
+
+# A library prints nothing unless asked: each module logs to ``logging.getLogger(__name__)``, a
+# child of "epa", and only the command (epa.cli) and the workflow (epa.workflow.terminal) attach
+# handlers. Without one of those, nor the application's own, Python's last-resort handler would
+# print epa's warnings on stderr.
+logging.getLogger("epa").addHandler(logging.NullHandler())
 __all__ = ["Result", "evaluate", "read_case", "read_cells", "read_results"]
 
 

@@ -165,7 +165,7 @@ def _eval_config(args):
         (cfg.get("report") or {}).get("per_case") if isinstance(cfg.get("report"), dict) else None
     )
     if given is not None and given != overrides[("report", "per_case")]:
-        logging.getLogger("epa").warning(
+        logging.getLogger(__name__).warning(
             "report.per_case: %s in the config is not used by epa eval (--report writes the report)",
             json.dumps(given),
         )
@@ -180,7 +180,7 @@ def _eval_config(args):
     resolved = settings.resolve(cfg, source=source)
     case_cfg, own = cells.one_case(resolved, algorithm, args.dataset or "", source=source)
     for where in own.applied:
-        logging.getLogger("epa").info("settings of this case: %s", where)
+        logging.getLogger(__name__).info("settings of this case: %s", where)
     return case_cfg, own
 
 

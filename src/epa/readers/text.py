@@ -89,7 +89,7 @@ __all__ = [
     "upper_to_full",
 ]
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 # From this size on, a file pyarrow does not take is parsed by pandas' C parser: 3-4x faster than
 # numpy's loadtxt (0.10 s against 0.37 s for a 100k-pose TUM file; same doubles, bit for bit), worth
