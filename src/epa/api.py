@@ -1,8 +1,10 @@
 """The Python API, for notebooks and scripts: :func:`evaluate` one reference and estimate (the stages
 of ``epa eval``, in this process), :func:`read_results` a grid's results as a table,
 :func:`read_cells` every cell of its tables, :func:`read_case` one case's records and per-pose
-errors. ``import epa`` reaches these lazily: it imports neither Snakemake nor matplotlib, and pandas
-only when a table is asked for.
+errors; and the building blocks, one step at a time: :func:`read_trajectory`, :func:`associate`,
+:func:`align`, :func:`ape`, :func:`rpe` and :func:`stats` (the stages' own functions).
+``import epa`` reaches these lazily: it imports neither Snakemake nor matplotlib, and pandas only
+when a table is asked for.
 """
 
 from __future__ import annotations
@@ -15,8 +17,25 @@ import numpy as np
 
 from epa.artifacts.case import Case, CaseData, CaseFolder, read_record
 from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
+from epa.metrics.accuracy import stats
+from epa.steps.align import Similarity
 
-__all__ = ["Result", "evaluate", "read_case", "read_cells", "read_results"]
+__all__ = [
+    "Result",
+    "Similarity",
+    "Trajectory",
+    "align",
+    "ape",
+    "associate",
+    "evaluate",
+    "read_case",
+    "read_cells",
+    "read_results",
+    "read_trajectory",
+    "rpe",
+    "stats",
+]
 
 # the name `epa eval` gives its one estimate in `sources.algorithms` (the same settings apply)
 ESTIMATE = "estimate"
@@ -257,3 +276,105 @@ def read_cells(results_dir):
         path, dtype={**text, "n": "Int64"}, keep_default_na=False, na_values=missing
     )
     return frame
+
+
+# ----------------------------------------------------------------------------- building blocks
+def read_trajectory(path, format: str = "auto", **source) -> Trajectory:
+    """A trajectory file or bag topic, read as the workflow reads a reference: ``format`` (auto,
+    tum, kitti, euroc, openvins, csv, position) and the other keys of a ``sources.*`` setting
+    (``topic``, ``frames``, ``stamp``, ``time_unit``, ``unsorted``, ...)."""
+    from epa import readers
+    from epa.workflow import settings as workflow_settings
+
+    opts = readers.options(workflow_settings.defaults(), "reference")
+    unknown = sorted(set(source) - set(opts))
+    if unknown:
+        raise EpaError(
+            f"epa.read_trajectory: unknown setting {unknown[0]!r} (settings: {', '.join(opts)})"
+        )
+    return readers.read(path, {**opts, **source, "format": format})
+
+
+def associate(
+    ref: Trajectory,
+    est: Trajectory,
+    *,
+    policy: str = "evo",
+    max_diff: float | None = None,
+    offset: float = 0.0,
+) -> tuple[Trajectory, Trajectory]:
+    """The matched poses of both sides, pose for pose (Step 1's association): ``policy`` evo,
+    ov_eval or rpg, ``max_diff`` its tolerance in seconds (default: the policy's), ``offset`` added
+    to the estimate's stamps (t_ref = t_est + offset)."""
+    from epa.steps import sync
+
+    i_ref, i_est = sync.associate(ref, est, policy=policy, max_diff=max_diff, offset=offset)
+    return ref.select(i_ref), est.select(i_est)
+
+
+def _matched(ref: Trajectory, est: Trajectory, what: str) -> None:
+    if len(ref) != len(est):
+        raise EpaError(
+            f"epa.{what}: {len(ref)} reference and {len(est)} estimate poses; associate them first"
+        )
+
+
+def align(
+    ref: Trajectory, est: Trajectory, *, method: str = "se3", first_n: int = -1
+) -> tuple[Trajectory, Similarity]:
+    """The estimate in the reference's world frame, and the fit (Step 3): ``method`` se3, sim3,
+    posyaw or none, on the first ``first_n`` matched poses (-1: all). Both sides matched pose for
+    pose (:func:`associate`)."""
+    from epa.steps import align as step
+
+    _matched(ref, est, "align")
+    fit = step.fit(ref, est, method=method, first_n=first_n)
+    return fit.apply(est), fit
+
+
+def _rows(ref: Trajectory, est: Trajectory):
+    from epa.core import geometry
+
+    return geometry.pair_rows(None, ref.p, est.p, q=(ref.q, est.q))
+
+
+def _errors(trans, rot, ref: Trajectory, est: Trajectory) -> dict:
+    """A position-only side has no rotation error to give."""
+    if ref.position_only or est.position_only:
+        return {"trans_m": trans}
+    return {"trans_m": trans, "rot_deg": rot}
+
+
+def ape(ref: Trajectory, est: Trajectory) -> dict:
+    """Per matched pose, the absolute errors of an aligned estimate: ``trans_m`` (position, m) and
+    ``rot_deg`` (orientation angle, deg) arrays; :func:`stats` gives their rmse, mean, ..."""
+    from epa.metrics import accuracy
+
+    _matched(ref, est, "ape")
+    trans, rot = accuracy.ape(ref, est, rows=None if ref.position_only else _rows(ref, est))
+    return _errors(trans, rot, ref, est)
+
+
+def rpe(
+    ref: Trajectory,
+    est: Trajectory,
+    *,
+    delta: float = 1.0,
+    unit: str = "m",
+    all_pairs: bool = False,
+) -> dict:
+    """The relative errors of pose pairs ``delta`` apart (``unit``: frames, m, s, deg, rad), the
+    pairs chosen on the estimate as evo chooses them (consecutive, or every start with
+    ``all_pairs``): ``i``, ``j`` (pose indices), ``trans_m`` and ``rot_deg`` arrays."""
+    from epa.core import geometry
+    from epa.metrics import accuracy
+
+    _matched(ref, est, "rpe")
+    i, j = accuracy.evo_pairs(est, delta, unit, all_pairs=all_pairs)
+    if ref.position_only or est.position_only:
+        identity = np.tile([0.0, 0.0, 0.0, 1.0], (len(ref), 1))
+        rows = geometry.pair_rows(identity, ref.p, est.p)
+    else:
+        rows = _rows(ref, est)
+    rot, trans = geometry.pair_errors(rows, i, j)
+    return {"i": np.asarray(i), "j": np.asarray(j), **_errors(trans, rot, ref, est)}
