@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from epa.artifacts.case import Case, CaseData, CaseFolder, read_record
+from epa.artifacts.case import Case, CaseData, CaseFolder, Record, read_record
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.metrics.accuracy import stats
@@ -39,23 +39,47 @@ __all__ = [
 
 # the name `epa eval` gives its one estimate in `sources.algorithms` (the same settings apply)
 ESTIMATE = "estimate"
-# the config sections a keyword argument may set (the folders and the grid's own are the workflow's)
-SETTINGS: tuple[str, ...] = ("mode", "load", "sources", "crop", "sync", "calibrate", "align")
-SETTINGS += ("metrics", "drift", "efficiency", "report")
-# each stage's record as CaseData names it (align's record is Step 3's transform)
-RECORDS = {
-    "load": "load_record",
-    "crop": "crop_record",
-    "sync": "sync_record",
-    "calibrate": "calibrate_record",
-    "align": "transform",
-    "metrics": "metrics_record",
-    "drift": "drift_record",
-    "consistency": "consistency_record",
-    "efficiency": "efficiency_record",
-}
-# the per-pose and per-pair tables of 06_metrics/ (CaseData's names are the files' stems)
-ARRAYS = ("ape", "rpe_segments", "rpe_time")
+
+
+# Derived from the stage declarations on each use (module __getattr__ below), so that a stage added
+# to the list reaches epa.evaluate and read_case:
+# SETTINGS: the config sections a keyword argument may set, those the stages read in the schema's
+#   order (the folders and the grid's own are the workflow's);
+# RECORDS: each stage's record as CaseData names it (align's record is Step 3's transform);
+# ARRAYS: the per-pose and per-pair tables the metrics stage hands on (06_metrics/, the files' stems).
+SETTINGS: tuple[str, ...]
+RECORDS: dict[str, str]
+ARRAYS: tuple[str, ...]
+
+
+def _records() -> dict[str, str]:
+    from epa.workflow import chain
+
+    return chain.RECORDS
+
+
+def _arrays() -> tuple[str, ...]:
+    from epa.workflow import chain
+
+    return tuple(v.name for v in chain.BY_NAME["metrics"].values if v.type is not Record)
+
+
+def _settings() -> tuple[str, ...]:
+    from epa.workflow import chain
+    from epa.workflow import settings as workflow_settings
+
+    read = {s for st in chain.STAGES for s in chain.sections_for(st.name)}
+    read -= set(workflow_settings.GRID_FOLDERS)
+    return tuple(k for k in workflow_settings.defaults() if k in read)
+
+
+_DERIVED = {"RECORDS": _records, "ARRAYS": _arrays, "SETTINGS": _settings}
+
+
+def __getattr__(name: str):
+    if name in _DERIVED:
+        return _DERIVED[name]()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True)
@@ -138,10 +162,11 @@ def settings(config=None, **given) -> dict:
     are the two sides' source settings (``sources.reference``, ``sources.algorithms.estimate``)."""
     from epa.workflow import settings as workflow_settings
 
-    unknown = sorted(set(given) - set(SETTINGS) - {"reference_source", "estimate_source"})
+    allowed = _settings()
+    unknown = sorted(set(given) - set(allowed) - {"reference_source", "estimate_source"})
     if unknown:
         raise EpaError(
-            f"epa.evaluate: unknown setting {unknown[0]!r} (settings: {', '.join(SETTINGS)},"
+            f"epa.evaluate: unknown setting {unknown[0]!r} (settings: {', '.join(allowed)},"
             " reference_source, estimate_source)"
         )
     if isinstance(config, (str, Path)):
@@ -184,7 +209,7 @@ def evaluate(reference, estimate, *, config=None, out_dir=None, **settings_) -> 
             write_arrays=out_dir is not None,
             ref_source=readers.options(cfg, "reference"),
             est_source=readers.options(cfg, "estimate", algorithm=ESTIMATE),
-            keep=tuple(RECORDS.values()) + ARRAYS,
+            keep=tuple(_records().values()) + _arrays(),
         )
         return _result(Path(estimate).stem, data, None if out_dir is None else Path(folder))
 
@@ -195,8 +220,8 @@ def evaluate(reference, estimate, *, config=None, out_dir=None, **settings_) -> 
 
 
 def _result(name: str, data: CaseData, folder: Path | None) -> Result:
-    records = {stage: getattr(data, attr) for stage, attr in RECORDS.items()}
-    relative = {k: dict(getattr(data, k)) for k in ARRAYS[1:]}
+    records = {stage: getattr(data, attr) for stage, attr in _records().items()}
+    relative = {k: dict(getattr(data, k)) for k in _arrays()[1:]}
     return Result(name, records, dict(data.ape), relative, folder)
 
 
@@ -209,15 +234,16 @@ def read_case(results_dir, case: str) -> Result:
     from epa.workflow import chain
 
     records = {}
-    for stage in RECORDS:
+    for stage in _records():
         name = chain.BY_NAME[stage].records[0]
         path = folder.path(stage, name)
         records[stage] = read_record(path)[0] if path.is_file() else _missing(stage)
     arrays = {}
-    for name in ARRAYS:
+    arrays_named = _arrays()
+    for name in arrays_named:
         path = folder.path("metrics", f"{name}.csv")
         arrays[name] = folder.table("metrics", f"{name}.csv") if _usable(path) else {}
-    relative = {k: arrays[k] for k in ARRAYS[1:]}
+    relative = {k: arrays[k] for k in arrays_named[1:]}
     return Result(case, records, arrays["ape"], relative, folder.root)
 
 

@@ -251,7 +251,7 @@ def _eval(args) -> None:
     on_stage(None)
     from epa.artifacts import files
 
-    files.write_json(document, out.document())
+    files.write_json(document, out.document(chain.DOCUMENT))
     record = result["metrics"]
     ate = record["ate"]["trans_m"]["rmse"]
     print(
