@@ -98,9 +98,9 @@ def anchor(metric: Metric, record: dict, metrics: Sequence[Metric] | None = None
 
 
 def _time_rpe_as_named(at: str, record: dict) -> str | None:
-    """RECORD_KEYS spells the time RPE as under the default metrics.time_delta (``rpe_time_1s``):
-    for that anchor, the record's own time-RPE key; None for any other."""
-    found = accuracy.time_rpe_in(record) if at == accuracy.time_rpe_key(1.0) else None
+    """RECORD_KEYS names the time RPE ``rpe_time`` (accuracy.TIME_RPE): for that anchor, the
+    record's own time-RPE key (``rpe_time_1s`` at metrics.time_delta 1); None for any other."""
+    found = accuracy.time_rpe_in(record) if at == accuracy.TIME_RPE else None
     return None if found is None else "rpe_time_" + found[0]
 
 

@@ -137,7 +137,7 @@ def build_tables(
     tables."""
     layout = _Layout.of(grid, decimals, spread)
     out = _base_tables(layout, segments, time_delta)
-    # a Table.after names a base table as BASE_TABLES spells it: the time RPE's under the default
+    # a Table.after names a base table as BASE_TABLES spells it: the time RPE's as rpe_time
     named = dict(zip(accuracy.BASE_TABLES, accuracy.base_tables(time_delta)))
     for metric in metrics:
         for spec in metric.tables:
