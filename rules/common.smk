@@ -20,6 +20,9 @@ from epa.workflow import (
     overrides as epa_overrides,
 )
 from epa.workflow import cluster as epa_cluster, settings as epa_settings
+from epa.workflow import terminal as epa_terminal
+
+epa_terminal.show_warnings()  # epa's warnings on stderr (the library prints nothing itself)
 
 
 def workers():

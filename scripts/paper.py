@@ -24,11 +24,12 @@ def write(results_dir, caption_dir, log_path) -> list:
 
 def main(argv=None) -> int:
     from epa.core.errors import EpaError
-    from epa.workflow import settings
+    from epa.workflow import settings, terminal
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--configfile", default="config/config.yaml")
     args = parser.parse_args(argv)
+    terminal.show_warnings()  # epa's warnings on stderr, as in the workflow
     try:
         cfg = settings.from_configfile(args.configfile)
     except EpaError as exc:

@@ -46,11 +46,12 @@ def write_provenance(results_dir, cfg, inputs, workflow_dir) -> None:
 
 def main(argv=None) -> int:
     """Without Snakemake: resolve the config and discover the cases as the Snakefile does."""
-    from epa.workflow import chain, discovery, settings
+    from epa.workflow import chain, discovery, settings, terminal
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--configfile", default="config/config.yaml")
     args = parser.parse_args(argv)
+    terminal.show_warnings()  # epa's warnings on stderr, as in the workflow
     try:
         cfg = settings.from_configfile(args.configfile)
         truth, cases = discovery.discover_config(cfg, source=args.configfile)

@@ -160,7 +160,7 @@ def test_the_api_page_runs_as_written(grid, tmp_path, monkeypatch):
     (checkout / "example").symlink_to(ROOT / "example")
     (checkout / "results").symlink_to(grid)
     blocks = python_blocks(ROOT / "docs/api.md")
-    assert len(blocks) == 8
+    assert len(blocks) == 9
     if DATA.is_dir():
         (tmp_path / "shared").mkdir()
         (tmp_path / "shared/data").symlink_to(DATA)
@@ -182,3 +182,91 @@ def test_each_sides_source_settings_reach_that_side():
     with pytest.raises(EpaError) as err:
         epa.evaluate(TRUTH, RUN1, reference_source={"topic": "/odom"})
     assert err.value.one_line().startswith(str(TRUTH) + ": a topic is set for this source")
+
+
+def _pair(folder: Path) -> tuple[Path, Path]:
+    """A 15 m helix and an estimate 1 cm off it: too short for the default segments (a warning)."""
+    t = 100 + np.arange(300) * 0.05
+    p = np.c_[np.cos(t), np.sin(t), 0.1 * t]
+    q = np.tile([0, 0, 0, 1.0], (len(t), 1))
+    for name, pos in (("ref.txt", p), ("est.txt", p + 0.01 * np.sin(7 * t)[:, None])):
+        np.savetxt(folder / name, np.c_[t, pos, q], fmt="%.6f")
+    return folder / "ref.txt", folder / "est.txt"
+
+
+WARNED = "mode ov_eval overrides sync.policy: 'evo' -> 'ov_eval'"
+
+
+@pytest.mark.parametrize("asked", [False, True])
+def test_evaluate_prints_nothing_unless_asked(tmp_path, asked):
+    """In a fresh interpreter (pytest's own log handlers would hide Python's last-resort printing):
+    the warnings go nowhere, or where the caller's logging configuration sends them."""
+    ref, est = _pair(tmp_path)
+    code = (
+        "import logging, sys, epa\n"
+        + ("logging.basicConfig(format='%(name)s: %(message)s')\n" if asked else "")
+        + f"r = epa.evaluate({str(ref)!r}, {str(est)!r}, mode='ov_eval', sync={{'policy': 'evo'}})\n"
+        "assert r.status == 'ok', r.reason\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == ""
+    if asked:  # each module's logger, a child of "epa"
+        assert f"epa.workflow.settings: {WARNED}\n" in done.stderr
+        assert "epa.workflow.stages.metrics: no 16 m segment fits" in done.stderr
+    else:
+        assert done.stderr == ""
+
+
+def test_a_case_log_still_takes_every_modules_records(tmp_path):
+    """The workflow's per-case log attaches to "epa": the modules' own loggers reach it."""
+    from epa.workflow import jobs
+
+    ref, est = _pair(tmp_path)
+    with jobs.case_log(tmp_path / "case.log"):
+        epa.evaluate(ref, est, mode="ov_eval", sync={"policy": "evo"})
+    lines = (tmp_path / "case.log").read_text().splitlines()
+    assert f"WARNING {WARNED}" in lines
+    assert "INFO consistency: the estimate has no covariance" in lines
+    assert sum("segment fits in the 15.023 m matched path" in line for line in lines) == 5
+
+
+def test_the_building_blocks_give_evos_numbers():
+    """read, associate, align, APE and RPE one step at a time, as evo's notebook user writes them;
+    the numbers are evo 1.38.1's (sync.associate_trajectories max_diff 0.01, align without scale,
+    APE, RPE 1 m consecutive) on the same two files."""
+    ref, est = epa.read_trajectory(TRUTH), epa.read_trajectory(RUN1)
+    ref, est = epa.associate(ref, est, max_diff=0.01)
+    assert len(ref) == len(est) == 2980
+    aligned, fit = epa.align(ref, est, method="se3")
+    assert isinstance(fit, epa.Similarity) and fit.s == 1.0
+    ape = epa.ape(ref, aligned)
+    assert epa.stats(ape["trans_m"])["rmse"] == pytest.approx(0.05730467269584577, rel=1e-12)
+    assert epa.stats(ape["rot_deg"])["rmse"] == pytest.approx(0.2505654883932078, rel=1e-12)
+    rpe = epa.rpe(ref, aligned, delta=1.0, unit="m")
+    assert len(rpe["i"]) == 548
+    assert epa.stats(rpe["trans_m"])["rmse"] == pytest.approx(0.029776231280606885, rel=1e-12)
+    assert epa.stats(rpe["rot_deg"])["rmse"] == pytest.approx(0.2909741085218831, rel=1e-12)
+
+
+def test_sim3_undoes_a_scale_and_posyaw_keeps_gravity():
+    ref, est = epa.associate(epa.read_trajectory(TRUTH), epa.read_trajectory(RUN1))
+    se3 = epa.ape(ref, epa.align(ref, est)[0])["trans_m"]
+    half = epa.Trajectory(est.t, 0.5 * est.p, est.q)
+    aligned, fit = epa.align(ref, half, method="sim3")
+    assert fit.s == pytest.approx(2.0, rel=0.01)
+    # Sim3 on the halved estimate: at most SE3's error on the original (it has one more freedom)
+    assert epa.stats(epa.ape(ref, aligned)["trans_m"])["rmse"] <= epa.stats(se3)["rmse"] + 1e-12
+    _, yaw_only = epa.align(ref, est, method="posyaw")
+    assert yaw_only.R[2] == pytest.approx([0, 0, 1])  # a rotation about z
+
+
+def test_the_building_blocks_refuse_in_one_line():
+    ref, est = epa.read_trajectory(TRUTH), epa.read_trajectory(RUN1)
+    with pytest.raises(EpaError, match="associate them first"):
+        epa.ape(ref, est)
+    with pytest.raises(EpaError, match="unknown setting 'topik'"):
+        epa.read_trajectory(TRUTH, topik="/odom")
+    with pytest.raises(EpaError, match="unknown rpe unit 'f'"):
+        epa.rpe(*epa.associate(ref, est), unit="f")

@@ -464,7 +464,7 @@ def test_command(tmp_path, capsys, caplog, b):
 
             doc = json.loads((tmp_path / "out" / "metrics.json").read_text())
             assert list(doc) == ["metrics", "drift", "consistency", "efficiency"]
-            assert doc == CaseFolder(tmp_path / "out").document()
+            assert doc == CaseFolder(tmp_path / "out").document(chain.DOCUMENT)
         return
     lines = [line for line in err.splitlines() if line.startswith("epa: error: ")]
     assert rc == 2 and len(lines) == 1, err

@@ -249,3 +249,31 @@ def test_a_config_at_its_defaults_is_valid_without_the_validator():
     # refused by the inputs check after it
     with pytest.raises(EpaError, match="truth_dir without algorithms_dir"):
         settings.resolve({"truth_dir": "."})
+
+
+def test_one_spelling_per_option_across_epas_own_commands(capsys):
+    """Options of the same meaning are spelled alike (--config, --out), with hyphens; underscores
+    only on the commands whose options copy another tool's (evo's, rpg's, the TUM scripts')."""
+    import argparse
+
+    top = cli._parser()
+    sub = next(a for a in top._actions if isinstance(a, argparse._SubParsersAction))
+    copies = {"ape", "rpe", "res", "rpg", "tum-ate", "tum-rpe"}
+    shown = {
+        name: {s for a in p._actions if a.help != argparse.SUPPRESS for s in a.option_strings}
+        for name, p in sub.choices.items()
+        if name not in copies
+    }
+    assert not {s for opts in shown.values() for s in opts if "_" in s}
+    assert {"--config"} <= shown["eval"] & shown["selftest"] & shown["stage"]
+    assert {"--out"} <= shown["eval"] & shown["fig"] & shown["pack"]
+    assert not {"--configfile", "--output"} & {s for opts in shown.values() for s in opts}
+    # the earlier spellings still work, with a warning
+    args = top.parse_args(["pack", "results", "--output", "p.tar.gz"])
+    assert args.out == "p.tar.gz"
+    assert capsys.readouterr().err == "epa: WARNING: --output is deprecated: use --out\n"
+    assert cli._parser().parse_args(["stage", "load", "case"]).config == "config/config.yaml"
+    assert cli._parser().parse_args(["stage", "load", "case", "--configfile", "c.yaml"]).config == (
+        "c.yaml"
+    )
+    assert "--configfile is deprecated: use --config" in capsys.readouterr().err

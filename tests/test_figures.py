@@ -7,6 +7,7 @@ import struct
 import pytest
 
 from epa import simulate
+from epa.cli import evaluate
 from epa.cli import main as cli
 
 
@@ -246,7 +247,7 @@ def test_bundle_arrays_are_written_at_seven_digits_with_nan_as_null(tmp_path):
 
 def test_epa_eval_prints_its_stages_on_a_large_input(case, capsys, monkeypatch, tmp_path):
     sim = case.parents[1] / "sim"
-    monkeypatch.setattr(cli, "LARGE_INPUT_MB", 0)  # every input counts as large
+    monkeypatch.setattr(evaluate, "LARGE_INPUT_MB", 0)  # every input counts as large
     assert (
         cli.main(
             [

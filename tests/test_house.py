@@ -121,11 +121,13 @@ def test_epa_stage_runs_one_stage_from_the_previous_artifacts(small_grid, capsys
     for name in want:
         (case_dir / name).unlink()
     for stage in ("align", "metrics"):
-        assert cli.main(["stage", stage, str(case_dir), "--configfile", str(cwd / "cfg.yaml")]) == 0
+        assert cli.main(["stage", stage, str(case_dir), "--config", str(cwd / "cfg.yaml")]) == 0
     assert "metrics: " in capsys.readouterr().out
     assert {n: (case_dir / n).read_bytes() for n in want} == want
-    # the load stage finds the case's files through the grid's config
+    # the load stage finds the case's files through the grid's config; --configfile, the earlier
+    # spelling of --config, still works and says so
     assert cli.main(["stage", "load", str(case_dir), "--configfile", str(cwd / "cfg.yaml")]) == 0
+    assert capsys.readouterr().err == "epa: WARNING: --configfile is deprecated: use --config\n"
 
 
 @pytest.mark.parametrize(
@@ -138,7 +140,7 @@ def test_epa_stage_runs_one_stage_from_the_previous_artifacts(small_grid, capsys
 def test_epa_stage_refuses_in_one_line(small_grid, capsys, args, says):
     cwd, _, keys = small_grid
     fill = {"case": str(cwd / "results/cases" / keys[0]), "results": str(cwd / "results")}
-    argv = [a.format(**fill) for a in args] + ["--configfile", str(cwd / "cfg.yaml")]
+    argv = [a.format(**fill) for a in args] + ["--config", str(cwd / "cfg.yaml")]
     assert cli.main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("epa: error: ") and says in err and err.count("\n") == 1

@@ -293,15 +293,15 @@ def test_every_parser_gives_the_same_doubles(tmp_path, monkeypatch, sep):
 
 
 def test_the_parser_is_chosen_by_size_and_what_is_imported(monkeypatch):
-    """pyarrow from 2 MB on (its import repaid), from 32 KB on once imported; pandas from the
-    caller's size on; below both, numpy's loadtxt."""
+    """pyarrow from 2 MB on (its import repaid), from 32 KB on once epa imported it; pandas from
+    the caller's size on; below both, numpy's loadtxt."""
     monkeypatch.setitem(text._ARROW, "installed", True)
-    monkeypatch.delitem(sys.modules, "pyarrow", raising=False)
+    monkeypatch.delitem(text._ARROW, "imported", raising=False)
     assert text.parsers_for(text.ARROW_MIN_BYTES - 1, text.C_PARSER_MIN_BYTES) == ()
     assert text.parsers_for(text.ARROW_MIN_BYTES, text.C_PARSER_MIN_BYTES) == ("arrow",)
     assert text.parsers_for(text.C_PARSER_MIN_BYTES, text.C_PARSER_MIN_BYTES) == ("arrow", "pandas")
     assert text.parsers_for(1000, 0) == ("pandas",)
-    monkeypatch.setitem(sys.modules, "pyarrow", object())
+    monkeypatch.setitem(text._ARROW, "imported", True)
     assert text.parsers_for(text.ARROW_IMPORTED_MIN_BYTES, text.C_PARSER_MIN_BYTES) == ("arrow",)
     monkeypatch.setitem(text._ARROW, "installed", False)
     assert text.parsers_for(text.C_PARSER_MIN_BYTES - 1, text.C_PARSER_MIN_BYTES) == ()
@@ -472,3 +472,21 @@ def test_upper_to_full_is_the_gather_layout_and_all():
         gathered = u[:, idx if columns is None else np.asarray(columns)[idx]]
         assert np.array_equal(full, gathered) and full.strides == gathered.strides
         assert np.array_equal(full.sum(axis=0), gathered.sum(axis=0))
+
+
+def test_the_parser_follows_the_size_and_epas_own_import_not_sys_modules(monkeypatch):
+    """pyarrow imported by someone else (a notebook's pandas) changes nothing; once epa has
+    imported it for a large file, it is worth its cost from ARROW_IMPORTED_MIN_BYTES on."""
+    import types
+
+    size, never = 100_000, 10**12  # between the two thresholds; pandas out of the way
+    monkeypatch.setattr(text, "_ARROW", {"installed": True})
+    monkeypatch.setitem(sys.modules, "pyarrow", types.ModuleType("pyarrow"))
+    assert text.ARROW_IMPORTED_MIN_BYTES < size < text.ARROW_MIN_BYTES
+    assert text.parsers_for(size, never) == ()
+    assert text.parsers_for(text.ARROW_MIN_BYTES, never) == ("arrow",)
+    monkeypatch.setattr(text, "_ARROW", {"installed": True, "imported": True})
+    assert text.parsers_for(size, never) == ("arrow",)
+    assert text.parsers_for(text.ARROW_IMPORTED_MIN_BYTES - 1, never) == ()
+    monkeypatch.setattr(text, "_ARROW", {"installed": False, "imported": True})
+    assert text.parsers_for(text.ARROW_MIN_BYTES, never) == ()

@@ -166,3 +166,18 @@ def test_the_tables_rule_takes_its_settings_from_the_registry():
     """rules/tables.smk passes the derived subset, not a hand-built dict."""
     rule = (ROOT / "rules/tables.smk").read_text()
     assert re.search(r"settings=epa_chain\.tables_settings\(EPA\)", rule)
+
+
+def test_every_metric_module_is_registered_once_and_listed():
+    """The registry names each module once (MODULES), every module declaring a METRIC is in it, and
+    the package's __all__ is its modules as they are."""
+    import importlib
+    import pkgutil
+
+    import epa.metrics
+
+    names = sorted(m.name for m in pkgutil.iter_modules(epa.metrics.__path__))
+    assert epa.metrics.__all__ == names and {"accuracy", "tum", "registry"} <= set(names)
+    declaring = [n for n in names if hasattr(importlib.import_module(f"epa.metrics.{n}"), "METRIC")]
+    assert sorted(registry.MODULES) == declaring
+    assert [m.key for m in registry.REGISTRY][:3] == ["ate_2d", "consistency", "efficiency"]

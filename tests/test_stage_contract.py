@@ -108,6 +108,27 @@ def test_a_stage_added_runs_in_epa_eval_and_reads_the_calibrated_estimate(
     assert records["toy"] == record
 
 
+def test_a_stage_added_reaches_evaluate_read_case_and_metrics_json(toy, camera_case, tmp_path):
+    """Its record, with no edit elsewhere: in epa.evaluate's and read_case's records (after the
+    others) and in `epa eval`'s metrics.json (the stages with a result; the per-case report's
+    copy holds those before the report stage)."""
+    import epa
+    from epa import api
+
+    ref, est = camera_case
+    assert list(api.RECORDS)[-2:] == ["efficiency", "toy"]
+    assert chain.DOCUMENT[-1] == ("toy", "toy.json")
+    result = epa.evaluate(ref, est, out_dir=tmp_path / "cases/alg/ds/run")
+    assert result.records["toy"]["n"] == result.metrics["n_matched"] > 0
+    back = epa.read_case(tmp_path, "alg/ds/run")
+    assert back.records["toy"] == result.records["toy"]
+    out = tmp_path / "e"
+    assert cli.main(["eval", str(ref), str(est), "--out", str(out)]) == 0
+    doc = json.loads((out / "metrics.json").read_text())
+    assert list(doc) == ["metrics", "drift", "consistency", "efficiency", "toy"]
+    assert doc["toy"] == result.records["toy"]
+
+
 def test_a_value_let_go_before_a_late_reader_is_what_the_derived_last_reader_prevents(
     toy, camera_case, tmp_path, monkeypatch
 ):

@@ -25,8 +25,8 @@ def test_the_name_is_the_interval_as_segment_lengths_are_spelled():
         "time_rpe_0.5s_trans_mean_m",
         "time_rpe_0.5s_rot_mean_deg",
     )
-    assert accuracy.base_tables(1.0) == accuracy.BASE_TABLES
-    two = accuracy.base_tables(2.0)
+    one, two = accuracy.base_tables(1.0), accuracy.base_tables(2.0)
+    assert "rpe_time_1s" in one and "valid_rpe_time_1s" in one and "rpe_time" not in one
     assert "rpe_time_2s" in two and "valid_rpe_time_2s" in two and "rpe_time_1s" not in two
     assert accuracy.time_rpe_in({"ate": {}, "rpe_time_0.5s": {"n": 1}}) == ("0.5s", {"n": 1})
     assert accuracy.time_rpe_in({"ate": {}}) is None
@@ -88,24 +88,26 @@ def test_the_case_report_row_names_the_interval(two_seconds):
 
 
 def test_a_table_after_the_time_rpe_follows_it_under_any_interval(two_seconds):
-    """A metric's Table.after names the base tables as BASE_TABLES spells them (the default's)."""
+    """A metric's Table.after names the base tables as BASE_TABLES spells them (the time RPE's:
+    rpe_time, whatever its interval)."""
     from epa.metrics import ate_2d
     from epa.outputs.tables.latex import build_tables
     from epa.outputs.tables.results import collect
 
     _, results, cfg = two_seconds
     grid = collect([CASE], results)
-    table = dataclasses.replace(ate_2d.METRIC.tables[0], after="rpe_time_1s")
+    table = dataclasses.replace(ate_2d.METRIC.tables[0], after="rpe_time")
     moved = dataclasses.replace(ate_2d.METRIC, tables=(table,))
     names = [t[0] for t in build_tables(grid, [8.0], metrics=(moved,), time_delta=2.0)]
     assert names[names.index("rpe_time_2s") + 1] == table.name
 
 
 def test_a_record_after_the_time_rpe_follows_it_under_any_interval():
-    """A metric's ``after`` names the base record's keys as RECORD_KEYS spells them (the default's)."""
+    """A metric's ``after`` names the base record's keys as RECORD_KEYS spells them (the time RPE's:
+    rpe_time, whatever its interval)."""
     from epa.metrics import ate_2d, registry
 
-    moved = dataclasses.replace(ate_2d.METRIC, after="rpe_time_1s")
+    moved = dataclasses.replace(ate_2d.METRIC, after="rpe_time")
     record = {"drift_rate_pct": {}, "rpe_time_2s": {"delta_s": 2.0}, "rpe": []}
     assert registry.anchor(moved, record, [moved]) == "rpe_time_2s"
     assert registry.anchor(moved, {"rpe_time_1s": {}, "rpe": []}, [moved]) == "rpe_time_1s"

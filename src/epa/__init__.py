@@ -7,11 +7,35 @@ lives there.
 
 The Python API (:mod:`epa.api`, docs/api.md) is reached from here lazily, so ``import epa`` stays
 light (no Snakemake, matplotlib or pandas): :func:`evaluate`, :func:`read_results`,
-:func:`read_cells`, :func:`read_case`, :class:`Result`.
+:func:`read_cells`, :func:`read_case`, :class:`Result`, and the building blocks
+:func:`read_trajectory`, :func:`associate`, :func:`align`, :func:`ape`, :func:`rpe`, :func:`stats`
+(with :class:`Trajectory` and :class:`Similarity`).
 """
 
+import logging
+
 __version__ = "0.1.0"
-__all__ = ["Result", "evaluate", "read_case", "read_cells", "read_results"]
+
+# A library prints nothing unless asked: each module logs to ``logging.getLogger(__name__)``, a
+# child of "epa", and only the command (epa.cli) and the workflow (epa.workflow.terminal) attach
+# handlers. Without one of those, nor the application's own, Python's last-resort handler would
+# print epa's warnings on stderr.
+logging.getLogger("epa").addHandler(logging.NullHandler())
+__all__ = [
+    "Result",
+    "Similarity",
+    "Trajectory",
+    "align",
+    "ape",
+    "associate",
+    "evaluate",
+    "read_case",
+    "read_cells",
+    "read_results",
+    "read_trajectory",
+    "rpe",
+    "stats",
+]
 
 
 def __getattr__(name: str):

@@ -1,8 +1,10 @@
 """The Python API, for notebooks and scripts: :func:`evaluate` one reference and estimate (the stages
 of ``epa eval``, in this process), :func:`read_results` a grid's results as a table,
 :func:`read_cells` every cell of its tables, :func:`read_case` one case's records and per-pose
-errors. ``import epa`` reaches these lazily: it imports neither Snakemake nor matplotlib, and pandas
-only when a table is asked for.
+errors; and the building blocks, one step at a time: :func:`read_trajectory`, :func:`associate`,
+:func:`align`, :func:`ape`, :func:`rpe` and :func:`stats` (the stages' own functions).
+``import epa`` reaches these lazily: it imports neither Snakemake nor matplotlib, and pandas only
+when a table is asked for.
 """
 
 from __future__ import annotations
@@ -13,30 +15,71 @@ from pathlib import Path
 
 import numpy as np
 
-from epa.artifacts.case import Case, CaseData, CaseFolder, read_record
+from epa.artifacts.case import Case, CaseData, CaseFolder, Record, read_record
 from epa.core.errors import EpaError
+from epa.core.trajectory import Trajectory
+from epa.metrics.accuracy import stats
+from epa.steps.align import Similarity
 
-__all__ = ["Result", "evaluate", "read_case", "read_cells", "read_results"]
+__all__ = [
+    "Result",
+    "Similarity",
+    "Trajectory",
+    "align",
+    "ape",
+    "associate",
+    "evaluate",
+    "read_case",
+    "read_cells",
+    "read_results",
+    "read_trajectory",
+    "rpe",
+    "stats",
+]
 
 # the name `epa eval` gives its one estimate in `sources.algorithms` (the same settings apply)
 ESTIMATE = "estimate"
-# the config sections a keyword argument may set (the folders and the grid's own are the workflow's)
-SETTINGS: tuple[str, ...] = ("mode", "load", "sources", "crop", "sync", "calibrate", "align")
-SETTINGS += ("metrics", "drift", "efficiency", "report")
-# each stage's record as CaseData names it (align's record is Step 3's transform)
-RECORDS = {
-    "load": "load_record",
-    "crop": "crop_record",
-    "sync": "sync_record",
-    "calibrate": "calibrate_record",
-    "align": "transform",
-    "metrics": "metrics_record",
-    "drift": "drift_record",
-    "consistency": "consistency_record",
-    "efficiency": "efficiency_record",
-}
-# the per-pose and per-pair tables of 06_metrics/ (CaseData's names are the files' stems)
-ARRAYS = ("ape", "rpe_segments", "rpe_time")
+
+
+# Derived from the stage declarations on each use (module __getattr__ below), so that a stage added
+# to the list reaches epa.evaluate and read_case:
+# SETTINGS: the config sections a keyword argument may set, those the stages read in the schema's
+#   order (the folders and the grid's own are the workflow's);
+# RECORDS: each stage's record as CaseData names it (align's record is Step 3's transform);
+# ARRAYS: the per-pose and per-pair tables the metrics stage hands on (06_metrics/, the files' stems).
+SETTINGS: tuple[str, ...]
+RECORDS: dict[str, str]
+ARRAYS: tuple[str, ...]
+
+
+def _records() -> dict[str, str]:
+    from epa.workflow import chain
+
+    return chain.RECORDS
+
+
+def _arrays() -> tuple[str, ...]:
+    from epa.workflow import chain
+
+    return tuple(v.name for v in chain.BY_NAME["metrics"].values if v.type is not Record)
+
+
+def _settings() -> tuple[str, ...]:
+    from epa.workflow import chain
+    from epa.workflow import settings as workflow_settings
+
+    read = {s for st in chain.STAGES for s in chain.sections_for(st.name)}
+    read -= set(workflow_settings.GRID_FOLDERS)
+    return tuple(k for k in workflow_settings.defaults() if k in read)
+
+
+_DERIVED = {"RECORDS": _records, "ARRAYS": _arrays, "SETTINGS": _settings}
+
+
+def __getattr__(name: str):
+    if name in _DERIVED:
+        return _DERIVED[name]()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True)
@@ -119,10 +162,11 @@ def settings(config=None, **given) -> dict:
     are the two sides' source settings (``sources.reference``, ``sources.algorithms.estimate``)."""
     from epa.workflow import settings as workflow_settings
 
-    unknown = sorted(set(given) - set(SETTINGS) - {"reference_source", "estimate_source"})
+    allowed = _settings()
+    unknown = sorted(set(given) - set(allowed) - {"reference_source", "estimate_source"})
     if unknown:
         raise EpaError(
-            f"epa.evaluate: unknown setting {unknown[0]!r} (settings: {', '.join(SETTINGS)},"
+            f"epa.evaluate: unknown setting {unknown[0]!r} (settings: {', '.join(allowed)},"
             " reference_source, estimate_source)"
         )
     if isinstance(config, (str, Path)):
@@ -165,7 +209,7 @@ def evaluate(reference, estimate, *, config=None, out_dir=None, **settings_) -> 
             write_arrays=out_dir is not None,
             ref_source=readers.options(cfg, "reference"),
             est_source=readers.options(cfg, "estimate", algorithm=ESTIMATE),
-            keep=tuple(RECORDS.values()) + ARRAYS,
+            keep=tuple(_records().values()) + _arrays(),
         )
         return _result(Path(estimate).stem, data, None if out_dir is None else Path(folder))
 
@@ -176,8 +220,8 @@ def evaluate(reference, estimate, *, config=None, out_dir=None, **settings_) -> 
 
 
 def _result(name: str, data: CaseData, folder: Path | None) -> Result:
-    records = {stage: getattr(data, attr) for stage, attr in RECORDS.items()}
-    relative = {k: dict(getattr(data, k)) for k in ARRAYS[1:]}
+    records = {stage: getattr(data, attr) for stage, attr in _records().items()}
+    relative = {k: dict(getattr(data, k)) for k in _arrays()[1:]}
     return Result(name, records, dict(data.ape), relative, folder)
 
 
@@ -190,15 +234,16 @@ def read_case(results_dir, case: str) -> Result:
     from epa.workflow import chain
 
     records = {}
-    for stage in RECORDS:
+    for stage in _records():
         name = chain.BY_NAME[stage].records[0]
         path = folder.path(stage, name)
         records[stage] = read_record(path)[0] if path.is_file() else _missing(stage)
     arrays = {}
-    for name in ARRAYS:
+    arrays_named = _arrays()
+    for name in arrays_named:
         path = folder.path("metrics", f"{name}.csv")
         arrays[name] = folder.table("metrics", f"{name}.csv") if _usable(path) else {}
-    relative = {k: arrays[k] for k in ARRAYS[1:]}
+    relative = {k: arrays[k] for k in arrays_named[1:]}
     return Result(case, records, arrays["ape"], relative, folder.root)
 
 
@@ -257,3 +302,105 @@ def read_cells(results_dir):
         path, dtype={**text, "n": "Int64"}, keep_default_na=False, na_values=missing
     )
     return frame
+
+
+# ----------------------------------------------------------------------------- building blocks
+def read_trajectory(path, format: str = "auto", **source) -> Trajectory:
+    """A trajectory file or bag topic, read as the workflow reads a reference: ``format`` (auto,
+    tum, kitti, euroc, openvins, csv, position) and the other keys of a ``sources.*`` setting
+    (``topic``, ``frames``, ``stamp``, ``time_unit``, ``unsorted``, ...)."""
+    from epa import readers
+    from epa.workflow import settings as workflow_settings
+
+    opts = readers.options(workflow_settings.defaults(), "reference")
+    unknown = sorted(set(source) - set(opts))
+    if unknown:
+        raise EpaError(
+            f"epa.read_trajectory: unknown setting {unknown[0]!r} (settings: {', '.join(opts)})"
+        )
+    return readers.read(path, {**opts, **source, "format": format})
+
+
+def associate(
+    ref: Trajectory,
+    est: Trajectory,
+    *,
+    policy: str = "evo",
+    max_diff: float | None = None,
+    offset: float = 0.0,
+) -> tuple[Trajectory, Trajectory]:
+    """The matched poses of both sides, pose for pose (Step 1's association): ``policy`` evo,
+    ov_eval or rpg, ``max_diff`` its tolerance in seconds (default: the policy's), ``offset`` added
+    to the estimate's stamps (t_ref = t_est + offset)."""
+    from epa.steps import sync
+
+    i_ref, i_est = sync.associate(ref, est, policy=policy, max_diff=max_diff, offset=offset)
+    return ref.select(i_ref), est.select(i_est)
+
+
+def _matched(ref: Trajectory, est: Trajectory, what: str) -> None:
+    if len(ref) != len(est):
+        raise EpaError(
+            f"epa.{what}: {len(ref)} reference and {len(est)} estimate poses; associate them first"
+        )
+
+
+def align(
+    ref: Trajectory, est: Trajectory, *, method: str = "se3", first_n: int = -1
+) -> tuple[Trajectory, Similarity]:
+    """The estimate in the reference's world frame, and the fit (Step 3): ``method`` se3, sim3,
+    posyaw or none, on the first ``first_n`` matched poses (-1: all). Both sides matched pose for
+    pose (:func:`associate`)."""
+    from epa.steps import align as step
+
+    _matched(ref, est, "align")
+    fit = step.fit(ref, est, method=method, first_n=first_n)
+    return fit.apply(est), fit
+
+
+def _rows(ref: Trajectory, est: Trajectory):
+    from epa.core import geometry
+
+    return geometry.pair_rows(None, ref.p, est.p, q=(ref.q, est.q))
+
+
+def _errors(trans, rot, ref: Trajectory, est: Trajectory) -> dict:
+    """A position-only side has no rotation error to give."""
+    if ref.position_only or est.position_only:
+        return {"trans_m": trans}
+    return {"trans_m": trans, "rot_deg": rot}
+
+
+def ape(ref: Trajectory, est: Trajectory) -> dict:
+    """Per matched pose, the absolute errors of an aligned estimate: ``trans_m`` (position, m) and
+    ``rot_deg`` (orientation angle, deg) arrays; :func:`stats` gives their rmse, mean, ..."""
+    from epa.metrics import accuracy
+
+    _matched(ref, est, "ape")
+    trans, rot = accuracy.ape(ref, est, rows=None if ref.position_only else _rows(ref, est))
+    return _errors(trans, rot, ref, est)
+
+
+def rpe(
+    ref: Trajectory,
+    est: Trajectory,
+    *,
+    delta: float = 1.0,
+    unit: str = "m",
+    all_pairs: bool = False,
+) -> dict:
+    """The relative errors of pose pairs ``delta`` apart (``unit``: frames, m, s, deg, rad), the
+    pairs chosen on the estimate as evo chooses them (consecutive, or every start with
+    ``all_pairs``): ``i``, ``j`` (pose indices), ``trans_m`` and ``rot_deg`` arrays."""
+    from epa.core import geometry
+    from epa.metrics import accuracy
+
+    _matched(ref, est, "rpe")
+    i, j = accuracy.evo_pairs(est, delta, unit, all_pairs=all_pairs)
+    if ref.position_only or est.position_only:
+        identity = np.tile([0.0, 0.0, 0.0, 1.0], (len(ref), 1))
+        rows = geometry.pair_rows(identity, ref.p, est.p)
+    else:
+        rows = _rows(ref, est)
+    rot, trans = geometry.pair_errors(rows, i, j)
+    return {"i": np.asarray(i), "j": np.asarray(j), **_errors(trans, rot, ref, est)}

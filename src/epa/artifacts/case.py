@@ -273,16 +273,12 @@ class CaseFolder:
         folder (:func:`epa.artifacts.files.remove_temporaries`); returns their names."""
         return files.remove_temporaries(self.root / stage_folder(stage), names)
 
-    def document(self) -> dict:
-        """Every stage's record of the case, as one document (``epa eval``'s metrics.json, the
-        per-case report's)."""
+    def document(self, records) -> dict:
+        """The records ``records`` ((stage, file name) pairs) of the case as one document, by stage
+        name, those present (``epa eval``'s metrics.json, the per-case report's: the stages
+        declaring a ``result``, :data:`epa.workflow.chain.DOCUMENT`)."""
         doc = {}
-        for stage, name in (
-            ("metrics", "metrics.json"),
-            ("drift", "drift.json"),
-            ("consistency", "consistency.json"),
-            ("efficiency", "efficiency.json"),
-        ):
+        for stage, name in records:
             path = self.path(stage, name)
             if path.exists():
                 doc[stage] = files.read_json(path)
@@ -309,6 +305,8 @@ class CaseData:
     :meth:`readable` limits it, a value the running stage does not declare it reads."""
 
     VALUES: ClassVar[dict[str, Value]] = {}
+    # the (stage, record) pairs of the case's document (CaseFolder.document)
+    DOCUMENT: ClassVar[tuple[tuple[str, str], ...]] = ()
 
     def __init__(self, folder: CaseFolder):
         object.__setattr__(self, "folder", folder)
@@ -346,14 +344,19 @@ class CaseData:
         """Whether ``name`` is already in memory (set by a stage or read before)."""
         return name in self.__dict__["_store"]
 
+    def document(self) -> dict:
+        """The case's records as one document (:meth:`CaseFolder.document` of :attr:`DOCUMENT`)."""
+        return self.folder.document(type(self).DOCUMENT)
+
     def forget(self, *names: str) -> None:
         """Let values go that no later stage reads (read again from the case folder if one did)."""
         for name in names:
             self.__dict__["_store"].pop(name, None)
 
 
-def data_class(values: Iterable[Value]) -> type[CaseData]:
-    """A :class:`CaseData` whose fields are ``values``, each annotated with its type."""
+def data_class(values: Iterable[Value], document=()) -> type[CaseData]:
+    """A :class:`CaseData` whose fields are ``values``, each annotated with its type; ``document``:
+    its :attr:`~CaseData.DOCUMENT`."""
     table: dict[str, Value] = {}
     for value in values:
         if value.name in table or value.name == "folder" or hasattr(CaseData, value.name):
@@ -361,6 +364,7 @@ def data_class(values: Iterable[Value]) -> type[CaseData]:
         table[value.name] = value
     namespace = {
         "VALUES": table,
+        "DOCUMENT": tuple(document),
         "__annotations__": {name: v.type for name, v in table.items()},
         "__doc__": CaseData.__doc__,
         "__module__": __name__,

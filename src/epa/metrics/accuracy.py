@@ -17,6 +17,9 @@ from epa.core.stamps import closest_pair_blocks, closest_pairs, run_starts
 from epa.core.trajectory import Trajectory
 
 RPE_UNITS = ("frames", "m", "s", "deg", "rad")
+# The time RPE as a declaration names it, whatever ``metrics.time_delta`` names its record and tables
+# (rpe_time_1s, rpe_time_2s, ...: time_rpe_key): what a metric's record or table may follow.
+TIME_RPE = "rpe_time"
 # the keys of evaluate's record: what a registered metric's record can follow in metrics.json
 RECORD_KEYS = (
     "n_matched",
@@ -25,22 +28,22 @@ RECORD_KEYS = (
     "ate",
     "rpe_distance",
     "drift_rate_pct",
-    "rpe_time_1s",
+    TIME_RPE,
     "rpe",
 )
 # the paper tables of these metrics (epa.outputs.tables), in order: what a metric's table can follow
-# (the time RPE's under the default metrics.time_delta: base_tables gives them under any)
+# (base_tables gives them as the grid names them)
 BASE_TABLES = (
     "ate",
     "rpe_distance",
     "drift_rate",
-    "rpe_time_1s",
+    TIME_RPE,
     "success_rate",
     "success_auc",
     "valid_ate",
     "valid_rpe_distance",
     "valid_drift_rate",
-    "valid_rpe_time_1s",
+    f"valid_{TIME_RPE}",
 )
 
 
@@ -70,9 +73,9 @@ def time_rpe_in(record: dict) -> tuple[str, dict] | None:
 
 def base_tables(time_delta: float) -> tuple[str, ...]:
     """BASE_TABLES with the time RPE's tables named after ``metrics.time_delta``."""
-    default, named = time_rpe_key(1.0), time_rpe_key(time_delta)
+    named = time_rpe_key(time_delta)
     return tuple(
-        named if t == default else f"valid_{named}" if t == f"valid_{default}" else t
+        named if t == TIME_RPE else f"valid_{named}" if t == f"valid_{TIME_RPE}" else t
         for t in BASE_TABLES
     )
 

@@ -185,7 +185,7 @@ def evaluate(
             f"{ms[k] * rate_hz / 1000:.0f} sensor periods: its EA-Drift weight overflows, "
             "so EA-Drift is left empty"
         )
-        logging.getLogger("epa").warning("%s", summary["ea_drift_reason"])
+        logging.getLogger(__name__).warning("%s", summary["ea_drift_reason"])
     else:
         summary.update(
             _finite_ea_drift(t_ref, t_tim, ms, idx, have, err_m, rate_hz, est_path_length_m)

@@ -6,23 +6,27 @@ metrics.json a record follows its ``after``, wherever that metric is in the list
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Sequence
 
-from epa.metrics import (
-    accuracy,
-    ate_2d,
-    consistency,
-    efficiency,
-    eth3d,
-    hilti,
-    kitti,
-    per_axis,
-    rpg,
-    sim3_check,
-    tartanair,
-    tum,
-)
+from epa.metrics import accuracy
 from epa.metrics.spec import Metric
+
+# The registered metrics' modules (epa.metrics.<name>, each declaring METRIC), named once, in the
+# order of their columns and tables.
+MODULES = (
+    "ate_2d",
+    "consistency",
+    "efficiency",
+    "kitti",
+    "per_axis",
+    "rpg",
+    "sim3_check",
+    "tum",
+    "tartanair",
+    "hilti",
+    "eth3d",
+)
 
 
 def validate(metrics: Sequence[Metric]) -> tuple[Metric, ...]:
@@ -94,9 +98,9 @@ def anchor(metric: Metric, record: dict, metrics: Sequence[Metric] | None = None
 
 
 def _time_rpe_as_named(at: str, record: dict) -> str | None:
-    """RECORD_KEYS spells the time RPE as under the default metrics.time_delta (``rpe_time_1s``):
-    for that anchor, the record's own time-RPE key; None for any other."""
-    found = accuracy.time_rpe_in(record) if at == accuracy.time_rpe_key(1.0) else None
+    """RECORD_KEYS names the time RPE ``rpe_time`` (accuracy.TIME_RPE): for that anchor, the
+    record's own time-RPE key (``rpe_time_1s`` at metrics.time_delta 1); None for any other."""
+    found = accuracy.time_rpe_in(record) if at == accuracy.TIME_RPE else None
     return None if found is None else "rpe_time_" + found[0]
 
 
@@ -120,22 +124,7 @@ def placement(metrics: Sequence[Metric] | None = None) -> tuple[Metric, ...]:
 
 
 REGISTRY = validate(
-    tuple(
-        m.METRIC
-        for m in (
-            ate_2d,
-            consistency,
-            efficiency,
-            kitti,
-            per_axis,
-            rpg,
-            sim3_check,
-            tum,
-            tartanair,
-            hilti,
-            eth3d,
-        )
-    )
+    tuple(importlib.import_module(f"{__package__}.{name}").METRIC for name in MODULES)
 )
 
 

@@ -20,7 +20,7 @@ from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 POSE_TYPES = (
     "geometry_msgs/msg/PoseStamped",

@@ -16,7 +16,7 @@ from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 from epa.readers import bags, text
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 KEYS = (
     "format",
     "topic",

@@ -19,7 +19,6 @@ from __future__ import annotations
 import importlib.util
 import logging
 import stat
-import sys
 import warnings
 from pathlib import Path
 from typing import NoReturn
@@ -89,7 +88,7 @@ __all__ = [
     "upper_to_full",
 ]
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 # From this size on, a file pyarrow does not take is parsed by pandas' C parser: 3-4x faster than
 # numpy's loadtxt (0.10 s against 0.37 s for a 100k-pose TUM file; same doubles, bit for bit), worth
@@ -154,17 +153,19 @@ class TableAhead(runtime.Background[Table]):
         )
 
 
-# whether pyarrow is installed: looked up once (0.1 ms), imported only when a file needs it
+# whether pyarrow is installed (looked up once, 0.1 ms) and whether epa has imported it (only when a
+# file needs it): the parser follows from these and the file's size, never from what else the
+# process happens to have imported
 _ARROW: dict[str, bool] = runtime.register("readers.text.arrow", {})
 
 
 def parsers_for(size: int, pandas_min_bytes: int) -> tuple[str, ...]:
     """The parsers in C worth their cost for a file of ``size`` bytes, in the order tried: "arrow"
-    (where installed; from 32 KB on once imported, else from 2 MB on), then "pandas" (from
+    (where installed; from 32 KB on once epa imported it, else from 2 MB on), then "pandas" (from
     ``pandas_min_bytes`` on). None of them: numpy's loadtxt. The same doubles whichever parses."""
     if "installed" not in _ARROW:
         _ARROW["installed"] = importlib.util.find_spec("pyarrow") is not None
-    least = ARROW_IMPORTED_MIN_BYTES if "pyarrow" in sys.modules else ARROW_MIN_BYTES
+    least = ARROW_IMPORTED_MIN_BYTES if _ARROW.get("imported") else ARROW_MIN_BYTES
     arrow = _ARROW["installed"] and size >= least
     return ("arrow",) * bool(arrow) + ("pandas",) * (size >= pandas_min_bytes)
 
@@ -305,6 +306,7 @@ def arrow_rows(data: bytes, offset: int, width: int, delimiter: str = " ") -> np
         import pyarrow.csv as pacsv
     except ImportError:
         return None
+    _ARROW["imported"] = True
     names = [f"c{k}" for k in range(width)]
     try:
         table = pacsv.read_csv(

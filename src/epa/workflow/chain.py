@@ -40,6 +40,10 @@ class Derived:
     # value -> the stage after which run_case lets it go: the last that reads it, else its own
     last_reader: dict[str, str]
     data_class: type[case_module.CaseData]
+    # stage -> the value holding its record (the one of type Record it hands on), for those with one
+    records: dict[str, str]
+    # (stage, record file) of the stages that declare a result: the case's document (metrics.json)
+    document: tuple[tuple[str, str], ...]
 
 
 def _closure(names, values: dict[str, Value]) -> set[str]:
@@ -75,6 +79,7 @@ def derive(stages: tuple[Stage, ...]) -> Derived:
             raise ValueError(f"stage {st.name}: {exc} before it") from None
         for name in _closure(st.reads, values):
             last_reader[name] = st.name
+    document = tuple((st.name, st.records[0]) for st in stages if st.result is not None)
     return Derived(
         stages=stages,
         by_name={st.name: st for st in stages},
@@ -82,7 +87,13 @@ def derive(stages: tuple[Stage, ...]) -> Derived:
         values=values,
         readable=readable,
         last_reader=last_reader,
-        data_class=case_module.data_class(v for st in stages for v in st.values),
+        data_class=case_module.data_class((v for st in stages for v in st.values), document),
+        records={
+            st.name: record[0]
+            for st in stages
+            if (record := [v.name for v in st.values if v.type is case_module.Record])
+        },
+        document=document,
     )
 
 
@@ -101,12 +112,16 @@ NAMES: tuple[str, ...]
 # (a million poses with covariance: about 0.7 GB less at the peak); the records it returns stay.
 LAST_READER: dict[str, str]
 CaseData: type[case_module.CaseData]  # with a field for each value a stage hands on
+RECORDS: dict[str, str]  # stage -> the CaseData value holding its record
+DOCUMENT: tuple[tuple[str, str], ...]  # (stage, record file) of the case's document, metrics.json
 _DERIVED = {
     "STAGES": "stages",
     "BY_NAME": "by_name",
     "NAMES": "names",
     "LAST_READER": "last_reader",
     "CaseData": "data_class",
+    "RECORDS": "records",
+    "DOCUMENT": "document",
 }
 
 

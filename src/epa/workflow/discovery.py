@@ -23,7 +23,7 @@ from epa.workflow.side_files import (  # noqa: F401 - SIDE_FILES: part of this m
     timing_side_files,
 )
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 
 def sources_of(cfg: dict, case: Case) -> tuple[dict, dict]:

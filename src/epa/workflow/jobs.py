@@ -35,7 +35,7 @@ from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.workflow import chain, overrides
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 
 # ----------------------------------------------------------------------------- batches

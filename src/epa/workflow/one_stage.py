@@ -12,7 +12,7 @@ from epa.artifacts.case import Case, CaseFolder
 from epa.core.errors import EpaError
 from epa.workflow import chain, discovery, settings
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 
 def grid_case(case_dir, cfg: dict, source: str) -> Case:

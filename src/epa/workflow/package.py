@@ -246,27 +246,6 @@ def _check_manifest(manifest: dict, archive: Path) -> None:
 
 
 # ----------------------------------------------------------------------------- the command
-def add_parser(sub) -> None:
-    p = sub.add_parser(
-        "pack",
-        help="write a replication package: a results folder's outputs, provenance, lock file and "
-        "REPRODUCE.md in one archive (docs/reproducibility.md)",
-    )
-    p.add_argument("results", help="a results folder (or an `epa eval --out` folder)")
-    p.add_argument("-o", "--output", required=True, help="the archive to write (.tar.gz)")
-    p.add_argument(
-        "--with-inputs",
-        action="store_true",
-        help="also pack every input, once per content (its size is said before writing)",
-    )
-    p.add_argument(
-        "--data",
-        action="append",
-        metavar="DIR",
-        help="with --with-inputs: a folder where the inputs are now (found by sha256)",
-    )
-
-
 def run(args) -> int:
-    pack(args.results, args.output, with_inputs=args.with_inputs, data=args.data)
+    pack(args.results, args.out, with_inputs=args.with_inputs, data=args.data)
     return 0

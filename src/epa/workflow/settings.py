@@ -296,7 +296,7 @@ def apply_mode(cfg: dict, given: dict) -> dict:
         given_section = given.get(section)
         user = given_section.get(key, value) if isinstance(given_section, dict) else value
         if user != value:
-            logging.getLogger("epa").warning(
+            logging.getLogger(__name__).warning(
                 "mode %s overrides %s.%s: %r -> %r", cfg["mode"], section, key, user, value
             )
         cfg[section][key] = value

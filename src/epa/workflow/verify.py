@@ -375,43 +375,6 @@ def report(compared: list[contract.Comparison], *, exact: bool, log) -> bool:
     return not failed
 
 
-def add_parser(sub) -> None:
-    v = sub.add_parser(
-        "verify",
-        help="check a results folder's inputs against provenance.json, regenerate it and compare "
-        "by the numeric contract (docs/reproducibility.md)",
-    )
-    v.add_argument(
-        "results", help="a results folder, an `epa eval --out` folder or a package of `epa pack`"
-    )
-    v.add_argument("--cores", type=int, default=2, help="cores of the re-run (default 2)")
-    v.add_argument("--snakefile", help="the workflow (default: this checkout's Snakefile)")
-    v.add_argument(
-        "--keep", help="regenerate into this folder and keep it (default: a temporary one)"
-    )
-    v.add_argument(
-        "--force", action="store_true", help="re-run and compare even when inputs changed"
-    )
-    v.add_argument(
-        "--data",
-        action="append",
-        metavar="DIR",
-        help="a folder where the inputs are now (repeatable): each recorded input is found by its "
-        "sha256 under them, whatever its path or name",
-    )
-    v.add_argument(
-        "--json",
-        metavar="FILE",
-        help="write the verdicts here (default: RESULTS/verify.json, or NAME.verify.json in this "
-        "folder for a package, or KEEP/verify.json with --keep)",
-    )
-    v.add_argument(
-        "--exact",
-        action="store_true",
-        help="compare byte for byte (a check on the machine that made the results)",
-    )
-
-
 def run(args) -> int:
     return verify(
         args.results,

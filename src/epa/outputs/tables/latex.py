@@ -137,7 +137,7 @@ def build_tables(
     tables."""
     layout = _Layout.of(grid, decimals, spread)
     out = _base_tables(layout, segments, time_delta)
-    # a Table.after names a base table as BASE_TABLES spells it: the time RPE's under the default
+    # a Table.after names a base table as BASE_TABLES spells it: the time RPE's as rpe_time
     named = dict(zip(accuracy.BASE_TABLES, accuracy.base_tables(time_delta)))
     for metric in metrics:
         for spec in metric.tables:
@@ -236,69 +236,64 @@ def lengths_note(grid: list[CaseResult]) -> str | None:
 
 
 def _base_tables(layout: _Layout, segments, time_delta: float) -> list[Built]:
-    """The tables every report has: success rates, then ATE and RPE of the full trajectories and
-    of their drift-valid parts."""
+    """The tables every report has, those of :data:`epa.metrics.accuracy.BASE_TABLES` in its order:
+    ATE and RPE of the full trajectories, then success rates and those of their drift-valid parts."""
 
     def per_dataset(name, title, fn, pair=True, dec=None):
         return layout.per_dataset(name, title, layout.rows_per_dataset(fn, pair), dec)
 
-    out = []
-    for prefix, valid, tag in (
-        ("", False, "FULL TRAJECTORY"),
-        ("valid_", True, "DRIFT-VALID ONLY"),
-    ):
-        if valid:
-            out.append(
-                per_dataset(
-                    "success_rate",
-                    "DRIFT-VALID SUCCESS RATE LATEX TABLE (% PATH LENGTH)",
-                    success_cell,
-                    pair=False,
-                    dec=2,
-                )
+    def build(name: str) -> Built:
+        base = name.removeprefix("valid_")
+        valid = base != name
+        tag = "DRIFT-VALID ONLY" if valid else "FULL TRAJECTORY"
+        prefix = "valid_" if valid else ""
+        if base == "success_rate":
+            return per_dataset(
+                "success_rate",
+                "DRIFT-VALID SUCCESS RATE LATEX TABLE (% PATH LENGTH)",
+                success_cell,
+                pair=False,
+                dec=2,
             )
-            out.append(
-                per_dataset(
-                    "success_auc",
-                    "SUCCESS RATE AREA LATEX TABLE (% PATH, MEAN OVER DRIFT THRESHOLDS x0.1-x10)",
-                    success_auc_cell,
-                    pair=False,
-                    dec=2,
-                )
+        if base == "success_auc":
+            return per_dataset(
+                "success_auc",
+                "SUCCESS RATE AREA LATEX TABLE (% PATH, MEAN OVER DRIFT THRESHOLDS x0.1-x10)",
+                success_auc_cell,
+                pair=False,
+                dec=2,
             )
-        out.append(
-            per_dataset(
+        if base == "ate":
+            return per_dataset(
                 prefix + "ate",
                 f"{tag} ATE LATEX TABLE (ROT DEG / TRANS M)",
-                lambda r, valid=valid: ate_cell(r, valid),
+                lambda r: ate_cell(r, valid),
             )
-        )
-        out.append(
-            _per_segment(
+        if base == "rpe_distance":
+            return _per_segment(
                 layout,
                 segments,
                 prefix + "rpe_distance",
                 f"{tag} DISTANCE RPE LATEX TABLE (ROT DEG / TRANS M)",
-                lambda r, s, valid=valid: mean_pair_cell(r, "segments", valid, s),
+                lambda r, s: mean_pair_cell(r, "segments", valid, s),
             )
-        )
-        out.append(
-            _per_segment(
+        if base == "drift_rate":
+            return _per_segment(
                 layout,
                 segments,
                 prefix + "drift_rate",
                 f"{tag} DISTANCE DRIFT RATE LATEX TABLE (% TRANS / DIST)",
-                lambda r, s, valid=valid: drift_rate_cell(r, valid, s),
+                lambda r, s: drift_rate_cell(r, valid, s),
             )
-        )
-        out.append(
-            per_dataset(
+        if base == accuracy.TIME_RPE:
+            return per_dataset(
                 prefix + time_rpe_key(time_delta),
                 f"{tag} {time_rpe_name(time_delta).upper()} TIME RPE LATEX TABLE (ROT DEG / TRANS M)",
-                lambda r, valid=valid: mean_pair_cell(r, "time", valid),
+                lambda r: mean_pair_cell(r, "time", valid),
             )
-        )
-    return out
+        raise ValueError(f"base table {name!r}: no table of that name to build")
+
+    return [build(name) for name in accuracy.BASE_TABLES]
 
 
 def _metric_table(layout: _Layout, metric, spec):

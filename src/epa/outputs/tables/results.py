@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from epa.artifacts import stage as stage_list
 from epa.artifacts.case import Case, CaseFolder
 from epa.core.errors import EpaError
-from epa.metrics import accuracy, drift
+from epa.metrics import accuracy, drift, registry
 from epa.outputs import parallel
 
 
@@ -129,7 +130,13 @@ def _pairs(folder: CaseFolder, name: str, columns) -> dict:
     return out
 
 
-AFTER_DRIFT = ("consistency", "efficiency")  # stages whose failure leaves the accuracy standing
+# The stages after drift whose records the tables read: those computing a registered metric of their
+# own (consistency, efficiency), in the order they run. Their failure leaves the accuracy standing.
+AFTER_DRIFT = tuple(
+    stage
+    for stage in stage_list.ORDER
+    if stage != "metrics" and any(m.stage == stage for m in registry.REGISTRY)
+)
 
 
 def failed_cases(grid: list[CaseResult]) -> list[tuple[str, str]]:

@@ -31,7 +31,7 @@ from epa.outputs.tables.summary import (
 )
 from epa.outputs.tables.text import report_text
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 
 def enabled_metrics(cfg: dict) -> tuple:

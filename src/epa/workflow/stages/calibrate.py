@@ -13,7 +13,7 @@ from epa.steps import calibrate as calibration
 from epa.steps.plan import evaluation_plan
 from epa.workflow.stages.sync import associate, matched_by
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 NAME = "calibrate"
 

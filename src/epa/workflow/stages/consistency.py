@@ -12,7 +12,7 @@ from epa.metrics import consistency
 from epa.steps.align import Similarity
 from epa.steps.calibrate import Extrinsic
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 NAME = "consistency"
 

@@ -12,7 +12,7 @@ from epa.artifacts.stage import Stage, Value
 from epa.metrics import accuracy, drift
 from epa.metrics.accuracy import null_rotation
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 NAME = "drift"
 

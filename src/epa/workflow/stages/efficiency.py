@@ -14,7 +14,7 @@ from epa.core import ranks
 from epa.core.errors import EpaError
 from epa.metrics import efficiency
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 NAME = "efficiency"
 

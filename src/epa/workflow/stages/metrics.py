@@ -17,7 +17,7 @@ from epa.readers import read_printed_quaternions
 from epa.readers.image_stamps import read_image_stamps
 from epa.workflow.stages.load import c_parser_min_bytes
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 NAME = "metrics"
 BASE_ARRAYS = ("ape.csv", "rpe_segments.csv", "rpe_time.csv")

@@ -12,7 +12,7 @@ from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory, position_only
 from epa.steps import sync
 
-log = logging.getLogger("epa")
+log = logging.getLogger(__name__)
 
 NAME = "sync"
 
