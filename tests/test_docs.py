@@ -472,7 +472,8 @@ def test_the_readme_module_recipe_deploys_a_clone_at_the_release_tag(tmp_path):
 
     run("clone", "--quiet", "--bare", str(ROOT), "origin.git")
     run("fetch", "--quiet", str(ROOT), "HEAD", cwd=tmp_path / "origin.git")  # HEAD may be detached
-    run("tag", tag, "FETCH_HEAD", cwd=tmp_path / "origin.git")
+    # this tree at the tag (a checkout that has the release tag on an earlier commit moves it)
+    run("tag", "--force", tag, "FETCH_HEAD", cwd=tmp_path / "origin.git")
     host = tmp_path / "host"
     host.mkdir()
     run("clone", "--quiet", "--branch", tag, str(tmp_path / "origin.git"), "epica", cwd=host)
