@@ -22,7 +22,9 @@ rule figures:
         success_curves=rules.tables.output.success_curves,
         # the per-dataset figures read the reports' files: none to wait for without them
         reports=(
-            expand(manifest("report"), batch=BATCHES) if EPA["report"]["per_case"] else []
+            expand(manifest("report"), batch=BATCHES)
+            if EPA["report"]["per_case"]
+            else []
         ),
     output:
         **{
