@@ -302,6 +302,21 @@ def _no_ligatures(fig) -> None:
             text.set_fontfeatures(["-liga"])
 
 
+def _top_over_side(plt, kind, w, left, aw, bottom, side, gap, th, top):
+    """A figure of a top view (``th`` in high) over a side view (``side`` in high) sharing x, both
+    ``aw`` in wide from ``left``: the case's trajectory and the dataset's overlay."""
+    fh = bottom + side + gap + th + top
+
+    def make():
+        fig = plt.figure(figsize=(w, fh))
+        ax_top = fig.add_axes([left / w, (bottom + side + gap) / fh, aw / w, th / fh])
+        fig.add_axes([left / w, bottom / fh, aw / w, side / fh], sharex=ax_top)
+        ax_top.tick_params(labelbottom=False)
+        return fig
+
+    return _layout(plt, kind, (w, fh), make)
+
+
 def _arr(x):
     return (
         np.array([np.nan if v is None else v for v in x], float)
@@ -321,14 +336,7 @@ def _trajectory(plt, b, w, h):
     th = round(float(np.clip(aw * span[1] / max(span[0], 1e-9), 0.8, 3.2)) / 0.05) * 0.05
     fh = bottom + side + gap + th + top
 
-    def make():
-        fig = plt.figure(figsize=(w, fh))
-        ax_top = fig.add_axes([left / w, (bottom + side + gap) / fh, aw / w, th / fh])
-        fig.add_axes([left / w, bottom / fh, aw / w, side / fh], sharex=ax_top)
-        ax_top.tick_params(labelbottom=False)
-        return fig
-
-    fig = _layout(plt, "trajectory", (w, fh), make)
+    fig = _top_over_side(plt, "trajectory", w, left, aw, bottom, side, gap, th, top)
     ax_top, ax_side = fig.axes
     from matplotlib.collections import LineCollection
 
@@ -667,16 +675,7 @@ def _overlay(plt, b, w, h):
     # (rounded up), as the case figure's: datasets of one shape share a layout.
     aw = min(aw, most / ratio)
     th = float(np.ceil(np.clip(aw * ratio, 1.2, most) / 0.05 - 1e-9) * 0.05)
-    fh = bottom + side + gap + th + top
-
-    def make():
-        fig = plt.figure(figsize=(w, fh))
-        ax_top = fig.add_axes([left / w, (bottom + side + gap) / fh, aw / w, th / fh])
-        fig.add_axes([left / w, bottom / fh, aw / w, side / fh], sharex=ax_top)
-        ax_top.tick_params(labelbottom=False)
-        return fig
-
-    fig = _layout(plt, "overlay", (w, fh), make)
+    fig = _top_over_side(plt, "overlay", w, left, aw, bottom, side, gap, th, top)
     ax_top, ax_side = fig.axes
     for ax, j, label in ((ax_top, 1, "y [m]"), (ax_side, 2, "z [m]")):
         if len(ref):

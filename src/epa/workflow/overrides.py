@@ -52,6 +52,17 @@ def _matches(pattern: str, name: str) -> bool:
     return fnmatch.fnmatchcase(name, pattern)
 
 
+def _hits(level: str, key: str, algorithms, datasets) -> bool:
+    """Whether an override key of ``level`` names one of the algorithms, datasets or their cells."""
+    if level == "cases":
+        alg_pat, _, ds_pat = key.partition("/")
+        return any(_matches(alg_pat, a) for a in algorithms) and any(
+            _matches(ds_pat, d) for d in datasets
+        )
+    names = datasets if level == "datasets" else algorithms
+    return any(_matches(key, n) for n in names)
+
+
 def _leaves(tree: dict, prefix: tuple = ()) -> dict[tuple, object]:
     out: dict[tuple, object] = {}
     for k, v in tree.items():
@@ -81,14 +92,8 @@ def _entries(cfg: dict, algorithm: str, dataset: str) -> list[tuple[str, dict]]:
         names: list[tuple[str, dict]] = []
         patterns: list[tuple[str, dict]] = []
         for key, value in table.items():
-            if level == "cases":
-                alg_pat, _, ds_pat = key.partition("/")
-                hit = _matches(alg_pat, algorithm) and _matches(ds_pat, dataset)
+            if _hits(level, key, [algorithm], [dataset]):
                 exact = not _is_pattern(key)
-            else:
-                name = dataset if level == "datasets" else algorithm
-                hit, exact = _matches(key, name), not _is_pattern(key)
-            if hit:
                 (names if exact else patterns).append((f"overrides.{level}.{key}", value or {}))
         _check_conflicts(patterns, algorithm, dataset)
         out += patterns + names
@@ -179,15 +184,7 @@ def unmatched(cfg: dict, algorithms, datasets) -> str | None:
     overrides = cfg.get("overrides") or {}
     for level in LEVELS:
         for key in overrides.get(level) or {}:
-            if level == "cases":
-                alg_pat, _, ds_pat = key.partition("/")
-                hit = any(_matches(alg_pat, a) for a in algorithms) and any(
-                    _matches(ds_pat, d) for d in datasets
-                )
-            else:
-                names = datasets if level == "datasets" else algorithms
-                hit = any(_matches(key, n) for n in names)
-            if not hit:
+            if not _hits(level, key, algorithms, datasets):
                 kind = {"datasets": "dataset", "algorithms": "algorithm", "cases": "cell"}[level]
                 known = datasets if level == "datasets" else algorithms
                 return f"overrides.{level}.{key}: matches no {kind} of the grid" + (
