@@ -43,7 +43,7 @@ def test_the_registry_is_valid_and_lists_declarations():
         (dict(summary="none"), "summary must be callable"),
         (dict(arrays="a.csv"), "arrays must be a tuple"),
         (dict(settings=("metrics..x",)), "settings"),
-        (dict(inputs=("everything",)), "inputs"),
+        (dict(inputs="everything"), "inputs must be a tuple"),
         (dict(tables=("ate",)), "tables must be a tuple of Table"),
         (dict(stage="drift", after="ate"), "belong to metrics of the metrics stage"),
         (dict(key=""), "key must be a non-empty string"),
@@ -52,6 +52,16 @@ def test_the_registry_is_valid_and_lists_declarations():
 def test_a_wrong_field_fails_when_the_metric_is_built(fields, message):
     with pytest.raises((TypeError, ValueError), match=message):
         metric(**fields)
+
+
+def test_an_input_the_metrics_stage_does_not_give_fails_when_it_loads():
+    from epa.workflow.stages import metrics as stage
+
+    stage.check_inputs(registry.computed_in("metrics"))  # the registered ones: all given
+    with pytest.raises(ValueError, match=r"metric 'extra': inputs \['everything'\]"):
+        stage.check_inputs([metric(inputs=("everything",))])
+    # every name the stage lists is given: by PROVIDED, or by compute on its way
+    assert set(stage.INPUTS) - set(stage.PROVIDED) == {"pair_rows", "accuracy"}
 
 
 def test_a_missing_field_fails_when_the_metric_is_built():

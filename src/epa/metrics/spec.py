@@ -12,7 +12,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-# what the metrics stage can pass a metric's compute beyond the aligned matched poses (Metric.inputs)
 INPUTS = (
     "unaligned",
     "transform",
@@ -76,7 +75,7 @@ class Metric:
       ``notes``; ``after``: the record it follows in metrics.json (a key of the base record or of
       another metric of the stage; None: last);
     - ``inputs``: what ``compute`` needs beyond the aligned matched poses, passed as keywords (one
-      of :data:`INPUTS`: the matched estimate before Step 3, ``05_align/transform.json``, the whole
+      of the metrics stage's ``INPUTS``, checked when that stage loads: the matched estimate before Step 3, ``05_align/transform.json``, the whole
       cropped reference, the estimate's source settings as ``load.json`` records them, the whole
       cropped estimate, the image stamps of metrics.eth3d.image_stamps or None, the reference's and
       the estimate's files read again with their quaternions as printed, each None where its
@@ -123,8 +122,6 @@ class Metric:
             raise ValueError(
                 f"metric {key!r}: settings {self.settings!r}: a dotted config key each"
             )
-        if unknown := [i for i in self.inputs if i not in INPUTS]:
-            raise ValueError(f"metric {key!r}: inputs {unknown} are not among {INPUTS}")
         if not isinstance(self.tables, tuple) or not all(isinstance(t, Table) for t in self.tables):
             raise TypeError(f"metric {key!r}: tables must be a tuple of Table")
         if self.documents is not None and not callable(self.documents):

@@ -193,18 +193,31 @@ def printed_quaternions(data: CaseData) -> tuple[Trajectory | None, Trajectory |
     return reference, estimate
 
 
+# What a registered metric may ask for beyond the aligned matched poses (Metric.inputs), each a
+# function of the case's data and settings; compute adds PAIR_ROWS and ACCURACY, made on the way.
+PROVIDED = {
+    "unaligned": lambda data, cfg: data.calibrated[1],
+    "transform": lambda data, cfg: data.transform,
+    "reference": lambda data, cfg: data.cropped[0],
+    "estimate_source": lambda data, cfg: data.load_record.get("sources", {}).get("estimate") or {},
+    "estimate": lambda data, cfg: data.cropped[1],
+    "image_stamps": lambda data, cfg: image_stamps(cfg, data.folder.case),
+    "printed_quaternions": lambda data, cfg: printed_quaternions(data),
+    "calibrate_record": lambda data, cfg: data.calibrate_record,
+}
+INPUTS = (*PROVIDED, "pair_rows", "accuracy")
+
+
+def check_inputs(metrics) -> None:
+    """Every metric of this stage asks only for :data:`INPUTS` (else a ValueError naming it)."""
+    for metric in metrics:
+        if unknown := [i for i in metric.inputs if i not in INPUTS]:
+            raise ValueError(f"metric {metric.key!r}: inputs {unknown} are not among {INPUTS}")
+
+
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     folder = data.folder
-    inputs = {
-        "unaligned": lambda: data.calibrated[1],
-        "transform": lambda: data.transform,
-        "reference": lambda: data.cropped[0],
-        "estimate_source": lambda: data.load_record.get("sources", {}).get("estimate") or {},
-        "estimate": lambda: data.cropped[1],
-        "image_stamps": lambda: image_stamps(cfg, data.folder.case),
-        "printed_quaternions": lambda: printed_quaternions(data),
-        "calibrate_record": lambda: data.calibrate_record,
-    }
+    inputs = {name: (lambda give=give: give(data, cfg)) for name, give in PROVIDED.items()}
     summary, tables = compute(data.matched[0], data.aligned, cfg, inputs)
     record = case_record(
         data.load_record, data.sync_record, data.calibrate_record, data.transform, summary
@@ -229,6 +242,8 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
                     folder.write_text(NAME, f"{metric.key}/{name}", text)
     folder.write_record(NAME, "metrics.json", record)
 
+
+check_inputs(registry.computed_in(NAME))
 
 STAGE = Stage(
     name=NAME,
