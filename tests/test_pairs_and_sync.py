@@ -271,8 +271,12 @@ def test_kept_reference_spectrum_gives_the_same_bits():
     for b, expected in zip((b1, b2, b1), (*fresh, fresh[0])):
         assert np.array_equal(sync._normalised_correlation(a, span_a, b, span_b)[0], expected)
     assert len(sync._SPECTRA) == 1
+    ((nfft, *_),) = sync._SPECTRA.keys()
     ((kept_a, kept_spectrum),) = sync._SPECTRA.values()
-    assert np.array_equal(kept_spectrum, np.fft.rfft(a, len(kept_spectrum) * 2 - 2))
+    # the transform of a's support, on a 5-smooth length at least 1.5 times it
+    assert nfft == sync.fft_length(int(1.5 * (span_a[1] - span_a[0] + 1)) + 1)
+    support = a[span_a[0] : span_a[1] + 1]
+    assert np.array_equal(kept_spectrum, np.fft.rfft(support, nfft))
     other = a.copy()
     other[span_a[0] + 1] += 1.0  # not one of the samples the key looks at
     got = sync._normalised_correlation(other, span_a, b1, span_b)[0]
@@ -431,3 +435,16 @@ def test_closest_pairs_is_the_first_closest_by_scan(steps, delta, strict, skip, 
     with mock.patch.object(stamps, "STARTS_PER_BLOCK", block or stamps.STARTS_PER_BLOCK):
         i, j = stamps.closest_pairs(d, delta, tol, strict=strict, skip=skip)
     assert list(zip(i.tolist(), j.tolist())) == want
+
+
+def test_smooth_and_power_of_two_transforms_agree_up_to_rounding():
+    """The 5-smooth transform over the supports and the power of two over the whole grid (evo's
+    --step1) give the same correlation at every lag, -1 where nothing is computed, up to the FFT's
+    rounding (relative to the whole signals' unit energy)."""
+    rng = np.random.default_rng(11)
+    for n, span_a, span_b in ((400, (20, 380), (100, 300)), (301, (150, 300), (0, 280))):
+        a, b = _signal_on(n, span_a, rng), _signal_on(n, span_b, rng)
+        smooth = sync._normalised_correlation(a, span_a, b, span_b, smooth_fft=True)[0]
+        power = sync._normalised_correlation(a, span_a, b, span_b, smooth_fft=False)[0]
+        assert np.array_equal(smooth == -1.0, power == -1.0)
+        assert np.abs(smooth - power).max() < 1e-12

@@ -139,7 +139,7 @@ def align(
         if o.align or o.align_origin or o.correct_scale:
             raise EpaError("--align_posyaw aligns alone: not with -a, --align_origin or -s")
         fit = alignment.fit(ref, est, method="posyaw", first_n=o.n_to_align)
-        return fit.apply(est), fit, _sim3(fit)
+        return fit.apply(est, matrices=True), fit, _sim3(fit)
     if o.align or o.correct_scale:
         fit = alignment.fit(
             ref, est, method="sim3" if o.correct_scale else "se3", first_n=o.n_to_align
@@ -147,12 +147,12 @@ def align(
         recorded = _sim3(fit)
         if not o.align:  # -s alone: the scale only
             fit = alignment.Similarity(np.eye(3), np.zeros(3), fit.s)
-        return fit.apply(est), fit, recorded
+        return fit.apply(est, matrices=True), fit, recorded
     if o.align_origin:
         r0, p0 = ref.r_as_printed[0], est.r_as_printed[0]
         rot = r0 @ p0.T
         fit = alignment.Similarity(rot, ref.p[0] - rot @ est.p[0], 1.0)
-        return fit.apply(est), fit, _sim3(fit)
+        return fit.apply(est, matrices=True), fit, _sim3(fit)
     return est, None, None
 
 
@@ -214,7 +214,7 @@ def prepare(ref: Trajectory, est: Trajectory, o: EvoOptions, *, timed: bool = Tr
     info: dict = {}
     if timed:
         if o.step1:
-            found = sync.estimate_offset(ref, est)
+            found = sync.estimate_offset(ref, est, smooth_fft=False)  # the bits it has printed
             if not found.used:
                 raise EpaError(
                     f"Step 1 found no trustworthy time offset ({found.reason}); give --t_offset instead"

@@ -417,7 +417,7 @@ def _on_grid(grid: np.ndarray, ts: np.ndarray, w: np.ndarray):
     return s, (i0, i1)
 
 
-def _normalised_correlation(a, span_a, b, span_b):
+def _normalised_correlation(a, span_a, b, span_b, smooth_fft: bool = True):
     """At every lag the FFT gives without wrapping (|lag| < n; index i holds lag i - (n - 1)), so a
     better match beyond the window is seen rather than a lesser one inside it reported, the
     correlation: corr[k] = sum_m a[m + k] b[m] (the estimate signal shifted later by k samples matches
@@ -427,22 +427,6 @@ def _normalised_correlation(a, span_a, b, span_b):
     prefix-sum differences. Lags where less than half the shorter signal overlaps get -1; the others
     are an interval (the overlap rises, stays and falls with the lag), and only they are computed."""
     n = len(a)
-    # A power of two and the whole arrays: a 5-smooth length of the supports' span (about 0.75 of
-    # it) halves the transforms' time but moves the offset's ninth printed digit (2 of the 18
-    # example cases): the same transform, so the same bits, is kept.
-    nfft = 1 << int(np.ceil(np.log2(2 * n)))
-    kept = _kept_spectrum(a, span_a, nfft)
-    if kept is None:
-        # the two transforms at once where a core is spare (`epa eval`: 13 ms each at 100k poses),
-        # then the inverse beside the energies
-        spectrum_a, spectrum_b = runtime.both(
-            lambda: np.fft.rfft(a, nfft), lambda: np.fft.rfft(b, nfft)
-        )
-        _keep_spectrum(a, span_a, nfft, spectrum_a)
-    else:
-        spectrum_a, spectrum_b = kept, np.fft.rfft(b, nfft)
-    # into b's buffer (the reference's may be kept): the same products, in the same operand order
-    spectrum = np.multiply(spectrum_a, np.conjugate(spectrum_b, out=spectrum_b), out=spectrum_b)
     (a0, a1), (b0, b1) = span_a, span_b
     need = math.ceil(0.5 * (min(a1 - a0, b1 - b0) + 1))  # the overlap is an integer
     # overlap = min(b1, a1 - k) - max(b0, a0 - k) + 1 >= need, term by term
@@ -450,6 +434,31 @@ def _normalised_correlation(a, span_a, b, span_b):
     if lo > hi:
         return np.full(2 * n - 1, -1.0), (b0, b1)
     count = hi - lo + 1
+    if smooth_fft:
+        # The supports only, on a 5-smooth length just long enough that the lags computed do not
+        # wrap onto others (lag k is index k + b0 - a0 of the supports' circular correlation, whose
+        # products reach from -(b's length - 1) to a's length - 1), and at least 1.5 times a's
+        # support, which covers every estimate within the reference's span: one length per
+        # reference, whose spectrum is kept. About half the power of two of the whole arrays
+        # (transforms 2x cheaper); the peak moves by rounding only (docs/reproducibility.md).
+        shift = b0 - a0
+        length_a, length_b = a1 - a0 + 1, b1 - b0 + 1
+        least = max(length_a - (lo + shift), hi + shift + length_b, length_a + (length_a + 1) // 2)
+        nfft, a_s, b_s = fft_length(least), a[a0 : a1 + 1], b[b0 : b1 + 1]
+    else:  # evo's --step1: the power of two of the whole arrays, whose bits it prints
+        shift, nfft, a_s, b_s = 0, 1 << int(np.ceil(np.log2(2 * n))), a, b
+    kept = _kept_spectrum(a, span_a, nfft)
+    if kept is None:
+        # the two transforms at once where a core is spare (`epa eval`: 13 ms each at 100k poses),
+        # then the inverse beside the energies
+        spectrum_a, spectrum_b = runtime.both(
+            lambda: np.fft.rfft(a_s, nfft), lambda: np.fft.rfft(b_s, nfft)
+        )
+        _keep_spectrum(a, span_a, nfft, spectrum_a)
+    else:
+        spectrum_a, spectrum_b = kept, np.fft.rfft(b_s, nfft)
+    # into b's buffer (the reference's may be kept): the same products, in the same operand order
+    spectrum = np.multiply(spectrum_a, np.conjugate(spectrum_b, out=spectrum_b), out=spectrum_b)
 
     def energies() -> np.ndarray:
         # the squares made in their own buffers, which become their prefix sums
@@ -468,7 +477,7 @@ def _normalised_correlation(a, span_a, b, span_b):
     corr[: lo + n - 1] = -1.0
     corr[hi + n :] = -1.0
     done = 0
-    for run in _circular_runs(full, lo, count):
+    for run in _circular_runs(full, lo + shift, count):
         start = lo + n - 1 + done
         np.divide(run, energy[done : done + len(run)], out=corr[start : start + len(run)])
         done += len(run)
@@ -520,6 +529,21 @@ def _keep_spectrum(a: np.ndarray, span_a: tuple[int, int], nfft: int, spectrum) 
             _SPECTRA.popitem(last=False)
 
 
+def fft_length(least: int) -> int:
+    """The smallest 2^i 3^j 5^k >= ``least``: among pocketfft's fastest lengths, and close above
+    ``least``, where the next power of two may be nearly twice it."""
+    best, fives = 1 << max(0, least - 1).bit_length(), 1
+    while fives < best:
+        threes = fives
+        while threes < best:
+            if (twos := max(1, -(-least // threes))) > 1:
+                twos = 1 << (twos - 1).bit_length()
+            best = min(best, twos * threes)
+            threes *= 3
+        fives *= 5
+    return best
+
+
 def _circular_runs(full: np.ndarray, first: int, count: int) -> tuple[np.ndarray, ...]:
     """full[(first + j) % len(full)] for j in range(count) (count <= len(full)) as one or two
     slices: a circular correlation holds its negative lags at its end."""
@@ -556,6 +580,7 @@ def estimate_offset(
     fallback: float = 0.0,
     max_samples: int = 2_000_000,
     speed=angular_speed,
+    smooth_fft: bool = True,
 ) -> OffsetEstimate:
     """Time offset by cross-correlating angular-speed signals on a uniform timeline (FFT).
 
@@ -581,6 +606,9 @@ def estimate_offset(
     speed : callable
         The signal: :func:`angular_speed` (rad/s), or :func:`linear_speed` (m/s) for a position-only
         estimate; ``min_motion`` is in its unit.
+    smooth_fft : bool
+        The correlation's transforms on a 5-smooth length over the supports (half the cost); False:
+        a power of two over the whole grid, as before 0.2 (evo's ``--step1`` keeps its bits).
 
     Returns
     -------
@@ -602,7 +630,7 @@ def estimate_offset(
     if min(span_a[1] - span_a[0], span_b[1] - span_b[0]) + 1 < 4:
         reason = f"too few samples on the {dt:.3g} s correlation grid"
         return _not_used(fallback, Step1Status.NO_OVERLAP, reason, **motion)
-    peak = _windowed_peak(a, span_a, b, span_b, window, dt)
+    peak = _windowed_peak(a, span_a, b, span_b, window, dt, smooth_fft)
     found = peak.found(motion, dt)  # what sync.json records, trusted or not
     refused = _peak_refused(peak, window, min_corr, min_peak_ratio)
     if refused is not None:
@@ -698,9 +726,9 @@ class _Peak:
         )
 
 
-def _windowed_peak(a, span_a, b, span_b, window: float, dt: float) -> _Peak:
+def _windowed_peak(a, span_a, b, span_b, window: float, dt: float, smooth_fft=True) -> _Peak:
     """The normalised correlation's peak within ±window, and the best match beyond it."""
-    corr_all, span_b = _normalised_correlation(a, span_a, b, span_b)
+    corr_all, span_b = _normalised_correlation(a, span_a, b, span_b, smooth_fft)
     zero = len(a) - 1  # the index of lag 0
     kmax = int(round(window / dt))
     maxima_all = _local_maxima(corr_all)

@@ -24,7 +24,8 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, calib_info: dict):
         fit, aligned = rpg.fit(ref, est, method, first_n)
     else:
         fit = alignment.fit(ref, est, method=method, first_n=first_n)
-        aligned = fit.apply(est)
+        # mode ov_eval prints ov_eval's table: its orientations turned by matrices, as before
+        aligned = fit.apply(est, matrices=cfg["mode"] == "ov_eval")
     return aligned, {
         "method": method,
         "first_n": first_n,
