@@ -201,3 +201,17 @@ def test_last_bit_noise_passes_and_a_change_of_1e_6_fails(values, ulps):
     changed_text = "v\n" + "\n".join(f"{v:.17g}" for v in changed) + "\n"
     got = contract.compare_record("a.csv", text, changed_text)
     assert got.verdict == Verdict.DIFFERS and got.worst.where == f"row {k + 1}, column v"
+
+
+def test_a_column_or_list_that_is_zero_up_to_rounding_has_the_absolute_floor():
+    """Values that are all zero up to rounding (1e-17 against each other: no scale of their own)
+    pass within 1e-12 in their unit; a change of 1e-11 does not."""
+    tiny_a = "t,x\n1,1.3877787807814457e-17\n2,-2.7755575615628914e-17\n"
+    tiny_b = "t,x\n1,-4.163336342344337e-17\n2,5.551115123125783e-17\n"
+    got = contract.compare_record("a.csv", tiny_a, tiny_b)
+    assert got.verdict == Verdict.WITHIN and got.worst.tol == contract.FLOOR_ATOL
+    moved = "t,x\n1,1e-11\n2,-2.7755575615628914e-17\n"
+    assert contract.compare_record("a.csv", tiny_a, moved).verdict == Verdict.DIFFERS
+    lists = contract.compare_record("c.json", _json(v=[1e-17, -3e-17]), _json(v=[-2e-17, 4e-17]))
+    assert lists.verdict == Verdict.WITHIN
+    assert not contract.compare_record("c.json", _json(v=[1e-17, 0.0]), _json(v=[2e-12, 0.0])).ok

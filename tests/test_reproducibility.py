@@ -282,3 +282,31 @@ def test_epa_eval_writes_and_verifies_its_case(tmp_path, capsys):
     assert (out / provenance.CONFIG).is_file()
     assert verify.verify(out, exact=True) == 0
     assert "REPRODUCED byte for byte" in capsys.readouterr().out
+
+
+def test_epa_verify_names_the_version_that_made_results_that_differ(tmp_path, capsys):
+    """Results recorded by another epica version whose numbers differ: the verdict says which
+    versions (results made by epica X, this is Y), not only that they differ; with the same numbers
+    they verify whatever the recorded version."""
+    from epa import __version__
+    from epa.artifacts import files
+
+    out = tmp_path / "case"
+    ref = ROOT / "example/truth/drone_figure8.txt"
+    est = ROOT / "example/algorithms/vo_drifty/drone_figure8/run1.txt"
+    assert cli.main(["eval", str(ref), str(est), "--out", str(out)]) == 0
+    doc = provenance.read(out)
+    doc["epica"]["version"] = "0.0.1"
+    files.write_json(out / provenance.PROVENANCE, doc)
+    assert verify.verify(out) == 0  # the same numbers: no word about versions
+    said = capsys.readouterr().out
+    assert "REPRODUCED within the numeric contract" in said and "made by epica" not in said
+    metrics = files.read_json(out / "06_metrics/metrics.json")
+    metrics["ate"]["trans_m"]["rmse"] *= 1.001
+    files.write_json(out / "06_metrics/metrics.json", metrics)
+    assert verify.verify(out, json_path=tmp_path / "verify.json") == 1
+    said = capsys.readouterr().out
+    versions = f"results made by epica 0.0.1, this is epica {__version__}"
+    assert f"epa verify: NOT VERIFIED: {versions} (the verdicts:" in said
+    assert "differs: 06_metrics/metrics.json: first $.ate.trans_m.rmse" in said
+    assert files.read_json(tmp_path / "verify.json")["verdict"] == f"NOT VERIFIED: {versions}"

@@ -20,7 +20,9 @@ OpenBLAS's kernels, FFT code paths), never on one machine. So:
     ``pt11..pt33`` share one scale: their diagonal);
   * a named JSON scalar, ``SCALAR_ATOL`` in its own unit;
   * a time stamp (a column ``t`` or ``t_*``, a JSON ``*_span_s``), ``STAMP_ATOL`` seconds plus four
-    units in the last place: a stamp of 1.7e9 s is absolute, a relative 1e-8 of it would be 17 s.
+    units in the last place: a stamp of 1.7e9 s is absolute, a relative 1e-8 of it would be 17 s;
+  * and never less than ``FLOOR_ATOL`` in the value's own unit: a column or list that is zero up to
+    rounding as a whole (every value about 1e-17) has no scale of its own to measure it by.
 
   Counts, strings, booleans, nulls and the structure (keys, lengths, headers) must be equal.
 
@@ -52,6 +54,7 @@ STATISTICS = frozenset(accuracy.STATISTICS)
 SCALAR_ATOL = 1e-12
 STAMP_ATOL = 1e-9
 STAMP_ULPS = 4
+FLOOR_ATOL = 1e-12  # the least tolerance of any number, in its own unit
 
 # a number in printed text: not glued to a word (run1, MH_01, x86_64) nor to another number's dot
 _NUMBER = re.compile(r"(?<![\w.])[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?(?![\w.])")
@@ -132,8 +135,8 @@ def tolerance(a: float, b: float, scale: float, *, stamp: bool = False) -> float
     if stamp:
         return STAMP_ATOL + STAMP_ULPS * math.ulp(big)
     if scale:
-        return RTOL * big + SCALE_ATOL * scale
-    return RTOL * big + SCALAR_ATOL
+        return max(RTOL * big + SCALE_ATOL * scale, FLOOR_ATOL)
+    return max(RTOL * big + SCALAR_ATOL, FLOOR_ATOL)
 
 
 def _is_stamp(name: str) -> bool:
@@ -360,7 +363,9 @@ def _compare_table(a: str, b: str, worst: _Worst) -> None:
     big = np.maximum(np.abs(xa), np.abs(xb))
     with np.errstate(invalid="ignore", over="ignore"):
         tol = np.where(
-            stamp, STAMP_ATOL + STAMP_ULPS * np.spacing(big), RTOL * big + SCALE_ATOL * scale
+            stamp,
+            STAMP_ATOL + STAMP_ULPS * np.spacing(big),
+            np.maximum(RTOL * big + SCALE_ATOL * scale, FLOOR_ATOL),
         )
         diff = np.abs(xa - xb)
     finite = np.isfinite(xa) & np.isfinite(xb)

@@ -311,6 +311,10 @@ def _verify(source, tmp, cores, snakefile, keep, force, exact, data, json_path, 
     ok = report(compared, exact=exact, log=log) and not problems
     how = "byte for byte" if exact else "within the numeric contract"
     verdict = "REPRODUCED " + how if ok else "NOT VERIFIED"
+    if not ok and any(not c.ok for c in compared) and (versions := version_difference(doc)):
+        # another epica may compute some numbers otherwise (CHANGELOG.md): say so, not only "differs"
+        print(f"epa verify: {versions}: see CHANGELOG.md for what changed between them", file=log)
+        verdict += f": {versions}"
     if unlisted:  # what it lists may reproduce; the archive as a whole is not what was packed
         ok = False
         verdict = f"NOT VERIFIED: {len(unlisted)} archive members not listed in {package.MANIFEST}"
@@ -324,6 +328,17 @@ def _verify(source, tmp, cores, snakefile, keep, force, exact, data, json_path, 
         _write_json(out, source, doc, compared, verdict, problems or [], exact, unlisted)
     print(f"epa verify: {verdict} (the verdicts: {out})", file=log)
     return 0 if ok else 1
+
+
+def version_difference(doc: dict) -> str | None:
+    """"results made by epica X, this is Y" where ``provenance.json`` records another epica version
+    than the running one (None where they agree or none is recorded)."""
+    from epa import __version__
+
+    recorded = (doc.get("epica") or {}).get("version")
+    if not recorded or recorded == __version__:
+        return None
+    return f"results made by epica {recorded}, this is epica {__version__}"
 
 
 def _write_json(
