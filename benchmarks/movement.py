@@ -135,7 +135,8 @@ def _against_std(path: str, a_doc: dict) -> float | None:
 
 def compare(before: Path, after: Path) -> int:
     step1, step2 = Worst("Step 1 offset / its std"), Worst("Step 2 extrinsic, scale / their std")
-    others = Worst("other records (relative)")
+    others = Worst("other records (relative; 1e-12 floor)")
+    bare = Worst("other records (relative, no floor)")
     printed = Worst("printed numbers that changed (relative)")
     drop_in, missing = [], []
     for pa in sorted(p for p in before.rglob("*") if p.is_file()):
@@ -166,6 +167,7 @@ def compare(before: Path, after: Path) -> int:
                     worst.see(abs(x - y) / std, f"{name}:{path}")
                 else:
                     others.see(relative(x, y), f"{name}:{path}")
+                    bare.see(relative(x, y, 0.0), f"{name}:{path} {x!r} vs {y!r}")
         else:
             text_a, text_b = ta.decode(), tb.decode()
             xa, xb = _NUMBER.findall(text_a), _NUMBER.findall(text_b)
@@ -182,7 +184,8 @@ def compare(before: Path, after: Path) -> int:
                         printed.see(relative(float(x), float(y), 0.0), where)
                     else:
                         others.see(relative(float(x), float(y)), where)
-    for w in (step1, step2, others, printed):
+                        bare.see(relative(float(x), float(y), 0.0), where)
+    for w in (step1, step2, others, bare, printed):
         print(w)
     print(f"drop-in outputs (mode {', '.join(DROP_IN)}) not byte-identical: {len(drop_in)}")
     for name in drop_in[:20] + missing[:20]:
