@@ -331,8 +331,8 @@ def _verify(source, tmp, cores, snakefile, keep, force, exact, data, json_path, 
 
 
 def version_difference(doc: dict) -> str | None:
-    """"results made by epica X, this is Y" where ``provenance.json`` records another epica version
-    than the running one (None where they agree or none is recorded)."""
+    """The words ``results made by epica X, this is Y`` where ``provenance.json`` records another
+    epica version than the running one (None where they agree or none is recorded)."""
     from epa import __version__
 
     recorded = (doc.get("epica") or {}).get("version")
