@@ -139,6 +139,8 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     data.calibrate_pairs = pairs if pairs is not None else data.sync_pairs
     if pairs is not None:
         data.matched = (ref, est) if not info["plan"]["apply_extrinsic"] else data.matched
+    else:  # sync's matched poses: in memory already (else the later stages select them again)
+        data.matched = data.sync_matched
     folder.write_record(NAME, "calibrate.json", info)
     if write_arrays:
         # unchanged pairs are sync's (linked); re-associated ones, or no links, are written
