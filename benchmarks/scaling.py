@@ -68,7 +68,9 @@ def make_pair(folder: Path, n: int) -> tuple[Path, Path]:
     # camera poses of the body
     q_c, p_c = ext.to_sensor_rows(ref.q.T, p + rng.normal(0, 0.01, p.shape))
     cov = np.broadcast_to(np.diag([3e-5, 3e-5, 3e-5]), (n, 3, 3))  # orientation (rad^2), position
-    est = Trajectory(1e9 + t - 0.03, p_c, np.ascontiguousarray(q_c.T), cov_rot=cov, cov_pos=cov * 4.0)
+    est = Trajectory(
+        1e9 + t - 0.03, p_c, np.ascontiguousarray(q_c.T), cov_rot=cov, cov_pos=cov * 4.0
+    )
     files.write_tum(folder / "ref.txt", ref)
     files.write_trajectory(folder / "est.txt", est, "openvins")
     ms = 20.0 * np.exp(rng.normal(0, 0.2, n))  # <run>_timing.txt: stamp and milliseconds per frame
