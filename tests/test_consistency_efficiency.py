@@ -80,6 +80,42 @@ def test_nees_of_a_simulated_estimator_through_steps_2_and_3(tmp_path, confidenc
         assert np.mean([r["outside_3sigma_pct"] for r in results]) < 0.6
 
 
+def test_without_arrays_only_the_matched_estimate_holds_the_covariance(tmp_path):
+    """epa eval without arrays turns no covariance into the calibrated and aligned frames (only
+    their files carry it): the matched estimate keeps it, and every stage's record is the same as
+    with the arrays written (consistency's NEES included)."""
+    ref, est = estimator(np.random.default_rng(6))
+    files.write_tum(tmp_path / "ref.txt", ref)
+    files.write_trajectory(tmp_path / "est.txt", est, "openvins")
+    cfg = settings.resolve(
+        {"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}}
+    )
+    keep = ("matched", "calibrated", "aligned")
+    runs = {
+        arrays: chain.run_case_data(
+            tmp_path / "ref.txt",
+            tmp_path / "est.txt",
+            tmp_path / str(arrays),
+            cfg,
+            write_arrays=arrays,
+            keep=keep,
+        )
+        for arrays in (True, False)
+    }
+    assert runs[True].calibrate_record["plan"]["apply_extrinsic"]
+    assert runs[True].aligned.cov_pos is not None and runs[True].calibrated[1].cov_pos is not None
+    assert runs[False].aligned.cov_pos is None and runs[False].calibrated[1].cov_rot is None
+    assert runs[False].matched[1].cov_pos is not None
+    assert np.array_equal(runs[False].aligned.p, runs[True].aligned.p)
+    from epa.artifacts.stage import folder
+
+    # (the report stage's says whether arrays were written)
+    records = [f"{folder(st.name)}/{name}" for st in chain.STAGES[:-1] for name in st.records]
+    for name in records:
+        assert (tmp_path / "False" / name).read_bytes() == (tmp_path / "True" / name).read_bytes()
+    assert runs[False].consistency_record["available"]
+
+
 def test_covariance_travels_through_the_stage_artifacts_transformed(tmp_path):
     """The aligned estimate's covariance (carried and transformed by Steps 2 and 3) gives the NEES of
     the estimate's own frame: position and orientation covariance were rotated, not copied."""

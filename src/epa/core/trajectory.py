@@ -95,6 +95,12 @@ class Trajectory:
             r_printed=None if self.r_printed is None else take(self.r_printed),
         )
 
+    def without_covariance(self) -> Trajectory:
+        """The same poses (the same arrays) without their covariances."""
+        if self.cov_rot is None and self.cov_pos is None and self.cov_ros is None:
+            return self
+        return replace(self, cov_rot=None, cov_pos=None, cov_ros=None)
+
     def at(self, stamps: np.ndarray) -> Trajectory:
         """The poses at ``stamps``: linear positions, slerp orientations (clamped at the ends)."""
         p, q = geometry.interpolate(self.t, self.p, self.q, stamps)
