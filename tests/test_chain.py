@@ -10,7 +10,7 @@ from conftest import run_stages
 from test_steps_sim import case as sim_case
 
 from epa.artifacts import files
-from epa.artifacts.case import failure_of
+from epa.artifacts.case import CaseFolder, failure_of
 from epa.core.errors import EpaError
 from epa.outputs import tables
 from epa.workflow import chain, settings
@@ -204,6 +204,38 @@ def test_values_let_go_are_read_by_no_later_stage(offset_case, tmp_path):
     records = chain.run_case(*offset_case, tmp_path / "out", resolved())
     assert records["metrics"]["extrinsic_rot_deg"] is not None  # Step 2 applied
     assert not (tmp_path / "out/04_calibrate/est.tum").exists()
+
+
+def test_the_metrics_stage_reads_the_cropped_and_calibrated_poses_only_where_a_metric_asks():
+    """Under the defaults no metric asks for the cropped trajectories or the calibrated estimate:
+    epa eval lets them go before the metrics stage (at 1M poses 120 MB, and the stage's
+    temporaries then reuse freed memory); a metric that asks keeps them."""
+    cfg = resolved()
+    assert chain.reads_under("metrics", cfg) == frozenset(chain.BY_NAME["metrics"].reads) - {
+        "cropped",
+        "calibrated",
+    }
+    rpg = resolved(mode="rpg")  # its metric asks for the unaligned (calibrated) estimate
+    assert {"cropped", "calibrated"} <= chain.reads_under("metrics", rpg)
+    tum = resolved(metrics={"tum": {"enabled": True}})  # its own association: the cropped
+    assert "cropped" in chain.reads_under("metrics", tum)
+    assert "calibrated" not in chain.reads_under("metrics", tum)
+    auto = resolved(metrics={"segments": "auto"})  # lengths of the whole cropped reference
+    assert "cropped" in chain.reads_under("metrics", auto)
+    assert chain.reads_under("drift", cfg) == frozenset(chain.BY_NAME["drift"].reads)
+
+
+def test_a_value_in_memory_keeps_nothing_it_would_be_read_again_from(offset_case, tmp_path):
+    """What a value is read again from (its needs: the matched poses' cropped trajectories and
+    pairs) is kept only while that value is not in memory."""
+    data = chain.CaseData(CaseFolder(tmp_path))
+    data.cropped, data.calibrate_pairs = ("ref", "est"), ("i", "j")
+    assert chain.unread(data, {"matched"}) == []  # matched would be read from them
+    data.matched = ("ref m", "est m")
+    assert chain.unread(data, {"matched"}) == ["cropped", "calibrate_pairs"]
+    assert chain.unread(data, set()) == ["cropped", "calibrate_pairs", "matched"]
+    records = chain.run_case(*offset_case, tmp_path / "out", resolved())
+    assert records["consistency"] and records["efficiency"]
 
 
 def test_pool_workers_do_not_import_the_main_scripts_imports_again(tmp_path):

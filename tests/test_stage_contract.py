@@ -129,21 +129,20 @@ def test_a_stage_added_reaches_evaluate_read_case_and_metrics_json(toy, camera_c
     assert doc["toy"] == result.records["toy"]
 
 
-def test_a_value_let_go_before_a_late_reader_is_what_the_derived_last_reader_prevents(
+def test_a_value_let_go_is_never_read_back_from_a_file_epa_eval_did_not_write(
     toy, camera_case, tmp_path, monkeypatch
 ):
-    """With the hand-kept LAST_READER of before (calibrated let go after metrics) the toy stage reads
-    the calibrated estimate back from a file `epa eval` never wrote."""
-    derive = chain.derive
-
-    def hand_kept(stages):
-        derived = derive(stages)
-        return dataclasses.replace(
-            derived, last_reader={**derived.last_reader, "calibrated": "metrics"}
-        )
-
-    monkeypatch.setattr(chain, "derive", hand_kept)
-    with pytest.raises(FileNotFoundError, match="04_calibrate/est.tum"):
+    """run_case lets a value go once no stage from there on reads it under the case's settings
+    (``reads_for``): a stage whose reads_for leaves out what it reads finds it gone, rather than
+    reading the calibrated estimate back from a file `epa eval` never wrote."""
+    monkeypatch.setattr(toy_stage, "STAGE", dataclasses.replace(toy, reads_for=lambda cfg: ()))
+    with pytest.raises(AttributeError, match="'calibrated' is not among the values"):
+        chain.run_case(*camera_case, tmp_path / "e", resolved())
+    assert not (tmp_path / "e/04_calibrate/est.tum").exists()
+    monkeypatch.setattr(
+        toy_stage, "STAGE", dataclasses.replace(toy, reads_for=lambda cfg: ("calibrated", "x"))
+    )
+    with pytest.raises(ValueError, match=r"stage toy: reads_for gives \['x'\], not read"):
         chain.run_case(*camera_case, tmp_path / "e", resolved())
 
 

@@ -108,8 +108,9 @@ def declared() -> Derived:
 STAGES: tuple[Stage, ...]  # the declarations, in order
 BY_NAME: dict[str, Stage]
 NAMES: tuple[str, ...]
-# run_case keeps every stage's values in memory and lets each go after the last stage that reads it
-# (a million poses with covariance: about 0.7 GB less at the peak); the records it returns stay.
+# The stage after which a value is let go where stages read their values from the artifacts: the
+# last that reads it, or reads a value it is read again from. run_case, which keeps them in memory,
+# lets each go sooner (:func:`unread`); the records it returns stay.
 LAST_READER: dict[str, str]
 CaseData: type[case_module.CaseData]  # with a field for each value a stage hands on
 RECORDS: dict[str, str]  # stage -> the CaseData value holding its record
@@ -165,13 +166,49 @@ def write_failure(folder: CaseFolder, stage: str, reason: str, *, arrays: bool =
     folder.write_failure(stage, st.artifacts if arrays else st.records, reason)
 
 
+def reads_under(stage: str, cfg: dict) -> frozenset[str]:
+    """The values ``stage`` reads under the settings ``cfg`` (its ``reads_for``, else its reads)."""
+    st = declared().by_name[stage]
+    if st.reads_for is None:
+        return frozenset(st.reads)
+    reads = frozenset(st.reads_for(settings_for(stage, cfg)))
+    if not reads <= set(st.reads):
+        raise ValueError(
+            f"stage {stage}: reads_for gives {sorted(reads - set(st.reads))}, not read"
+        )
+    return reads
+
+
+def unread(data: case_module.CaseData, later: set[str]) -> list[str]:
+    """The values in memory that no later stage reads (``later``: the values they read), nor any
+    value they read that is not in memory and would be read again from them (its ``needs``): what
+    run_case lets go. A value in memory is never read again, so what it was read from is not kept
+    for it (a million poses: the cropped trajectories go after Step 2, not after the last stage)."""
+    values = declared().values
+    needed: set[str] = set()
+    todo = list(later)
+    while todo:
+        name = todo.pop()
+        if name not in needed:
+            needed.add(name)
+            if not data.known(name):
+                todo += values[name].needs
+    return [name for name in values if data.known(name) and name not in needed]
+
+
 def run_stage(
-    stage: str, data: case_module.CaseData, cfg: dict, *, write_arrays: bool = True
+    stage: str,
+    data: case_module.CaseData,
+    cfg: dict,
+    *,
+    write_arrays: bool = True,
+    gone: frozenset[str] = frozenset(),
 ) -> None:
     """One stage for one case. Raises EpaError for a user mistake; any other exception is a bug
-    (reading a value the stage does not declare it reads is one)."""
+    (reading a value the stage does not declare it reads is one, and so is reading a value of
+    ``gone``, which run_case let go)."""
     chain = declared()
-    data.readable(chain.readable[stage])
+    data.readable(chain.readable[stage] - gone)
     try:
         chain.by_name[stage].run(data, settings_for(stage, cfg), write_arrays)
     finally:
@@ -208,16 +245,22 @@ def run_case_data(
     case = Case("", "", "", Path(ref_path), Path(est_path), ref_source, est_source, settings_record)
     data = chain.data_class(CaseFolder(out_dir, case))
     kept = {st.result for st in chain.stages} | set(keep)
-    for st in chain.stages:
+    reads = [reads_under(st.name, cfg) for st in chain.stages]
+    gone: set[str] = set()
+    for k, st in enumerate(chain.stages):
         if on_stage is not None:
             on_stage(st.name)
         # what a killed `epa eval --out` into this folder left, as a workflow job removes it
         data.folder.remove_temporaries(st.name, st.artifacts)
         try:
-            run_stage(st.name, data, cfg, write_arrays=write_arrays)
-            data.forget(
-                *(v for v, last in chain.last_reader.items() if last == st.name and v not in kept)
-            )
+            # what no stage from here on reads goes first (read under these settings by none)
+            let_go = [v for v in unread(data, set().union(*reads[k:])) if v not in kept]
+            data.forget(*let_go)
+            gone.update(let_go)
+            run_stage(st.name, data, cfg, write_arrays=write_arrays, gone=frozenset(gone))
+            let_go = [v for v in unread(data, set().union(*reads[k + 1 :])) if v not in kept]
+            data.forget(*let_go)
+            gone.update(let_go)
         except EpaError as exc:
             write_failure(data.folder, st.name, f"{st.name}: {exc.one_line()}", arrays=write_arrays)
             if exc.path is None:  # a stage's finding about the case: name the estimate it is about
