@@ -193,17 +193,45 @@ def test_every_rule_declares_log_benchmark_threads_and_resources():
             assert declared == rules_here, (smk.name, directive)
 
 
-def test_values_let_go_are_read_by_no_later_stage(offset_case, tmp_path):
-    """run_case lets a value go after the last stage declaring it reads it (chain.LAST_READER, derived
-    from the declarations); a stage may read only what it declares (tests/test_stage_contract.py),
-    so no stage reads a value let go. The offset case applies Step 2 (the calibrated estimate has no
-    file without --artifacts) and runs through."""
-    assert chain.LAST_READER["loaded"] == "crop"
-    assert chain.LAST_READER["sync_matched"] == "calibrate"
-    assert chain.LAST_READER["calibrated"] == "metrics"
+def let_go_after(monkeypatch, *args, **options) -> dict[str, str]:
+    """Value -> the stage after which run_case_data let it go (from its CaseData.forget calls)."""
+    from epa.artifacts import case as case_module
+
+    ran: dict = {"last": None}
+    after: dict[str, str] = {}
+    run_stage, forget = chain.run_stage, case_module.CaseData.forget
+
+    def running(stage, *a, **k):
+        run_stage(stage, *a, **k)
+        ran["last"] = stage
+
+    def recording(self, *names):
+        for name in names:
+            after.setdefault(name, ran["last"])
+        forget(self, *names)
+
+    monkeypatch.setattr(chain, "run_stage", running)
+    monkeypatch.setattr(case_module.CaseData, "forget", recording)
+    chain.run_case_data(*args, **options)
+    return after
+
+
+def test_values_let_go_are_read_by_no_later_stage(offset_case, tmp_path, monkeypatch):
+    """run_case lets a value go once no stage from there on reads it under the settings; a stage
+    may read only what it declares (tests/test_stage_contract.py), so no stage reads a value let go.
+    The offset case applies Step 2 (the calibrated estimate has no file without --artifacts): the
+    cropped trajectories go after Step 2 (the matched poses are in memory; no metric asks for
+    them), the calibrated estimate after Step 3, and the records stay."""
+    after = let_go_after(monkeypatch, *offset_case, tmp_path / "out", resolved())
+    assert after["loaded"] == "crop" and after["sync_matched"] == "calibrate"
+    assert after["cropped"] == "calibrate" and after["calibrated"] == "align"
+    assert after["matched"] == "efficiency" and after["rpe_segments"] == "drift"
+    assert not {st.result for st in chain.STAGES} & set(after)
     records = chain.run_case(*offset_case, tmp_path / "out", resolved())
     assert records["metrics"]["extrinsic_rot_deg"] is not None  # Step 2 applied
     assert not (tmp_path / "out/04_calibrate/est.tum").exists()
+    rpg = let_go_after(monkeypatch, *offset_case, tmp_path / "rpg", resolved(mode="rpg"))
+    assert rpg["cropped"] == rpg["calibrated"] == "metrics"  # its metric reads both
 
 
 def test_the_metrics_stage_reads_the_cropped_and_calibrated_poses_only_where_a_metric_asks():

@@ -2,7 +2,7 @@
 
 The stage list is :data:`epa.artifacts.stage.ORDER`; each stage module declares itself
 (``STAGE``, :class:`epa.artifacts.stage.Stage`) and everything else is derived here
-(:func:`derive`): ``STAGES``, ``NAMES``, ``BY_NAME``, ``LAST_READER``, ``CaseData``.
+(:func:`derive`): ``STAGES``, ``NAMES``, ``BY_NAME``, ``CaseData``.
 
 ``epa eval`` runs :func:`run_case` (every stage in one process, values passed in memory through one
 :class:`~epa.artifacts.case.CaseData`); a workflow job runs one stage for a batch of cases
@@ -37,8 +37,6 @@ class Derived:
     # name -> its Value; each stage's readable values (its reads, what reading them reads, its own)
     values: dict[str, Value]
     readable: dict[str, frozenset[str]]
-    # value -> the stage after which run_case lets it go: the last that reads it, else its own
-    last_reader: dict[str, str]
     data_class: type[case_module.CaseData]
     # stage -> the value holding its record (the one of type Record it hands on), for those with one
     records: dict[str, str]
@@ -66,19 +64,15 @@ def derive(stages: tuple[Stage, ...]) -> Derived:
     stage hands on is an error here)."""
     values: dict[str, Value] = {}
     readable: dict[str, frozenset[str]] = {}
-    last_reader: dict[str, str] = {}
     for st in stages:
         for value in st.values:
             values.setdefault(value.name, value)
-            last_reader[value.name] = st.name
         try:
             readable[st.name] = frozenset(
                 _closure((*st.reads, *(v.name for v in st.values)), values)
             )
         except ValueError as exc:
             raise ValueError(f"stage {st.name}: {exc} before it") from None
-        for name in _closure(st.reads, values):
-            last_reader[name] = st.name
     document = tuple((st.name, st.records[0]) for st in stages if st.result is not None)
     return Derived(
         stages=stages,
@@ -86,7 +80,6 @@ def derive(stages: tuple[Stage, ...]) -> Derived:
         names=tuple(st.name for st in stages),
         values=values,
         readable=readable,
-        last_reader=last_reader,
         data_class=case_module.data_class((v for st in stages for v in st.values), document),
         records={
             st.name: record[0]
@@ -108,10 +101,6 @@ def declared() -> Derived:
 STAGES: tuple[Stage, ...]  # the declarations, in order
 BY_NAME: dict[str, Stage]
 NAMES: tuple[str, ...]
-# The stage after which a value is let go where stages read their values from the artifacts: the
-# last that reads it, or reads a value it is read again from. run_case, which keeps them in memory,
-# lets each go sooner (:func:`unread`); the records it returns stay.
-LAST_READER: dict[str, str]
 CaseData: type[case_module.CaseData]  # with a field for each value a stage hands on
 RECORDS: dict[str, str]  # stage -> the CaseData value holding its record
 DOCUMENT: tuple[tuple[str, str], ...]  # (stage, record file) of the case's document, metrics.json
@@ -119,7 +108,6 @@ _DERIVED = {
     "STAGES": "stages",
     "BY_NAME": "by_name",
     "NAMES": "names",
-    "LAST_READER": "last_reader",
     "CaseData": "data_class",
     "RECORDS": "records",
     "DOCUMENT": "document",
@@ -237,9 +225,11 @@ def run_case_data(
     keep: tuple[str, ...] = (),
     settings_record: dict | None = None,
 ) -> case_module.CaseData:
-    """:func:`run_case`, returning the whole :class:`CaseData`; besides each stage's ``result`` the
-    values named in ``keep`` stay in memory (what the Python API, :func:`epa.evaluate`, hands on:
-    every record and the per-pose errors, which are not on disk without ``write_arrays``).
+    """:func:`run_case`, returning the whole :class:`CaseData`. Every value stays in memory until
+    no stage from there on reads it under ``cfg`` (:func:`reads_under`, :func:`unread`: a million
+    poses with covariance, a few hundred MB less at the peak); each stage's ``result`` and the
+    values named in ``keep`` stay (what the Python API, :func:`epa.evaluate`, hands on: every
+    record and the per-pose errors, which are not on disk without ``write_arrays``).
     ``settings_record``: what the case's own settings changed (load.json ``settings``)."""
     chain = declared()
     case = Case("", "", "", Path(ref_path), Path(est_path), ref_source, est_source, settings_record)
