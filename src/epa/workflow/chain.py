@@ -243,14 +243,11 @@ def run_case_data(
         # what a killed `epa eval --out` into this folder left, as a workflow job removes it
         data.folder.remove_temporaries(st.name, st.artifacts)
         try:
-            # what no stage from here on reads goes first (read under these settings by none)
-            let_go = [v for v in unread(data, set().union(*reads[k:])) if v not in kept]
-            data.forget(*let_go)
-            gone.update(let_go)
             run_stage(st.name, data, cfg, write_arrays=write_arrays, gone=frozenset(gone))
+            # what no later stage reads under these settings goes (a value set again is back)
             let_go = [v for v in unread(data, set().union(*reads[k + 1 :])) if v not in kept]
             data.forget(*let_go)
-            gone.update(let_go)
+            gone = {v for v in gone if not data.known(v)} | set(let_go)
         except EpaError as exc:
             write_failure(data.folder, st.name, f"{st.name}: {exc.one_line()}", arrays=write_arrays)
             if exc.path is None:  # a stage's finding about the case: name the estimate it is about
