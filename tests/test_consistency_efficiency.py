@@ -352,3 +352,21 @@ def test_closed_form_nees_is_nan_exactly_where_lapack_finds_no_cholesky():
     assert list(np.isfinite(got)) == [True, False, False, False, False, False, True]
     # hand-derived for the diagonal one: sum e_k^2 / sigma_k^2
     assert got[0] == pytest.approx(1e-4 / 1e-4 + 4e-4 / 2e-4 + 2.5e-5 / 3e-4, rel=1e-14)
+
+
+def test_stamps_in_order_are_their_stable_sort():
+    """efficiency.in_order skips the sort of stamps already in order: the same order and stamps as
+    the stable sort, for stamps in order (with ties), out of order, with NaN, empty and one."""
+    rng = np.random.default_rng(11)
+    for t in (
+        np.sort(rng.uniform(0, 100, 1000)),
+        np.repeat(np.arange(10.0), 3),
+        rng.uniform(0, 100, 1000),
+        np.array([1.0, np.nan, 2.0]),
+        np.r_[np.arange(5.0), np.nan],
+        np.zeros(0),
+        np.array([3.0]),
+    ):
+        order, stamps = efficiency.in_order(t)
+        assert np.array_equal(order, np.argsort(t, kind="stable")) and order.dtype == np.intp
+        assert np.array_equal(stamps, np.sort(t), equal_nan=True)
