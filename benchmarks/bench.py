@@ -1,14 +1,19 @@
 """Benchmarks (figures go in the closing note, never in a timed test).
 
     python benchmarks/bench.py [--skip-evo]
+    python benchmarks/bench.py --large [--repeat 3]
 
 1. epa eval vs evo_ape + evo_rpe (8 m, all pairs) on a 100,000-pose simulated pair.
 2. epa eval on one EuRoC case (../shared/data), wall time and peak memory.
 3. Steps 1+2 vs the metrics stage on the 100,000-pose pair.
+
+``--large``: only `epa eval` on a 1,000,000-pose simulated pair (300 MB of TUM text), each run's
+wall time, CPU time (user + system) and peak memory (its maximum resident set).
 """
 
+import argparse
+import os
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -42,14 +47,54 @@ def big_pair(tmp: Path, n=100_000):
     return ref, est
 
 
+def measured(cmd) -> tuple[float, float, float, float]:
+    """Wall seconds, user and system CPU seconds and peak resident memory (MB) of ``cmd``, from its
+    own resource usage (os.wait4: the child alone, no /usr/bin/time needed)."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    err = proc.stderr.read() if proc.stderr is not None else b""
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode:
+        raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode}): {err.decode()[-2000:]}")
+    return wall, usage.ru_utime, usage.ru_stime, usage.ru_maxrss / 1024  # Linux: kB
+
+
+def large(repeat: int) -> None:
+    """`epa eval` on a 1,000,000-pose pair: wall, CPU and peak memory of each run."""
+    with tempfile.TemporaryDirectory() as name:
+        tmp = Path(name)
+        big_pair(tmp, n=1_000_000)
+        cmd = [tool("epa"), "eval", str(tmp / "ref.txt"), str(tmp / "est.txt"), "--out"]
+        runs = [measured([*cmd, str(tmp / f"o{k}")]) for k in range(repeat)]
+    for k, (wall, user, system, peak) in enumerate(runs, 1):
+        print(
+            f"epa eval, 1M poses, run {k}: {wall:.2f} s wall, {user:.2f} s user +"
+            f" {system:.2f} s system, peak {peak:.0f} MB"
+        )
+    walls, peaks = [r[0] for r in runs], [r[3] for r in runs]
+    print(
+        f"epa eval, 1M poses: {min(walls):.2f}-{max(walls):.2f} s wall,"
+        f" peak {min(peaks):.0f}-{max(peaks):.0f} MB (load average {os.getloadavg()[0]:.2f})"
+    )
+
+
 def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--skip-evo", action="store_true", help="leave out evo_ape + evo_rpe")
+    ap.add_argument("--large", action="store_true", help="only epa eval on a 1M-pose pair")
+    ap.add_argument("--repeat", type=int, default=3, help="runs of --large (default 3)")
+    args = ap.parse_args()
+    if args.large:
+        return large(args.repeat)
     tmp = Path(tempfile.mkdtemp())
     ref, est = big_pair(tmp)
     epa_s = timed(
         [tool("epa"), "eval", str(tmp / "ref.txt"), str(tmp / "est.txt"), "--out", str(tmp / "o")]
     )
     print(f"epa eval, 100k poses: {epa_s:.2f} s")
-    if "--skip-evo" not in sys.argv:
+    if not args.skip_evo:
         evo_s = timed([tool("evo_ape"), "tum", str(tmp / "ref.txt"), str(tmp / "est.txt"), "-a"])
         evo_s += timed(
             [

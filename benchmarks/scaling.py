@@ -29,7 +29,7 @@ import numpy as np
 
 from epa import simulate
 from epa.artifacts import files
-from epa.core import geometry, runtime
+from epa.core import runtime
 from epa.core.trajectory import Trajectory
 from epa.steps.calibrate import Extrinsic
 from epa.workflow import chain, settings
@@ -65,10 +65,12 @@ def make_pair(folder: Path, n: int) -> tuple[Path, Path]:
     ext = Extrinsic(
         R=np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), t=np.array([0.05, 0, 0])
     )
-    q_b = geometry.component_rows(geometry.rot_to_quat(r))
-    q_c, p_c = ext.to_sensor_rows(q_b, p + rng.normal(0, 0.01, p.shape))  # camera poses of the body
+    # camera poses of the body
+    q_c, p_c = ext.to_sensor_rows(ref.q.T, p + rng.normal(0, 0.01, p.shape))
     cov = np.broadcast_to(np.diag([3e-5, 3e-5, 3e-5]), (n, 3, 3))  # orientation (rad^2), position
-    est = Trajectory(1e9 + t - 0.03, p_c, q_c.T.copy(), cov_rot=cov, cov_pos=cov * 4.0)
+    est = Trajectory(
+        1e9 + t - 0.03, p_c, np.ascontiguousarray(q_c.T), cov_rot=cov, cov_pos=cov * 4.0
+    )
     files.write_tum(folder / "ref.txt", ref)
     files.write_trajectory(folder / "est.txt", est, "openvins")
     ms = 20.0 * np.exp(rng.normal(0, 0.2, n))  # <run>_timing.txt: stamp and milliseconds per frame

@@ -10,7 +10,7 @@ from conftest import run_stages
 from test_steps_sim import case as sim_case
 
 from epa.artifacts import files
-from epa.artifacts.case import failure_of
+from epa.artifacts.case import CaseFolder, failure_of
 from epa.core.errors import EpaError
 from epa.outputs import tables
 from epa.workflow import chain, settings
@@ -193,17 +193,77 @@ def test_every_rule_declares_log_benchmark_threads_and_resources():
             assert declared == rules_here, (smk.name, directive)
 
 
-def test_values_let_go_are_read_by_no_later_stage(offset_case, tmp_path):
-    """run_case lets a value go after the last stage declaring it reads it (chain.LAST_READER, derived
-    from the declarations); a stage may read only what it declares (tests/test_stage_contract.py),
-    so no stage reads a value let go. The offset case applies Step 2 (the calibrated estimate has no
-    file without --artifacts) and runs through."""
-    assert chain.LAST_READER["loaded"] == "crop"
-    assert chain.LAST_READER["sync_matched"] == "calibrate"
-    assert chain.LAST_READER["calibrated"] == "metrics"
+def let_go_after(monkeypatch, *args, **options) -> dict[str, str]:
+    """Value -> the stage after which run_case_data let it go (from its CaseData.forget calls)."""
+    from epa.artifacts import case as case_module
+
+    ran: dict = {"last": None}
+    after: dict[str, str] = {}
+    run_stage, forget = chain.run_stage, case_module.CaseData.forget
+
+    def running(stage, *a, **k):
+        run_stage(stage, *a, **k)
+        ran["last"] = stage
+
+    def recording(self, *names):
+        for name in names:
+            after.setdefault(name, ran["last"])
+        forget(self, *names)
+
+    monkeypatch.setattr(chain, "run_stage", running)
+    monkeypatch.setattr(case_module.CaseData, "forget", recording)
+    chain.run_case_data(*args, **options)
+    return after
+
+
+def test_values_let_go_are_read_by_no_later_stage(offset_case, tmp_path, monkeypatch):
+    """run_case lets a value go once no stage from there on reads it under the settings; a stage
+    may read only what it declares (tests/test_stage_contract.py), so no stage reads a value let go.
+    The offset case applies Step 2 (the calibrated estimate has no file without --artifacts): the
+    cropped trajectories go after Step 2 (the matched poses are in memory; no metric asks for
+    them), the calibrated estimate after Step 3, and the records stay."""
+    after = let_go_after(monkeypatch, *offset_case, tmp_path / "out", resolved())
+    assert after["loaded"] == "crop" and after["sync_matched"] == "calibrate"
+    assert after["cropped"] == "calibrate" and after["calibrated"] == "align"
+    assert after["matched"] == "efficiency" and after["rpe_segments"] == "drift"
+    assert not {st.result for st in chain.STAGES} & set(after)
     records = chain.run_case(*offset_case, tmp_path / "out", resolved())
     assert records["metrics"]["extrinsic_rot_deg"] is not None  # Step 2 applied
     assert not (tmp_path / "out/04_calibrate/est.tum").exists()
+    rpg = let_go_after(monkeypatch, *offset_case, tmp_path / "rpg", resolved(mode="rpg"))
+    assert rpg["cropped"] == rpg["calibrated"] == "metrics"  # its metric reads both
+
+
+def test_the_metrics_stage_reads_the_cropped_and_calibrated_poses_only_where_a_metric_asks():
+    """Under the defaults no metric asks for the cropped trajectories or the calibrated estimate:
+    epa eval lets them go before the metrics stage (at 1M poses 120 MB, and the stage's
+    temporaries then reuse freed memory); a metric that asks keeps them."""
+    cfg = resolved()
+    assert chain.reads_under("metrics", cfg) == frozenset(chain.BY_NAME["metrics"].reads) - {
+        "cropped",
+        "calibrated",
+    }
+    rpg = resolved(mode="rpg")  # its metric asks for the unaligned (calibrated) estimate
+    assert {"cropped", "calibrated"} <= chain.reads_under("metrics", rpg)
+    tum = resolved(metrics={"tum": {"enabled": True}})  # its own association: the cropped
+    assert "cropped" in chain.reads_under("metrics", tum)
+    assert "calibrated" not in chain.reads_under("metrics", tum)
+    auto = resolved(metrics={"segments": "auto"})  # lengths of the whole cropped reference
+    assert "cropped" in chain.reads_under("metrics", auto)
+    assert chain.reads_under("drift", cfg) == frozenset(chain.BY_NAME["drift"].reads)
+
+
+def test_a_value_in_memory_keeps_nothing_it_would_be_read_again_from(offset_case, tmp_path):
+    """What a value is read again from (its needs: the matched poses' cropped trajectories and
+    pairs) is kept only while that value is not in memory."""
+    data = chain.CaseData(CaseFolder(tmp_path))
+    data.cropped, data.calibrate_pairs = ("ref", "est"), ("i", "j")
+    assert chain.unread(data, {"matched"}) == []  # matched would be read from them
+    data.matched = ("ref m", "est m")
+    assert chain.unread(data, {"matched"}) == ["cropped", "calibrate_pairs"]
+    assert chain.unread(data, set()) == ["cropped", "calibrate_pairs", "matched"]
+    records = chain.run_case(*offset_case, tmp_path / "out", resolved())
+    assert records["consistency"] and records["efficiency"]
 
 
 def test_pool_workers_do_not_import_the_main_scripts_imports_again(tmp_path):

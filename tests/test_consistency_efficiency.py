@@ -80,6 +80,42 @@ def test_nees_of_a_simulated_estimator_through_steps_2_and_3(tmp_path, confidenc
         assert np.mean([r["outside_3sigma_pct"] for r in results]) < 0.6
 
 
+def test_without_arrays_only_the_matched_estimate_holds_the_covariance(tmp_path):
+    """epa eval without arrays turns no covariance into the calibrated and aligned frames (only
+    their files carry it): the matched estimate keeps it, and every stage's record is the same as
+    with the arrays written (consistency's NEES included)."""
+    ref, est = estimator(np.random.default_rng(6))
+    files.write_tum(tmp_path / "ref.txt", ref)
+    files.write_trajectory(tmp_path / "est.txt", est, "openvins")
+    cfg = settings.resolve(
+        {"truth_dir": ".", "algorithms_dir": ".", "sync": {"estimate_offset": False}}
+    )
+    keep = ("matched", "calibrated", "aligned")
+    runs = {
+        arrays: chain.run_case_data(
+            tmp_path / "ref.txt",
+            tmp_path / "est.txt",
+            tmp_path / str(arrays),
+            cfg,
+            write_arrays=arrays,
+            keep=keep,
+        )
+        for arrays in (True, False)
+    }
+    assert runs[True].calibrate_record["plan"]["apply_extrinsic"]
+    assert runs[True].aligned.cov_pos is not None and runs[True].calibrated[1].cov_pos is not None
+    assert runs[False].aligned.cov_pos is None and runs[False].calibrated[1].cov_rot is None
+    assert runs[False].matched[1].cov_pos is not None
+    assert np.array_equal(runs[False].aligned.p, runs[True].aligned.p)
+    from epa.artifacts.stage import folder
+
+    # (the report stage's says whether arrays were written)
+    records = [f"{folder(st.name)}/{name}" for st in chain.STAGES[:-1] for name in st.records]
+    for name in records:
+        assert (tmp_path / "False" / name).read_bytes() == (tmp_path / "True" / name).read_bytes()
+    assert runs[False].consistency_record["available"]
+
+
 def test_covariance_travels_through_the_stage_artifacts_transformed(tmp_path):
     """The aligned estimate's covariance (carried and transformed by Steps 2 and 3) gives the NEES of
     the estimate's own frame: position and orientation covariance were rotated, not copied."""
@@ -316,3 +352,21 @@ def test_closed_form_nees_is_nan_exactly_where_lapack_finds_no_cholesky():
     assert list(np.isfinite(got)) == [True, False, False, False, False, False, True]
     # hand-derived for the diagonal one: sum e_k^2 / sigma_k^2
     assert got[0] == pytest.approx(1e-4 / 1e-4 + 4e-4 / 2e-4 + 2.5e-5 / 3e-4, rel=1e-14)
+
+
+def test_stamps_in_order_are_their_stable_sort():
+    """efficiency.in_order skips the sort of stamps already in order: the same order and stamps as
+    the stable sort, for stamps in order (with ties), out of order, with NaN, empty and one."""
+    rng = np.random.default_rng(11)
+    for t in (
+        np.sort(rng.uniform(0, 100, 1000)),
+        np.repeat(np.arange(10.0), 3),
+        rng.uniform(0, 100, 1000),
+        np.array([1.0, np.nan, 2.0]),
+        np.r_[np.arange(5.0), np.nan],
+        np.zeros(0),
+        np.array([3.0]),
+    ):
+        order, stamps = efficiency.in_order(t)
+        assert np.array_equal(order, np.argsort(t, kind="stable")) and order.dtype == np.intp
+        assert np.array_equal(stamps, np.sort(t), equal_nan=True)

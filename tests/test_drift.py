@@ -80,6 +80,45 @@ def test_knee_threshold_cases():
     assert k["mode"] == "knee" and 5 <= k["threshold_m"] < 30 and k["raw_m"] < 1e4
 
 
+def _sorted_knee(ape: np.ndarray) -> tuple[str, float]:
+    """The knee as the whole sorted curve gives it (knee_threshold's definition, written out)."""
+    finite = np.sort(ape[np.isfinite(ape)])
+    p95 = float(np.percentile(finite, 95))
+    y = finite[finite <= p95]
+    if y.size >= 3 and y[-1] > y[0]:
+        gap = np.linspace(0.0, 1.0, y.size) - (y - y[0]) / (y[-1] - y[0])
+        k = int(np.argmax(gap))
+        if gap[k] > 0.05:
+            return "knee", float(y[k])
+    return "p95", p95
+
+
+@pytest.mark.parametrize("n", [4 * drift.KNEE_BINS + 1, 60_000])
+def test_knee_of_a_large_sample_is_the_whole_sorted_curves_bit_for_bit(n):
+    """Only the bins that may hold the largest gap are sorted: the same knee (its value's bits) as
+    the whole curve sorted, on error distributions, with ties (repeated values at the largest gap
+    too), a far tail, NaN and infinite errors, and a curve within 5 % of its chord (p95)."""
+    rng = np.random.default_rng(7)
+    samples = [
+        np.linalg.norm(rng.normal(0, 0.02, (n, 3)), axis=1),
+        np.round(rng.exponential(3.0, n), 1),  # a few dozen distinct values
+        np.concatenate([rng.uniform(0, 1, n - n // 3), rng.uniform(20, 40, n // 3)]),
+        np.where(rng.random(n) < 0.1, np.inf, rng.lognormal(0, 2, n)),
+        np.where(np.arange(n) % 7 == 0, np.nan, rng.gamma(0.5, 1.0, n)),
+        rng.choice([0.0, 5e-324, 1.0, 2.0], n),
+        rng.uniform(0, 10, n),
+    ]
+    modes = []
+    for ape in samples:
+        got = drift.knee_threshold(ape.copy())
+        mode, raw = _sorted_knee(ape)
+        assert (
+            got["mode"] == mode and np.float64(got["raw_m"]).tobytes() == np.float64(raw).tobytes()
+        )
+        modes.append(mode)
+    assert modes.count("knee") >= 5 and modes[-1] == "p95"
+
+
 def _case(gt, est, tmp_path, **kw):
     cfg = settings.defaults()
     cfg["load"].update(kw)

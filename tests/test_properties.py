@@ -445,3 +445,29 @@ def test_pair_errors_refuses_a_pair_index_out_of_range():
     for i, j in (([0, 2], [1, 7]), ([0, 2], [-1, 2]), ([3], [0])):
         with pytest.raises(IndexError, match="out of range for 3 poses"):
             geometry.pair_errors(rows, i, j)
+
+
+def test_path_distances_in_blocks_gives_the_whole_arrays_bits():
+    """path_distances in blocks of poses, each carried on from the one before, is the whole
+    difference's norms and cumsum bit for bit: over block edges, from strided and Fortran-ordered
+    positions, with zero steps, a NaN and scales from 1e-3 to 1e3; an empty and a one-pose path."""
+    rng = np.random.default_rng(345)
+    n = 2 * geometry.ROW_BLOCK + 3
+    p = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-3, 3, (n, 1))
+    p[100:110] = p[100]  # standing still
+    p[geometry.ROW_BLOCK + 1, 2] = np.nan
+    table = np.zeros((n, 8))
+    table[:, 1:4] = p
+    for positions in (p, np.asfortranarray(p), table[:, 1:4]):
+        whole = np.concatenate(
+            [[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))]
+        )
+        got = geometry.path_distances(positions)
+        assert np.array_equal(got.view(np.int64), whole.view(np.int64))
+    assert geometry.path_distances(np.zeros((0, 3))).shape == (0,)
+    assert geometry.path_distances(np.ones((1, 3))).tolist() == [0.0]
+    assert geometry.path_distances(np.array([[0.0, 0, 0], [3, 4, 0], [3, 4, 12]])).tolist() == [
+        0.0,
+        5.0,
+        17.0,
+    ]

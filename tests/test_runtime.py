@@ -188,3 +188,45 @@ def test_keep_freed_memory_keeps_a_freed_large_array_for_reuse():
     }
     assert out["keep"][0] == "True" and float(out["keep"][1]) > 20
     assert out["default"][0] == "False" and float(out["default"][1]) < 4
+
+
+_THREAD_FREED = """
+import sys
+import threading
+import numpy as np
+from epa.core import runtime
+runtime.keep_freed_memory()
+applied = runtime.one_arena() if sys.argv[1] == "one" else False
+def rss_mb():
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * 4096 / 1e6
+def parse():  # a read-ahead thread's 24 MB temporary, freed there
+    a = np.ones(24_000_000 // 8)
+    del a
+thread = threading.Thread(target=parse)
+thread.start()
+thread.join()
+before = rss_mb()
+b = np.ones(24_000_000 // 8)  # the main thread's next temporary of that size
+print(applied, rss_mb() - before)
+"""
+
+
+@pytest.mark.skipif(
+    not sys.platform.startswith("linux") or platform.libc_ver()[0] != "glibc",
+    reason="glibc's malloc only",
+)
+def test_one_arena_lets_the_main_thread_reuse_what_a_second_thread_freed():
+    """Without it a thread's freed memory stays in that thread's own heap: the main thread's next
+    24 MB temporary comes as 24 MB of fresh pages; with one_arena it reuses the freed pages."""
+    out = {
+        mode: subprocess.run(
+            [sys.executable, "-c", _THREAD_FREED, mode],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.split()
+        for mode in ("one", "default")
+    }
+    assert out["one"][0] == "True" and float(out["one"][1]) < 4
+    assert out["default"][0] == "False" and float(out["default"][1]) > 20

@@ -157,6 +157,28 @@ def test_under_se3_a_sim3_fit_beside_finds_the_injected_scale(scale, metric_scal
     assert record["evaluated_scale"] is None  # nothing fitted a scale for this evaluation
 
 
+@pytest.mark.parametrize("rows", [False, True])
+def test_an_estimate_standing_still_has_no_sim3_fit_beside_it(rows):
+    """Under SE3 an estimate whose positions are all one point has no Sim3 fit (its extent is
+    taken on pair_rows' position rows where the metrics stage gives them, else on its positions);
+    one that moves along one axis only has one."""
+    ref = smooth_path()
+    info = {"method": "se3", "first_n": -1}
+    cfg = {"metrics": {"sim3_check": CFG}}
+    still = Trajectory(ref.t, np.broadcast_to(ref.p[5], ref.p.shape).copy(), ref.q)
+    along = still.p.copy()
+    along[:, 1] += np.linspace(0.0, 1.0, len(ref))
+    for p, available in ((still.p, False), (along, True)):
+        est = Trajectory(ref.t, p, ref.q)
+        given = geometry.pair_rows(None, ref.p, est.p, q=(ref.q, est.q)) if rows else None
+        record, _, _ = sim3_check.compute(
+            ref, est, cfg, transform=info, estimate_source={}, pair_rows=given
+        )
+        assert record["available"] is available
+        if not available:
+            assert record["reason"] == "no Sim3 fit: the estimate does not move"
+
+
 def test_the_scale_evaluated_with_is_step_2s_times_step_3s():
     calib = {"plan": {"apply_extrinsic": True}, "extrinsic": {"scale": 5.0, "scale_std": 0.01}}
     got = sim3_check.estimate_scale({"method": "sim3", "scale": 1.1}, calib)

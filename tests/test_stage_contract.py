@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import toy_stage
 from conftest import run_stages
+from test_chain import let_go_after
 from test_steps_sim import case as sim_case
 
 from epa.artifacts import files
@@ -66,13 +67,11 @@ def test_the_declarations_give_the_layout_the_fields_and_when_a_value_is_let_go(
     assert hints["metrics_record"] == Record == dict[str, Any]
     assert hints["timing"] == dict[str, np.ndarray] | None
     assert set(hints) == {v.name for st in chain.STAGES for v in st.values}
-    # the big trajectories go after their last reader; the records run_case returns stay
-    assert chain.LAST_READER["loaded"] == "crop"
-    assert chain.LAST_READER["sync_matched"] == "calibrate"
-    assert chain.LAST_READER["calibrated"] == "metrics"
-    assert (
-        chain.LAST_READER["cropped"] == "efficiency"
-    )  # matched is read from it where not in memory
+    # what each stage reads under the settings, from which run_case lets values go
+    # (tests/test_chain.py follows a run)
+    cfg = resolved()
+    assert chain.reads_under("calibrate", cfg) == frozenset(chain.BY_NAME["calibrate"].reads)
+    assert "cropped" not in chain.reads_under("metrics", cfg)
     assert [st.result for st in chain.STAGES if st.result] == [
         "metrics_record",
         "drift_record",
@@ -86,15 +85,17 @@ def test_a_stage_added_to_the_list_gets_its_folder_field_settings_and_last_reads
     assert folder("toy") == "11_toy" and folder("report") == "10_report"
     assert chain.previous("toy") == "report"
     assert chain.CaseData.__annotations__["toy_record"] == Record
-    assert chain.LAST_READER["calibrated"] == "toy"  # kept in memory for it
+    assert chain.reads_under("toy", resolved()) == {"calibrated"}  # kept in memory for it
     cfg = resolved()
     assert chain.settings_for("toy", cfg) == {"align": cfg["align"]}
 
 
 def test_a_stage_added_runs_in_epa_eval_and_reads_the_calibrated_estimate(
-    toy, camera_case, tmp_path
+    toy, camera_case, tmp_path, monkeypatch
 ):
     ref, est = camera_case
+    # kept in memory for it (no metric reads it under the defaults): let go after it
+    assert let_go_after(monkeypatch, ref, est, tmp_path / "k", resolved())["calibrated"] == "toy"
     # the calibrated estimate as the workflow writes it
     assert cli.main(["eval", str(ref), str(est), "--out", str(tmp_path / "a"), "--artifacts"]) == 0
     calibrated = files.read_tum_file(tmp_path / "a/04_calibrate/est.tum")
@@ -129,21 +130,20 @@ def test_a_stage_added_reaches_evaluate_read_case_and_metrics_json(toy, camera_c
     assert doc["toy"] == result.records["toy"]
 
 
-def test_a_value_let_go_before_a_late_reader_is_what_the_derived_last_reader_prevents(
+def test_a_value_let_go_is_never_read_back_from_a_file_epa_eval_did_not_write(
     toy, camera_case, tmp_path, monkeypatch
 ):
-    """With the hand-kept LAST_READER of before (calibrated let go after metrics) the toy stage reads
-    the calibrated estimate back from a file `epa eval` never wrote."""
-    derive = chain.derive
-
-    def hand_kept(stages):
-        derived = derive(stages)
-        return dataclasses.replace(
-            derived, last_reader={**derived.last_reader, "calibrated": "metrics"}
-        )
-
-    monkeypatch.setattr(chain, "derive", hand_kept)
-    with pytest.raises(FileNotFoundError, match="04_calibrate/est.tum"):
+    """run_case lets a value go once no stage from there on reads it under the case's settings
+    (``reads_for``): a stage whose reads_for leaves out what it reads finds it gone, rather than
+    reading the calibrated estimate back from a file `epa eval` never wrote."""
+    monkeypatch.setattr(toy_stage, "STAGE", dataclasses.replace(toy, reads_for=lambda cfg: ()))
+    with pytest.raises(AttributeError, match="'calibrated' is not among the values"):
+        chain.run_case(*camera_case, tmp_path / "e", resolved())
+    assert not (tmp_path / "e/04_calibrate/est.tum").exists()
+    monkeypatch.setattr(
+        toy_stage, "STAGE", dataclasses.replace(toy, reads_for=lambda cfg: ("calibrated", "x"))
+    )
+    with pytest.raises(ValueError, match=r"stage toy: reads_for gives \['x'\], not read"):
         chain.run_case(*camera_case, tmp_path / "e", resolved())
 
 

@@ -67,7 +67,10 @@ class Stage:
     - ``reads``: the ``CaseData`` values of earlier stages ``run`` reads (only these are readable
       while it runs);
     - ``values``: the values it hands on;
-    - ``result``: the value ``epa eval`` returns under the stage's name (None: none)."""
+    - ``result``: the value ``epa eval`` returns under the stage's name (None: none);
+    - ``reads_for(settings)``: those of ``reads`` it reads under its settings (the chain's subset,
+      :func:`epa.workflow.chain.settings_for`), where some are read only under some settings;
+      ``epa eval`` lets the others go before it runs (None: every one of ``reads``)."""
 
     name: str
     run: Callable[[Any, dict, bool], None]
@@ -77,6 +80,7 @@ class Stage:
     reads: tuple[str, ...] = ()
     values: tuple[Value, ...] = ()
     result: str | None = None
+    reads_for: Callable[[dict], tuple[str, ...]] | None = None
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():

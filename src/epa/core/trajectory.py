@@ -27,8 +27,10 @@ def _every_index(idx, n: int) -> bool:
     return bool(idx.dtype.kind in "iu" and geometry.consecutive(idx) and idx[0] == 0)
 
 
-def _copy(x: np.ndarray) -> np.ndarray:
-    return np.array(x, order="C", copy=True)
+def _c_ordered(x: np.ndarray) -> np.ndarray:
+    """``x`` itself where it is C-ordered already, else a C-ordered copy: the same values in the
+    same layout either way, and a million poses' t and p (64 MB a pair) are not held twice."""
+    return np.ascontiguousarray(x)
 
 
 @dataclass(frozen=True)
@@ -77,9 +79,11 @@ class Trajectory:
             return (
                 self  # a mask that keeps every pose (a crop without limits): no copy, same arrays
             )
-        # 0, 1, ..., n - 1 (every pose matched): plain copies, 2x cheaper than gathers and the same
-        # C-ordered arrays (the later stages' bits depend on the layout, so never the views)
-        take = _copy if _every_index(idx, len(self)) else (lambda x: x[idx])
+        # 0, 1, ..., n - 1 (every pose matched): the arrays themselves where C-ordered, else plain
+        # copies (2x cheaper than gathers); C-ordered either way, as a gather gives them (the later
+        # stages' bits depend on the layout, so never a strided view). No stage writes into a
+        # trajectory's arrays, so sharing them is safe, as a crop without limits shares them.
+        take = _c_ordered if _every_index(idx, len(self)) else (lambda x: x[idx])
         return replace(
             self,
             t=take(self.t),
@@ -90,6 +94,12 @@ class Trajectory:
             cov_ros=None if self.cov_ros is None else take(self.cov_ros),
             r_printed=None if self.r_printed is None else take(self.r_printed),
         )
+
+    def without_covariance(self) -> Trajectory:
+        """The same poses (the same arrays) without their covariances."""
+        if self.cov_rot is None and self.cov_pos is None and self.cov_ros is None:
+            return self
+        return replace(self, cov_rot=None, cov_pos=None, cov_ros=None)
 
     def at(self, stamps: np.ndarray) -> Trajectory:
         """The poses at ``stamps``: linear positions, slerp orientations (clamped at the ends)."""

@@ -77,8 +77,7 @@ def ape_steps(t: np.ndarray, ape: np.ndarray, pi: np.ndarray, pj: np.ndarray):
 def knee_threshold(ape: np.ndarray, lo: float = 5.0, hi: float = 30.0) -> dict:
     """Knee of the sorted APE curve (largest gap below the chord, tail above p95 trimmed), else p95;
     clamped. Without a finite APE: mode none, raw_m None and the upper bound."""
-    finite = ape[np.isfinite(ape)]  # a copy: sorted in place (np.sort would copy it again)
-    finite.sort()
+    finite = ape[np.isfinite(ape)]  # a copy: partitioned in place (np.percentile would copy it)
     if finite.size == 0:
         return {
             "threshold_m": hi,
@@ -87,16 +86,12 @@ def knee_threshold(ape: np.ndarray, lo: float = 5.0, hi: float = 30.0) -> dict:
             "clamped": True,
             "bounds_m": [lo, hi],
         }
-    p95 = float(np.percentile(finite, 95))
-    y = finite[: np.searchsorted(finite, p95, side="right")]  # sorted: finite[finite <= p95]
+    p95 = float(np.percentile(finite, 95, overwrite_input=True))
+    y = finite[finite <= p95]
     raw, mode = p95, "p95"
-    if y.size >= 3 and y[-1] > y[0]:
-        x = np.linspace(0.0, 1.0, y.size)
-        yn = (y - y[0]) / (y[-1] - y[0])
-        gap = x - yn  # chord from (0,0) to (1,1) minus the curve
-        k = int(np.argmax(gap))
-        if gap[k] > 0.05:  # a curve within 5% of its chord has no knee worth the name
-            raw, mode = float(y[k]), "knee"
+    knee = _knee(y) if y.size >= 3 else None
+    if knee is not None:
+        raw, mode = knee, "knee"
     thr = float(np.clip(raw, lo, hi))
     return {
         "threshold_m": thr,
@@ -105,6 +100,58 @@ def knee_threshold(ape: np.ndarray, lo: float = 5.0, hi: float = 30.0) -> dict:
         "clamped": thr != raw,
         "bounds_m": [lo, hi],
     }
+
+
+KNEE_GAP = 0.05  # a curve within 5% of its chord has no knee worth the name
+# Bins of the normalised APE in _knee: a power of two, so that yn * KNEE_BINS is exact and bin b
+# holds exactly the values with b <= yn * KNEE_BINS < b + 1
+KNEE_BINS = 4096
+
+
+def _knee(y: np.ndarray) -> float | None:
+    """The value at the knee of the curve of the values ``y`` sorted (an unsorted sample without
+    NaN): at the first largest gap between its chord from (0, 0) to (1, 1) and the curve, the
+    values normalised to (y - min) / (max - min) at x = linspace(0, 1, n); None where that gap is
+    not above KNEE_GAP (or the values are all equal).
+
+    Without sorting them all (60 of drift's 140 ms at 1,000,000 poses): the values are counted
+    into bins of the normalised value, which tells each bin's ranks; a bin's gap is at most its
+    last x less its least value, and only the bins that may hold the largest gap are sorted (2-5 %
+    of the values). The same gaps are computed, value by value, on the same x: the same knee."""
+    y0, y1 = y.min(), y.max()
+    if not y1 > y0:
+        return None
+    span = y1 - y0
+    x = np.linspace(0.0, 1.0, y.size)
+    if y.size <= 4 * KNEE_BINS:  # small: sorted whole
+        s = np.sort(y)
+        gap = x - (s - y0) / span
+        k = int(np.argmax(gap))
+        return float(s[k]) if gap[k] > KNEE_GAP else None
+    bins = np.multiply((y - y0) / span, KNEE_BINS)
+    bins = np.minimum(bins.astype(np.intp), KNEE_BINS - 1)  # the maximum: the last bin
+    counts = np.bincount(bins, minlength=KNEE_BINS)
+    ends = np.cumsum(counts)
+    starts = ends - counts
+    full = counts > 0
+    # the rounded differences only grow with x and shrink with the value: a bound of each gap
+    bound = np.full(KNEE_BINS, -np.inf)
+    bound[full] = x[ends[full] - 1] - np.flatnonzero(full) / KNEE_BINS
+    top = int(np.argmax(bound))
+    if bound[top] <= KNEE_GAP:
+        return None
+    # the largest gap in the most promising bin: only bins bounded by no less can hold the largest
+    s = np.sort(y[bins == top])
+    least = (x[starts[top] : ends[top]] - (s - y0) / span).max()
+    keep = (bound >= least) & (bound > KNEE_GAP)
+    # each kept bin's values sorted are its ranks' values (the bins are in the values' order)
+    s = np.sort(y[keep[bins]])
+    kept = np.flatnonzero(keep)
+    before = np.cumsum(counts[kept]) - counts[kept]  # where each kept bin starts in s
+    rank = np.arange(s.size) + np.repeat(starts[kept] - before, counts[kept])
+    gap = x[rank] - (s - y0) / span
+    k = int(np.argmax(gap))  # the first largest: rank order
+    return float(s[k]) if gap[k] > KNEE_GAP else None
 
 
 THRESHOLD_KEYS = ("rpe_trans_max_m", "jump_rise_m", "jump_rate_m_s", "jump_hold_m")
@@ -202,8 +249,8 @@ def detect(t, dist, ape_trans, ape_rot, time_i, time_j, time_trans, settings: di
         "ape_max_m": np.array([ape_trans[a : b + 1].max() for a, b in zip(starts, ends)]),
         "ape_mean_m": np.array([ape_trans[a : b + 1].mean() for a, b in zip(starts, ends)]),
     }
-    finite = ape_trans[np.isfinite(ape_trans)]
-    p5 = float(np.percentile(finite, 5)) if finite.size else None
+    finite = ape_trans[np.isfinite(ape_trans)]  # a copy: partitioned in place
+    p5 = float(np.percentile(finite, 5, overwrite_input=True)) if finite.size else None
     global_failed = p5 is None or p5 > settings["global_fail_p5_m"]
     knee = knee_threshold(ape_trans, settings["knee_min_m"], settings["knee_max_m"])
     return {

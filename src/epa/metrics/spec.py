@@ -75,15 +75,16 @@ class Metric:
       ``notes``; ``after``: the record it follows in metrics.json (a key of the base record or of
       another metric of the stage; None: last);
     - ``inputs``: what ``compute`` needs beyond the aligned matched poses, passed as keywords (one
-      of the metrics stage's ``INPUTS``, checked when that stage loads: the matched estimate before Step 3, ``05_align/transform.json``, the whole
-      cropped reference, the estimate's source settings as ``load.json`` records them, the whole
-      cropped estimate, the image stamps of metrics.eth3d.image_stamps or None, the reference's and
-      the estimate's files read again with their quaternions as printed, each None where its
-      source prints none, :func:`epa.core.geometry.pair_rows` of the aligned matched poses, None
-      where a side is position-only, ``04_calibrate/calibrate.json``, the accuracy record the
-      metrics stage computed: ``ref_length_m``, ``ate``, ...); each is read only when such a metric is on;
-    - ``protocol``: one of the field's published scoring protocols (TUM RGB-D, TartanAir, ...), turned on by ``epa eval
-      --protocol <key>`` or ``metrics.<key>.enabled``;
+      of the metrics stage's ``INPUTS``, checked when that stage loads: the matched estimate before
+      Step 3, ``05_align/transform.json``, the whole cropped reference, the estimate's source
+      settings as ``load.json`` records them, the whole cropped estimate, the image stamps of
+      metrics.eth3d.image_stamps or None, the reference's and the estimate's files read again with
+      their quaternions as printed, each None where its source prints none,
+      :func:`epa.core.geometry.pair_rows` of the aligned matched poses, None where a side is
+      position-only, ``04_calibrate/calibrate.json``, the accuracy record the metrics stage
+      computed: ``ref_length_m``, ``ate``, ...); each is read only when such a metric is on;
+    - ``protocol``: one of the field's published scoring protocols (TUM RGB-D, TartanAir, ...),
+      turned on by ``epa eval --protocol <key>`` or ``metrics.<key>.enabled``;
     - ``arrays``: its own per-case files; ``tables``: its paper tables;
     - ``documents(record) -> {file name: text}``: small files of its own, written to
       ``06_metrics/<key>/`` (that folder is removed where the metric is off);

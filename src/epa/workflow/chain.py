@@ -2,7 +2,7 @@
 
 The stage list is :data:`epa.artifacts.stage.ORDER`; each stage module declares itself
 (``STAGE``, :class:`epa.artifacts.stage.Stage`) and everything else is derived here
-(:func:`derive`): ``STAGES``, ``NAMES``, ``BY_NAME``, ``LAST_READER``, ``CaseData``.
+(:func:`derive`): ``STAGES``, ``NAMES``, ``BY_NAME``, ``CaseData``.
 
 ``epa eval`` runs :func:`run_case` (every stage in one process, values passed in memory through one
 :class:`~epa.artifacts.case.CaseData`); a workflow job runs one stage for a batch of cases
@@ -37,8 +37,6 @@ class Derived:
     # name -> its Value; each stage's readable values (its reads, what reading them reads, its own)
     values: dict[str, Value]
     readable: dict[str, frozenset[str]]
-    # value -> the stage after which run_case lets it go: the last that reads it, else its own
-    last_reader: dict[str, str]
     data_class: type[case_module.CaseData]
     # stage -> the value holding its record (the one of type Record it hands on), for those with one
     records: dict[str, str]
@@ -66,19 +64,15 @@ def derive(stages: tuple[Stage, ...]) -> Derived:
     stage hands on is an error here)."""
     values: dict[str, Value] = {}
     readable: dict[str, frozenset[str]] = {}
-    last_reader: dict[str, str] = {}
     for st in stages:
         for value in st.values:
             values.setdefault(value.name, value)
-            last_reader[value.name] = st.name
         try:
             readable[st.name] = frozenset(
                 _closure((*st.reads, *(v.name for v in st.values)), values)
             )
         except ValueError as exc:
             raise ValueError(f"stage {st.name}: {exc} before it") from None
-        for name in _closure(st.reads, values):
-            last_reader[name] = st.name
     document = tuple((st.name, st.records[0]) for st in stages if st.result is not None)
     return Derived(
         stages=stages,
@@ -86,7 +80,6 @@ def derive(stages: tuple[Stage, ...]) -> Derived:
         names=tuple(st.name for st in stages),
         values=values,
         readable=readable,
-        last_reader=last_reader,
         data_class=case_module.data_class((v for st in stages for v in st.values), document),
         records={
             st.name: record[0]
@@ -108,9 +101,6 @@ def declared() -> Derived:
 STAGES: tuple[Stage, ...]  # the declarations, in order
 BY_NAME: dict[str, Stage]
 NAMES: tuple[str, ...]
-# run_case keeps every stage's values in memory and lets each go after the last stage that reads it
-# (a million poses with covariance: about 0.7 GB less at the peak); the records it returns stay.
-LAST_READER: dict[str, str]
 CaseData: type[case_module.CaseData]  # with a field for each value a stage hands on
 RECORDS: dict[str, str]  # stage -> the CaseData value holding its record
 DOCUMENT: tuple[tuple[str, str], ...]  # (stage, record file) of the case's document, metrics.json
@@ -118,7 +108,6 @@ _DERIVED = {
     "STAGES": "stages",
     "BY_NAME": "by_name",
     "NAMES": "names",
-    "LAST_READER": "last_reader",
     "CaseData": "data_class",
     "RECORDS": "records",
     "DOCUMENT": "document",
@@ -165,13 +154,49 @@ def write_failure(folder: CaseFolder, stage: str, reason: str, *, arrays: bool =
     folder.write_failure(stage, st.artifacts if arrays else st.records, reason)
 
 
+def reads_under(stage: str, cfg: dict) -> frozenset[str]:
+    """The values ``stage`` reads under the settings ``cfg`` (its ``reads_for``, else its reads)."""
+    st = declared().by_name[stage]
+    if st.reads_for is None:
+        return frozenset(st.reads)
+    reads = frozenset(st.reads_for(settings_for(stage, cfg)))
+    if not reads <= set(st.reads):
+        raise ValueError(
+            f"stage {stage}: reads_for gives {sorted(reads - set(st.reads))}, not read"
+        )
+    return reads
+
+
+def unread(data: case_module.CaseData, later: set[str]) -> list[str]:
+    """The values in memory that no later stage reads (``later``: the values they read), nor any
+    value they read that is not in memory and would be read again from them (its ``needs``): what
+    run_case lets go. A value in memory is never read again, so what it was read from is not kept
+    for it (a million poses: the cropped trajectories go after Step 2, not after the last stage)."""
+    values = declared().values
+    needed: set[str] = set()
+    todo = list(later)
+    while todo:
+        name = todo.pop()
+        if name not in needed:
+            needed.add(name)
+            if not data.known(name):
+                todo += values[name].needs
+    return [name for name in values if data.known(name) and name not in needed]
+
+
 def run_stage(
-    stage: str, data: case_module.CaseData, cfg: dict, *, write_arrays: bool = True
+    stage: str,
+    data: case_module.CaseData,
+    cfg: dict,
+    *,
+    write_arrays: bool = True,
+    gone: frozenset[str] = frozenset(),
 ) -> None:
     """One stage for one case. Raises EpaError for a user mistake; any other exception is a bug
-    (reading a value the stage does not declare it reads is one)."""
+    (reading a value the stage does not declare it reads is one, and so is reading a value of
+    ``gone``, which run_case let go)."""
     chain = declared()
-    data.readable(chain.readable[stage])
+    data.readable(chain.readable[stage] - gone)
     try:
         chain.by_name[stage].run(data, settings_for(stage, cfg), write_arrays)
     finally:
@@ -200,24 +225,29 @@ def run_case_data(
     keep: tuple[str, ...] = (),
     settings_record: dict | None = None,
 ) -> case_module.CaseData:
-    """:func:`run_case`, returning the whole :class:`CaseData`; besides each stage's ``result`` the
-    values named in ``keep`` stay in memory (what the Python API, :func:`epa.evaluate`, hands on:
-    every record and the per-pose errors, which are not on disk without ``write_arrays``).
+    """:func:`run_case`, returning the whole :class:`CaseData`. Every value stays in memory until
+    no stage from there on reads it under ``cfg`` (:func:`reads_under`, :func:`unread`: a million
+    poses with covariance, a few hundred MB less at the peak); each stage's ``result`` and the
+    values named in ``keep`` stay (what the Python API, :func:`epa.evaluate`, hands on: every
+    record and the per-pose errors, which are not on disk without ``write_arrays``).
     ``settings_record``: what the case's own settings changed (load.json ``settings``)."""
     chain = declared()
     case = Case("", "", "", Path(ref_path), Path(est_path), ref_source, est_source, settings_record)
     data = chain.data_class(CaseFolder(out_dir, case))
     kept = {st.result for st in chain.stages} | set(keep)
-    for st in chain.stages:
+    reads = [reads_under(st.name, cfg) for st in chain.stages]
+    gone: set[str] = set()
+    for k, st in enumerate(chain.stages):
         if on_stage is not None:
             on_stage(st.name)
         # what a killed `epa eval --out` into this folder left, as a workflow job removes it
         data.folder.remove_temporaries(st.name, st.artifacts)
         try:
-            run_stage(st.name, data, cfg, write_arrays=write_arrays)
-            data.forget(
-                *(v for v, last in chain.last_reader.items() if last == st.name and v not in kept)
-            )
+            run_stage(st.name, data, cfg, write_arrays=write_arrays, gone=frozenset(gone))
+            # what no later stage reads under these settings goes (a value set again is back)
+            let_go = [v for v in unread(data, set().union(*reads[k + 1 :])) if v not in kept]
+            data.forget(*let_go)
+            gone = {v for v in gone if not data.known(v)} | set(let_go)
         except EpaError as exc:
             write_failure(data.folder, st.name, f"{st.name}: {exc.one_line()}", arrays=write_arrays)
             if exc.path is None:  # a stage's finding about the case: name the estimate it is about

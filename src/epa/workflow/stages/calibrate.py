@@ -77,10 +77,19 @@ def extrinsic_record(ext: calibration.Extrinsic) -> dict:
     return {**record, "notes": [UNDEFINED_UNCERTAINTY]} if undefined else record
 
 
-def compute(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict, cropped=None):
+def compute(
+    ref: Trajectory,
+    est: Trajectory,
+    cfg: dict,
+    sync_info: dict,
+    cropped=None,
+    *,
+    covariance: bool = True,
+):
     """Step 2 and the evaluation plan on the matched (ref, est). ``cropped()`` gives the unmatched
     trajectories, needed only when the plan drops an estimated offset (Step 2 not trusted) and the
-    poses are re-associated; the new indices are then returned, else None."""
+    poses are re-associated; the new indices are then returned, else None. ``covariance`` False:
+    an estimate with the extrinsic applied holds no covariance (none is turned)."""
     c = cfg["calibrate"]
     step1_record = sync_info.get("step1", {})
     plan = evaluation_plan(cfg, step1_record)
@@ -127,18 +136,26 @@ def compute(ref: Trajectory, est: Trajectory, cfg: dict, sync_info: dict, croppe
     if plan["apply_extrinsic"]:
         if ext is None:  # evaluation_plan applies only an extrinsic Step 2 estimated
             raise TypeError("the plan applies an extrinsic that Step 2 did not estimate")
-        est = ext.apply(est)
+        est = ext.apply(est if covariance else est.without_covariance())
     return ref, est, info, pairs
 
 
 def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
     folder = data.folder
     ref, est = data.sync_matched
-    ref, est, info, pairs = compute(ref, est, cfg, data.sync_record, cropped=lambda: data.cropped)
-    data.calibrated, data.calibrate_record = (ref, est), info
+    # The covariances are read in the matched estimate's own frames (consistency); turned into the
+    # calibrated and aligned frames they are only written (est.tum, aligned.tum). Without arrays
+    # (epa eval) neither carries them: at 1M poses 216 MB and Steps 2 and 3's turning them spared.
+    ref, est, info, pairs = compute(
+        ref, est, cfg, data.sync_record, cropped=lambda: data.cropped, covariance=write_arrays
+    )
+    data.calibrated = (ref, est if write_arrays else est.without_covariance())
+    data.calibrate_record = info
     data.calibrate_pairs = pairs if pairs is not None else data.sync_pairs
     if pairs is not None:
         data.matched = (ref, est) if not info["plan"]["apply_extrinsic"] else data.matched
+    else:  # sync's matched poses: in memory already (else the later stages select them again)
+        data.matched = data.sync_matched
     folder.write_record(NAME, "calibrate.json", info)
     if write_arrays:
         # unchanged pairs are sync's (linked); re-associated ones, or no links, are written

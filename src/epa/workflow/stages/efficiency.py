@@ -25,7 +25,7 @@ def compute(t_est, ape: dict, est_length_m: float, timing, dataset: str, cfg: di
     rate = c["datasets"].get(dataset, c["sensor_rate_hz"])
     note = None
     if rate is None:  # not configured: the timing file's own frame rate
-        dt = np.diff(np.sort(timing[0]))
+        dt = np.diff(efficiency.in_order(timing[0])[1])
         rate = 1.0 / ranks.median(dt[dt > 0]) if (dt > 0).any() else None
         if rate is None:
             raise EpaError("set efficiency.sensor_rate_hz (the timing file's stamps give no rate)")

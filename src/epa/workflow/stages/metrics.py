@@ -208,6 +208,24 @@ PROVIDED = {
 INPUTS = (*PROVIDED, "pair_rows", "accuracy")
 
 
+def reads_for(cfg: dict) -> tuple[str, ...]:
+    """What :func:`run` reads under ``cfg``: the cropped trajectories and the calibrated estimate
+    only where a metric that is on asks for them (``reference``, ``estimate``, ``unaligned``) or
+    the segment lengths follow the whole reference's path (``auto``, ``kitti``)."""
+    asked = {
+        name
+        for metric in registry.computed_in(NAME)
+        if metric.enabled(cfg) and metric.compute is not None
+        for name in metric.inputs
+    }
+    only_if = {
+        "cropped": bool({"reference", "estimate"} & asked)
+        or isinstance(cfg["metrics"]["segments"], str),
+        "calibrated": "unaligned" in asked,
+    }
+    return tuple(name for name in READS if only_if.get(name, True))
+
+
 def check_inputs(metrics) -> None:
     """Every metric of this stage asks only for :data:`INPUTS` (else a ValueError naming it)."""
     for metric in metrics:
@@ -245,6 +263,17 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
 
 check_inputs(registry.computed_in(NAME))
 
+READS = (
+    "matched",
+    "aligned",
+    "calibrated",
+    "transform",
+    "cropped",
+    "load_record",
+    "sync_record",
+    "calibrate_record",
+)
+
 STAGE = Stage(
     name=NAME,
     run=run,
@@ -252,16 +281,8 @@ STAGE = Stage(
     settings=("mode", "metrics"),
     records=("metrics.json",),
     arrays=BASE_ARRAYS + tuple(a for m in registry.computed_in(NAME) for a in m.arrays),
-    reads=(
-        "matched",
-        "aligned",
-        "calibrated",
-        "transform",
-        "cropped",
-        "load_record",
-        "sync_record",
-        "calibrate_record",
-    ),
+    reads=READS,
+    reads_for=reads_for,
     values=(
         Value("metrics_record", Record, lambda s: s.f.record(NAME, "metrics.json")),
         Value("ape", Columns, lambda s: s.f.table(NAME, "ape.csv")),
