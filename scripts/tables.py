@@ -17,10 +17,11 @@ from pathlib import Path
 from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.outputs import provenance, tables
+from epa.readers import text
 
-try:  # pyarrow's reader parses every artifact from 32 KB on once it is imported (epa.artifacts.files)
-    import pyarrow.csv  # noqa: F401 - 0.05 s to import, where pandas took 0.3-0.5 s of the serial tail
-except ImportError:
+# pyarrow's reader parses every artifact from 32 KB on (epa.artifacts.files): 0.05 s to import,
+# where pandas took 0.3-0.5 s of the serial tail
+if not text.use_arrow():
     import pandas  # noqa: F401 - its C parser instead
 
 WORKFLOW_DIR = Path(__file__).resolve().parents[1]

@@ -33,6 +33,7 @@ from epa.artifacts import files
 from epa.artifacts.case import Case, CaseFolder
 from epa.core import runtime
 from epa.core.errors import EpaError
+from epa.readers import text
 from epa.workflow import chain, overrides
 
 log = logging.getLogger(__name__)
@@ -199,6 +200,7 @@ class EpaWorker(context.ForkServerProcess):
         # pandas is preloaded in the forkserver (_context): pyarrow's reader (which pandas imports,
         # where installed) or its C parser reads every file here
         runtime.use_pandas_parser()
+        text.use_arrow()  # preloaded in the forkserver too: every artifact from 32 KB on
         super().run()
 
 
