@@ -258,6 +258,24 @@ def write_provenance(params, output, log):
     epa_files.write_text(log[0], "".join(f"wrote {path}\n" for path in written))
 
 
+def grid_script(script, threads, **kwargs):
+    """A once-per-grid rule's body: scripts/<script>.py's write(**kwargs) in a worker of the pool
+    (epa.workflow.jobs.run_script), with ``workers`` (the script's own forked processes) up to the
+    rule's threads; in this process's thread (one core, a cluster job's single CPU) it forks none,
+    as this process has threads. Its wall and CPU seconds go to results/benchmarks/<script>.tsv.
+    """
+    n = workers()
+    if "workers" in kwargs:
+        kwargs["workers"] = min(threads, n) if n > 1 else 1
+    epa_jobs.run_script(
+        os.path.join(EPICA_DIR, "scripts", f"{script}.py"),
+        "write",
+        kwargs,
+        workers=n,
+        timing_path=f"{RESULTS}/benchmarks/{script}.tsv",
+    )
+
+
 def idle_truths():
     """mode ov_eval: the references no case uses (ov_eval lists every reference of the folder)."""
     if EPA["mode"] != "ov_eval":
