@@ -221,8 +221,8 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
     c = cfg["report"]
     case = data.folder
     folder = case.path("report", "report.json").parent
-    doc = data.document()
-    files.write_json(folder / "metrics.json", doc)
+    doc, text = case.document_text(type(data).DOCUMENT)  # write_json's text of doc
+    files.write_text(folder / "metrics.json", text)
     files.write_text(folder / "metrics_summary.csv", summary_csv(doc))
     # Figures cost most of a report (0.7 s a case): by default only the cases a reader opens first,
     # those drift detection failed, are drawn; every case keeps its bundles.
