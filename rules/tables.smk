@@ -75,8 +75,6 @@ rule provenance:
         ),
     log:
         f"{RESULTS}/logs/provenance.log",
-    benchmark:
-        f"{RESULTS}/benchmarks/provenance.tsv"
     threads: 1
     resources:
         mem_mb=500,

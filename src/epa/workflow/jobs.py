@@ -356,6 +356,17 @@ def script_function(path, name: str):
     return getattr(module, name)
 
 
+@contextmanager
+def timed(timing_path):
+    """The wall seconds of what runs inside and the CPU seconds of this thread, as a Snakemake
+    benchmark file (its ``s`` and ``cpu_time`` columns), for a job that runs in the job's thread."""
+    files.remove_temporaries(Path(timing_path).parent, [Path(timing_path).name])
+    wall0, cpu0 = time.perf_counter(), time.thread_time()
+    yield
+    wall, cpu = time.perf_counter() - wall0, time.thread_time() - cpu0
+    files.write_text(timing_path, f"s\tcpu_time\n{wall:.4f}\t{cpu:.4f}\n")
+
+
 def _cpu_seconds() -> float:
     """CPU seconds of this process and of its children that have ended (a script's forked workers)."""
     import resource
