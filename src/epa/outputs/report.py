@@ -230,8 +230,9 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
         bundles = case_bundles(data, doc)
         # what the grid's per-dataset figures read of this case (its relative errors, thinned)
         samples = dataset_figures.case_samples(case)
+    memo: dict = {}  # the steps bundle repeats the trajectory bundle's arrays
     for fig_name, b in bundles.items():
-        figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b)
+        figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b, memo)
     figures.write_bundle(folder / dataset_figures.SAMPLES_FILE, samples)
     why = flags(doc)
     draw = c["figures"] == "all" or (c["figures"] == "flagged" and failed(doc))
