@@ -523,3 +523,29 @@ def test_the_report_documents_are_the_plain_encoders_text(case, tmp_path):
     odd = {"metrics": {"a,b": 1.5, 'q"x': {"y z": 2, "é": 3.0}, "": 4, "n": 0.1 + 0.2}}
     assert report.summary_csv(odd) == by_csv_writer(odd)
     assert '"a,b"' in report.summary_csv(odd)
+
+
+def test_an_overlay_drawn_into_a_kept_figure_is_the_fresh_one(tmp_path):
+    # a worker keeps one figure per layout; a tall trajectory narrows the overlay's views, and the
+    # next dataset's was drawn into the previous one's axes (its figure of the same height)
+    import numpy as np
+
+    from epa.core import runtime
+    from epa.outputs import figures
+
+    t = np.linspace(0, 2 * np.pi, 200)
+
+    def overlay(sx, sy):
+        xyz = np.column_stack([sx * np.cos(t), sy * np.sin(t), 0.1 * t])
+        line = {"label": "a", "run": "run0", "color": 0, "xyz": xyz + 0.05}
+        return figures.bundle("overlay", "o", {"dataset": "d", "ref": xyz, "lines": [line]})
+
+    # both as tall as an overlay gets, so of one figure height, each of its own width
+    other, tall = overlay(10.0, 20.0), overlay(5.0, 40.0)
+    runtime.reset()
+    figures.render(tall, tmp_path / "fresh", style="wide", formats=("png",))
+    runtime.reset()
+    figures.render(other, tmp_path / "first", style="wide", formats=("png",))
+    figures.render(tall, tmp_path / "kept", style="wide", formats=("png",))
+    runtime.reset()
+    assert (tmp_path / "kept.png").read_bytes() == (tmp_path / "fresh.png").read_bytes()

@@ -334,7 +334,9 @@ def _top_over_side(plt, kind, w, left, aw, bottom, side, gap, th, top):
         ax_top.tick_params(labelbottom=False)
         return fig
 
-    return _layout(plt, kind, (w, fh), make)
+    # every number of the geometry: a kept figure of another width of view (an overlay's narrows
+    # with a tall trajectory) drew the next dataset into the previous one's axes
+    return _layout(plt, kind, (w, fh, left, aw, bottom, side, gap, th), make)
 
 
 def _arr(x):
