@@ -248,14 +248,35 @@ if snakemake_compat.in_cluster_job(workflow):
 
 
 def write_provenance(params, output, log):
-    """The provenance rule's body: provenance.json and config.resolved.yaml, then its log."""
-    written = epa_provenance.write(
-        os.path.dirname(output.provenance),
-        epa_provenance.document(
-            "grid", params.resolved, params.inputs, workflow_dir=params.workflow_dir
-        ),
+    """The provenance rule's body: provenance.json and config.resolved.yaml, then its log. Its
+    wall and CPU seconds go to results/benchmarks/provenance.tsv (no benchmark directive: that
+    samples the memory of Snakemake's whole process tree, the workers' too)."""
+    with epa_jobs.timed(f"{RESULTS}/benchmarks/provenance.tsv"):
+        written = epa_provenance.write(
+            os.path.dirname(output.provenance),
+            epa_provenance.document(
+                "grid", params.resolved, params.inputs, workflow_dir=params.workflow_dir
+            ),
+        )
+        epa_files.write_text(log[0], "".join(f"wrote {path}\n" for path in written))
+
+
+def grid_script(script, threads, **kwargs):
+    """A once-per-grid rule's body: scripts/<script>.py's write(**kwargs) in a worker of the pool
+    (epa.workflow.jobs.run_script), with ``workers`` (the script's own forked processes) up to the
+    rule's threads; in this process's thread (one core, a cluster job's single CPU) it forks none,
+    as this process has threads. Its wall and CPU seconds go to results/benchmarks/<script>.tsv.
+    """
+    n = workers()
+    if "workers" in kwargs:
+        kwargs["workers"] = min(threads, n) if n > 1 else 1
+    epa_jobs.run_script(
+        os.path.join(EPICA_DIR, "scripts", f"{script}.py"),
+        "write",
+        kwargs,
+        workers=n,
+        timing_path=f"{RESULTS}/benchmarks/{script}.tsv",
     )
-    epa_files.write_text(log[0], "".join(f"wrote {path}\n" for path in written))
 
 
 def idle_truths():

@@ -1,6 +1,6 @@
 # The grid's figures, from summary.csv and results/consistency/, and with per-case reports each
 # dataset's trajectories and relative-error boxes from the reports' files: vector PDF beside PNG
-# (scripts/figures.py, which also runs on its own).
+# (scripts/figures.py's write, in the worker pool; the script also runs on its own).
 from epa.outputs import dataset_figures as epa_dataset_figures
 
 # (name, kind, dataset) of each per-dataset figure; none without per-case reports to draw from
@@ -48,10 +48,6 @@ rule figures:
         },
     log:
         f"{RESULTS}/logs/figures.log",
-    benchmark:
-        f"{RESULTS}/benchmarks/figures.tsv"
-    conda:
-        "../envs/epica.yaml"
     threads: 2
     resources:
         mem_mb=1500,
@@ -60,5 +56,12 @@ rule figures:
         results=lambda wc, input: os.path.dirname(input.summary),
         per_dataset=EPA["report"]["per_case"],
         version=EPA_VERSION,
-    script:
-        "../scripts/figures.py"
+    run:
+        grid_script(
+            "figures",
+            threads,
+            results_dir=params.results,
+            log_path=log[0],
+            workers=threads,
+            per_dataset=params.per_dataset,
+        )

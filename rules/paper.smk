@@ -1,5 +1,6 @@
 # results/paper/: every LaTeX table, every grid figure as PDF and paper.tex that \input's them
-# (scripts/paper.py, which also runs on its own); compiles with `pdflatex paper.tex` there.
+# (scripts/paper.py's write, in the worker pool; the script also runs on its own); compiles with
+# `pdflatex paper.tex` there.
 rule paper:
     input:
         tex=rules.tables.output.tex,
@@ -26,10 +27,6 @@ rule paper:
         ],
     log:
         f"{RESULTS}/logs/paper.log",
-    benchmark:
-        f"{RESULTS}/benchmarks/paper.tsv"
-    conda:
-        "../envs/epica.yaml"
     threads: 1
     resources:
         mem_mb=500,
@@ -38,5 +35,11 @@ rule paper:
         results=lambda wc, input: os.path.dirname(input.comparison_tex),
         captions=os.path.join(EPICA_DIR, "docs", "captions"),
         version=EPA_VERSION,
-    script:
-        "../scripts/paper.py"
+    run:
+        grid_script(
+            "paper",
+            threads,
+            results_dir=params.results,
+            caption_dir=params.captions,
+            log_path=log[0],
+        )

@@ -1,8 +1,8 @@
 # error_comparison.txt, one .tex and .csv per LaTeX table, cells.csv, summary.csv, comparison,
 # results/consistency/: every case, failed ones marked; mode rpg: rpg's summary tables too
-# (scripts/tables.py, which also runs on its own). Its params hold only the settings the tables
-# read: another section's change re-runs the stages that read it, and provenance below, not the
-# tables, figures and paper.
+# (scripts/tables.py's write, in the worker pool; the script also runs on its own). Its params hold
+# only the settings the tables read: another section's change re-runs the stages that read it, and
+# provenance below, not the tables, figures and paper.
 rule tables:
     input:
         expand(manifest("efficiency"), batch=BATCHES),
@@ -32,10 +32,6 @@ rule tables:
         success_curves=f"{RESULTS}/success_curves.csv",
     log:
         f"{RESULTS}/logs/tables.log",
-    benchmark:
-        f"{RESULTS}/benchmarks/tables.tsv"
-    conda:
-        "../envs/epica.yaml"
     threads: 2
     resources:
         mem_mb=lambda wc: 1000 + len(CASE_BY_KEY) // 10,
@@ -47,8 +43,17 @@ rule tables:
         # the tables' sections and those the registered metrics declare (their settings)
         settings=epa_chain.tables_settings(EPA),
         version=EPA_VERSION,
-    script:
-        "../scripts/tables.py"
+    run:
+        grid_script(
+            "tables",
+            threads,
+            cases=params.cases,
+            results_dir=params.results,
+            settings=params.settings,
+            idle_truths=params.idle_truths,
+            log_path=log[0],
+            workers=threads,
+        )
 
 
 # provenance.json and config.resolved.yaml: what made the results (the whole resolved config, every
@@ -70,8 +75,6 @@ rule provenance:
         ),
     log:
         f"{RESULTS}/logs/provenance.log",
-    benchmark:
-        f"{RESULTS}/benchmarks/provenance.tsv"
     threads: 1
     resources:
         mem_mb=500,

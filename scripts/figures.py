@@ -2,7 +2,8 @@
 summary.csv, success_curves.csv and results/consistency/, and each dataset's from the per-case
 reports' files.
 
-Snakemake runs it for the ``figures`` rule (``script:``). It also runs on its own, on a results folder
+The ``figures`` rule calls :func:`write` in a worker of the workflow's pool (``run:``, where
+numpy, pandas and epa are imported already). It also runs on its own, on a results folder
 whose tables are written:
 
     python scripts/figures.py [--configfile config/config.yaml]
@@ -64,8 +65,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    if "snakemake" in globals():  # run by the figures rule
-        sm = globals()["snakemake"]
-        write(sm.params.results, sm.log[0], workers=sm.threads, per_dataset=sm.params.per_dataset)
-    else:
-        sys.exit(main())
+    sys.exit(main())

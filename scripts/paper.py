@@ -1,6 +1,7 @@
 """The paper rule's body: results/paper/ (every LaTeX table, every grid figure as PDF, paper.tex).
 
-Snakemake runs it for the ``paper`` rule (``script:``). It also runs on its own, on a results folder
+The ``paper`` rule calls :func:`write` in a worker of the workflow's pool (``run:``, where
+numpy, pandas and epa are imported already). It also runs on its own, on a results folder
 whose tables and figures are written:
 
     python scripts/paper.py [--configfile config/config.yaml]
@@ -42,8 +43,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    if "snakemake" in globals():  # run by the paper rule
-        sm = globals()["snakemake"]
-        write(sm.params.results, sm.params.captions, sm.log[0])
-    else:
-        sys.exit(main())
+    sys.exit(main())

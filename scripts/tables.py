@@ -3,7 +3,8 @@ tables, summary.csv, comparison.txt/.tex, results/consistency/; on its own also 
 config.resolved.yaml (what made them: docs/reproducibility.md; in the workflow the provenance rule
 writes these two).
 
-Snakemake runs it for the ``tables`` rule (``script:``). It also runs on its own, on a results folder
+The ``tables`` rule calls :func:`write` in a worker of the workflow's pool (``run:``, where
+numpy, pandas and epa are imported already). It also runs on its own, on a results folder
 a grid has filled, with the grid's config:
 
     python scripts/tables.py [--configfile config/config.yaml]
@@ -17,10 +18,11 @@ from pathlib import Path
 from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.outputs import provenance, tables
+from epa.readers import text
 
-try:  # pyarrow's reader parses every artifact from 32 KB on once it is imported (epa.artifacts.files)
-    import pyarrow.csv  # noqa: F401 - 0.05 s to import, where pandas took 0.3-0.5 s of the serial tail
-except ImportError:
+# pyarrow's reader parses every artifact from 32 KB on (epa.artifacts.files): 0.05 s to import,
+# where pandas took 0.3-0.5 s of the serial tail
+if not text.use_arrow():
     import pandas  # noqa: F401 - its C parser instead
 
 WORKFLOW_DIR = Path(__file__).resolve().parents[1]
@@ -80,15 +82,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    if "snakemake" in globals():  # run by the tables rule
-        sm = globals()["snakemake"]
-        write(
-            sm.params.cases,
-            sm.params.results,
-            sm.params.settings,
-            sm.params.idle_truths,
-            sm.log[0],
-            workers=sm.threads,
-        )
-    else:
-        sys.exit(main())
+    sys.exit(main())

@@ -496,3 +496,56 @@ def test_the_per_dataset_figures_of_a_real_euroc_grid(euroc_grid):
                 lo, hi = np.percentile(trans, [49, 51])
                 assert lo <= box["med"] <= hi, alg["label"]
     assert ("vislam_ba", "MH_01") in exact
+
+
+def test_the_report_documents_are_the_plain_encoders_text(case, tmp_path):
+    # metrics.json is composed of the records' texts and metrics_summary.csv joined by hand: each
+    # must be the bytes write_json and csv.writer write of the same values
+    import csv
+    import io
+
+    from epa.artifacts import files
+    from epa.outputs import report
+
+    doc = json.loads((case / "metrics.json").read_text())
+    files.write_json(tmp_path / "again.json", doc)
+    assert (case / "metrics.json").read_bytes() == (tmp_path / "again.json").read_bytes()
+
+    def by_csv_writer(d):
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(["section", "metric", "value"])
+        for s, m, v in report.summary_rows(d):
+            w.writerow([s, m, f"{v:.9g}" if isinstance(v, float) else v])
+        return buf.getvalue()
+
+    assert (case / "metrics_summary.csv").read_text() == by_csv_writer(doc)
+    odd = {"metrics": {"a,b": 1.5, 'q"x': {"y z": 2, "é": 3.0}, "": 4, "n": 0.1 + 0.2}}
+    assert report.summary_csv(odd) == by_csv_writer(odd)
+    assert '"a,b"' in report.summary_csv(odd)
+
+
+def test_an_overlay_drawn_into_a_kept_figure_is_the_fresh_one(tmp_path):
+    # a worker keeps one figure per layout; a tall trajectory narrows the overlay's views, and the
+    # next dataset's was drawn into the previous one's axes (its figure of the same height)
+    import numpy as np
+
+    from epa.core import runtime
+    from epa.outputs import figures
+
+    t = np.linspace(0, 2 * np.pi, 200)
+
+    def overlay(sx, sy):
+        xyz = np.column_stack([sx * np.cos(t), sy * np.sin(t), 0.1 * t])
+        line = {"label": "a", "run": "run0", "color": 0, "xyz": xyz + 0.05}
+        return figures.bundle("overlay", "o", {"dataset": "d", "ref": xyz, "lines": [line]})
+
+    # both as tall as an overlay gets, so of one figure height, each of its own width
+    other, tall = overlay(10.0, 20.0), overlay(5.0, 40.0)
+    runtime.reset()
+    figures.render(tall, tmp_path / "fresh", style="wide", formats=("png",))
+    runtime.reset()
+    figures.render(other, tmp_path / "first", style="wide", formats=("png",))
+    figures.render(tall, tmp_path / "kept", style="wide", formats=("png",))
+    runtime.reset()
+    assert (tmp_path / "kept.png").read_bytes() == (tmp_path / "fresh.png").read_bytes()

@@ -11,8 +11,10 @@ import os
 import random
 import re
 import tempfile
+import threading
 import warnings
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -532,9 +534,41 @@ def write_csv(path, columns: dict[str, np.ndarray], fmt: str = EXACT) -> None:
 
 
 def read_csv(path) -> dict[str, np.ndarray]:
+    kept = getattr(_ONCE, "kept", None)
+    if kept is None:
+        return _read_csv(path)
+    st = os.stat(path)
+    key = (st.st_dev, st.st_ino, st.st_mtime_ns, st.st_size)  # a rewrite is another file
+    if key not in kept:
+        kept[key] = _read_csv(path, read_only=True)
+    return dict(kept[key])
+
+
+def _read_csv(path, read_only: bool = False) -> dict[str, np.ndarray]:
     with open(path, encoding="utf-8") as fh:
         names = fh.readline().strip().split(",")
     rows = _numbers(path, ",", skip=1)
     if rows.size == 0:
         rows = np.zeros((0, len(names)))
+    if read_only:
+        rows.setflags(write=False)  # and so every column (a view)
     return {n: rows[:, k] for k, n in enumerate(names)}
+
+
+# The tables read while tables_once() is active in this thread, by file (read-only: no reader changes
+# what another reads). The report stage reads 06_metrics/rpe_segments.csv twice (its RPE box
+# bundle and its grid samples).
+_ONCE = threading.local()
+
+
+@contextmanager
+def tables_once():
+    """While inside, :func:`read_csv` parses each file once (this thread; nested: the outer scope)."""
+    if getattr(_ONCE, "kept", None) is not None:
+        yield
+        return
+    _ONCE.kept = {}
+    try:
+        yield
+    finally:
+        _ONCE.kept = None

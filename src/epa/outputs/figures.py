@@ -64,28 +64,47 @@ def _plain(obj):
 _NOT_FINITE = re.compile(r"-?\b(?:nan|inf)\b")
 
 
-def _json(obj) -> str:
+def _json(obj, memo: dict | None = None) -> str:
     """JSON with arrays at 7 significant digits (a figure needs no more) and NaN as null, formatted
-    in one call per array: element-by-element conversion cost more than drawing a figure."""
+    in one call per array: element-by-element conversion cost more than drawing a figure. ``memo``:
+    the text of each array already formatted, by its values (a case's bundles repeat some)."""
     if isinstance(obj, np.ndarray):
-        if obj.ndim > 2:
-            return "[" + ",".join(_json(row) for row in obj) + "]"
-        if not obj.size:
-            return "[" + ",".join("[]" for _ in range(len(obj))) + "]" if obj.ndim == 2 else "[]"
-        item = "%.7g," * obj.shape[-1]
-        if obj.ndim == 2:
-            item = "[" + item[:-1] + "],"
-        text = (item * (obj.size // obj.shape[-1]) % tuple(obj.ravel().tolist()))[:-1]
-        if not np.isfinite(obj).all():
-            text = _NOT_FINITE.sub("null", text)
-        return "[" + text + "]"
+        if memo is None or obj.size < MEMO_FROM:
+            return _array_json(obj)
+        key = (obj.shape, obj.dtype.str, obj.tobytes())
+        text = memo.get(key)
+        if text is None:
+            text = memo[key] = _array_json(obj)
+        return text
     if isinstance(obj, dict):  # keys as json.dumps(str(k)) writes them, without its per-call cost
-        return "{" + ",".join([_ESCAPE(str(k)) + ":" + _json(v) for k, v in obj.items()]) + "}"
+        return (
+            "{" + ",".join([_ESCAPE(str(k)) + ":" + _json(v, memo) for k, v in obj.items()]) + "}"
+        )
     if isinstance(obj, list):
-        return "[" + ",".join([_json(v) for v in obj]) + "]"
+        return "[" + ",".join([_json(v, memo) for v in obj]) + "]"
     if type(obj) is float and obj - obj == 0:  # finite: json.dumps' text
         return float.__repr__(obj)
     return json.dumps(obj)
+
+
+# arrays from this size on are looked up in a memo: the steps bundle repeats the trajectory
+# bundle's reference and estimate (a third of a case's bundle text)
+MEMO_FROM = 256
+
+
+def _array_json(obj: np.ndarray) -> str:
+    """An array's JSON text (:func:`_json`)."""
+    if obj.ndim > 2:
+        return "[" + ",".join(_array_json(row) for row in obj) + "]"
+    if not obj.size:
+        return "[" + ",".join("[]" for _ in range(len(obj))) + "]" if obj.ndim == 2 else "[]"
+    item = "%.7g," * obj.shape[-1]
+    if obj.ndim == 2:
+        item = "[" + item[:-1] + "],"
+    text = (item * (obj.size // obj.shape[-1]) % tuple(obj.ravel().tolist()))[:-1]
+    if not np.isfinite(obj).all():
+        text = _NOT_FINITE.sub("null", text)
+    return "[" + text + "]"
 
 
 _ESCAPE = json.encoder.encode_basestring_ascii
@@ -103,8 +122,9 @@ def bundle(kind: str, title: str, data: dict, **meta) -> dict:
     }
 
 
-def write_bundle(path, b: dict) -> None:
-    files.write_text(path, _json(b) + "\n")
+def write_bundle(path, b: dict, memo: dict | None = None) -> None:
+    """``memo``: shared by the bundles of one case (:func:`_json`)."""
+    files.write_text(path, _json(b, memo) + "\n")
 
 
 def read_bundle(path) -> dict:
@@ -314,7 +334,9 @@ def _top_over_side(plt, kind, w, left, aw, bottom, side, gap, th, top):
         ax_top.tick_params(labelbottom=False)
         return fig
 
-    return _layout(plt, kind, (w, fh), make)
+    # every number of the geometry: a kept figure of another width of view (an overlay's narrows
+    # with a tall trajectory) drew the next dataset into the previous one's axes
+    return _layout(plt, kind, (w, fh, left, aw, bottom, side, gap, th), make)
 
 
 def _arr(x):

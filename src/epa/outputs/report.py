@@ -12,6 +12,7 @@ import csv
 import hashlib
 import io as _io
 import json
+import re
 import zipfile
 from pathlib import Path
 
@@ -39,11 +40,12 @@ def time_zero(data: CaseData) -> float:
     return float(data.matched[0].t[0])
 
 
-def case_bundles(data: CaseData) -> dict[str, dict]:
-    """Every per-case figure's bundle, from a case's artifacts."""
+def case_bundles(data: CaseData, doc: dict | None = None) -> dict[str, dict]:
+    """Every per-case figure's bundle, from a case's artifacts (``doc``: its document, where it
+    has been read: :meth:`CaseData.document`)."""
     p = data.folder.path
     ref, aligned, ape, fail = data.matched[0], data.aligned, data.ape, data.fail_segments
-    drift = files.read_json(p("drift", "drift.json"))
+    drift = doc["drift"] if doc and "drift" in doc else files.read_json(p("drift", "drift.json"))
     sync = files.read_json(p("sync", "sync.json"))
     t0 = time_zero(data)
     k = figures.thin(len(ref))
@@ -108,13 +110,14 @@ def case_bundles(data: CaseData) -> dict[str, dict]:
 
 
 # ----------------------------------------------------------------------------- documents
-def _numbers(prefix: str, obj):
-    """(dotted name, value) of every number in a nested record."""
+def _numbers(prefix: str, obj, out: list) -> list:
+    """(dotted name, value) of every number in a nested record, appended to ``out`` in order."""
     if isinstance(obj, dict):
         for k, v in obj.items():
-            yield from _numbers(f"{prefix}.{k}" if prefix else str(k), v)
+            _numbers(f"{prefix}.{k}" if prefix else str(k), v, out)
     elif isinstance(obj, (int, float)) and not isinstance(obj, bool):
-        yield prefix, obj
+        out.append((prefix, obj))
+    return out
 
 
 SETTINGS_AND_MATRICES = ("load", "sync", "calibrate", "alignment", "thresholds", "rpe")
@@ -126,17 +129,29 @@ def summary_rows(doc: dict) -> list[tuple[str, str, float]]:
         (section, name, value)
         for section, record in doc.items()
         for name, value in _numbers(
-            "", {k: v for k, v in record.items() if k not in SETTINGS_AND_MATRICES}
+            "", {k: v for k, v in record.items() if k not in SETTINGS_AND_MATRICES}, []
         )
     ]
 
 
+# fields csv.writer writes as they are (no quotes): what the names of a record are
+_PLAIN_FIELDS = re.compile(r"[\w.+-]*", re.ASCII)
+
+
 def summary_csv(doc: dict) -> str:
+    """metrics_summary.csv: csv.writer's text, joined here where no name needs quotes (a
+    csv.writer call a row was most of the file's cost)."""
+    rows = summary_rows(doc)
+    values = [f"{v:.9g}" if isinstance(v, float) else str(v) for _, _, v in rows]
+    names = [f"{section},{metric}" for section, metric, _ in rows]
+    if all(s and m for s, m, _ in rows) and _PLAIN_FIELDS.fullmatch(
+        ".".join(names).replace(",", ".")
+    ):
+        return "".join(["section,metric,value\n", *(f"{n},{v}\n" for n, v in zip(names, values))])
     buf = _io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["section", "metric", "value"])
-    for section, metric, value in summary_rows(doc):
-        w.writerow([section, metric, f"{value:.9g}" if isinstance(value, float) else value])
+    w.writerows([(s, m, v) for (s, m, _), v in zip(rows, values)])
     return buf.getvalue()
 
 
@@ -206,16 +221,19 @@ def write_case_report(data: CaseData, name: str, cfg: dict) -> dict:
     c = cfg["report"]
     case = data.folder
     folder = case.path("report", "report.json").parent
-    doc = data.document()
-    files.write_json(folder / "metrics.json", doc)
+    doc, text = case.document_text(type(data).DOCUMENT)  # write_json's text of doc
+    files.write_text(folder / "metrics.json", text)
     files.write_text(folder / "metrics_summary.csv", summary_csv(doc))
     # Figures cost most of a report (0.7 s a case): by default only the cases a reader opens first,
     # those drift detection failed, are drawn; every case keeps its bundles.
-    bundles = case_bundles(data)
+    with files.tables_once():  # both read 06_metrics/rpe_segments.csv
+        bundles = case_bundles(data, doc)
+        # what the grid's per-dataset figures read of this case (its relative errors, thinned)
+        samples = dataset_figures.case_samples(case)
+    memo: dict = {}  # the steps bundle repeats the trajectory bundle's arrays
     for fig_name, b in bundles.items():
-        figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b)
-    # what the grid's per-dataset figures read of this case (its relative errors, thinned)
-    figures.write_bundle(folder / dataset_figures.SAMPLES_FILE, dataset_figures.case_samples(case))
+        figures.write_bundle(folder / "bundles" / f"{fig_name}.json", b, memo)
+    figures.write_bundle(folder / dataset_figures.SAMPLES_FILE, samples)
     why = flags(doc)
     draw = c["figures"] == "all" or (c["figures"] == "flagged" and failed(doc))
     drawn = list(bundles) if draw else []

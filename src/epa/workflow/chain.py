@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -92,7 +93,13 @@ def derive(stages: tuple[Stage, ...]) -> Derived:
 
 def declared() -> Derived:
     """The chain of the stage list as it is now (each stage module's ``STAGE``)."""
-    modules = (importlib.import_module(f"{__package__}.stages.{name}") for name in stage_list.ORDER)
+    # sys.modules first: import_module's own lookups were most of a call, and a workflow job makes
+    # a few calls a case
+    loaded = sys.modules
+    modules = (
+        loaded.get(module) or importlib.import_module(module)
+        for module in (f"{__package__}.stages.{name}" for name in stage_list.ORDER)
+    )
     return derive(tuple(module.STAGE for module in modules))
 
 
