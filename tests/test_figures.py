@@ -147,6 +147,29 @@ def test_a_kept_font_subset_gives_the_bytes_matplotlib_writes(case, tmp_path, mo
         assert kept[0][name].read_bytes() == own == kept[1][name].read_bytes(), name
 
 
+def test_a_png_holds_the_pixels_matplotlib_writes(case, tmp_path, monkeypatch):
+    """figures._write_png encodes Agg's pixels itself (RGB, unfiltered rows): decoded, every case
+    figure is matplotlib's own PNG without its alpha channel, which is opaque, at the same dpi."""
+    import numpy as np
+    from PIL import Image
+
+    from epa.outputs import figures
+
+    bundles = {p.stem: figures.read_bundle(p) for p in sorted((case / "bundles").glob("*.json"))}
+    ours = {
+        n: figures.render(b, tmp_path / "ours" / n, formats=("png",))[0] for n, b in bundles.items()
+    }
+    monkeypatch.setattr(figures, "_write_png", lambda fig, path: fig.savefig(path, format="png"))
+    for name, b in bundles.items():
+        theirs = Image.open(figures.render(b, tmp_path / "theirs" / name, formats=("png",))[0])
+        mine = Image.open(ours[name])
+        assert (mine.mode, theirs.mode) == ("RGB", "RGBA") and mine.size == theirs.size, name
+        assert mine.info["dpi"] == theirs.info["dpi"] == pytest.approx((150, 150), abs=0.02)
+        pixels = np.asarray(theirs)
+        assert (pixels[..., 3] == 255).all(), name
+        assert np.array_equal(np.asarray(mine), pixels[..., :3]), name
+
+
 @pytest.mark.parametrize(
     "content,message",
     [

@@ -313,17 +313,16 @@ def render(
         except OSError as exc:
             raise EpaError(f"cannot write: {exc.strerror}", path=str(path)) from None
         tmp = path.with_name("." + path.name + ".tmp")
-        # no creation date: the same bundle gives the same bytes (re-runs and batching compare equal)
-        meta = {"CreationDate": None} if fmt == "pdf" else {}
-        # fixed margins, not bbox_inches="tight": that draws the figure twice (half the cost of a figure);
-        # fast PNG compression: a few ms less per figure, for 11 % more bytes
-        with plt.rc_context({"axes.unicode_minus": False} if b["kind"] in ASCII_MINUS else {}):
-            fig.savefig(
-                tmp,
-                format=fmt,
-                metadata=meta,
-                **({"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}),
-            )
+        # fixed margins, not bbox_inches="tight": that draws the figure twice (half the cost of a
+        # figure); fast PDF stream compression: 7-15 ms less a figure, for 8 % more bytes
+        rc = {"pdf.compression": 1}
+        if b["kind"] in ASCII_MINUS:
+            rc["axes.unicode_minus"] = False
+        with plt.rc_context(rc):
+            if fmt == "png":
+                _write_png(fig, tmp)
+            else:  # no creation date: the same bundle gives the same bytes (re-runs compare equal)
+                fig.savefig(tmp, format=fmt, metadata={"CreationDate": None})
         tmp.replace(path)
         out.append(path)
     key = getattr(fig, "_epa_layout", None)
@@ -332,6 +331,44 @@ def render(
     else:
         _KEPT[key] = fig
     return out
+
+
+def _write_png(fig, path) -> None:
+    """The figure as an opaque 8-bit RGB PNG at ``savefig.dpi``: Agg's pixels without their alpha
+    (the figure is opaque), every row unfiltered, zlib level 1. Pillow's RGBA PNG took 22 ms of a
+    figure's 0.1 s; this 10-13 ms, and its files are a quarter smaller (plots are mostly flat)."""
+    import io
+    import struct
+    import zlib
+
+    import matplotlib
+
+    dpi = matplotlib.rcParams["savefig.dpi"]
+    raw = io.BytesIO()
+    fig.savefig(raw, format="rgba", dpi=dpi)
+    width = int(fig.get_figwidth() * dpi)
+    rgba = np.frombuffer(raw.getbuffer(), np.uint8).reshape(-1, width, 4)
+    rows = np.zeros((len(rgba), 1 + 3 * width), np.uint8)  # each row: filter 0 (none), its pixels
+    rows[:, 1:].reshape(len(rgba), width, 3)[:] = rgba[..., :3]
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
+
+    per_metre = round(dpi / 0.0254)
+    software = f"Software\0Matplotlib version{matplotlib.__version__}, https://matplotlib.org/"
+    png = b"".join(
+        [
+            b"\x89PNG\r\n\x1a\n",
+            chunk(b"IHDR", struct.pack(">IIBBBBB", width, len(rgba), 8, 2, 0, 0, 0)),
+            chunk(b"tEXt", software.encode("latin-1")),
+            chunk(b"pHYs", struct.pack(">IIB", per_metre, per_metre, 1)),
+            chunk(b"IDAT", zlib.compress(rows.data, 1)),
+            chunk(b"IEND", b""),
+        ]
+    )
+    Path(path).write_bytes(png)
 
 
 def _no_ligatures(fig) -> None:
