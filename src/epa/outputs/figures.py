@@ -254,8 +254,16 @@ def _empty(fig) -> None:
             ax.set_title("", loc=loc)
         ax.set_xlabel("")
         ax.set_ylabel("")
-        ax.set_xscale("linear")  # default locators and formatters (a box plot leaves fixed ones)
-        ax.set_yscale("linear")
+        # default locators and formatters (a box plot leaves fixed ones, a log axis its own);
+        # resetting an axis already at its defaults cost a fifth of making a figure's artists
+        for axis, set_scale in ((ax.xaxis, ax.set_xscale), (ax.yaxis, ax.set_yscale)):
+            if axis.get_scale() != "linear" or not (
+                axis.isDefault_majloc
+                and axis.isDefault_minloc
+                and axis.isDefault_majfmt
+                and axis.isDefault_minfmt
+            ):
+                set_scale("linear")
         ax.set_aspect("auto", adjustable="box")
         ax.set_prop_cycle(None)
         ax.relim()
@@ -793,6 +801,8 @@ def _key(ax, left: float, top: float, entries, *, title=None, ncols: int = 1) ->
                 colors.append(style["color"])
                 widths.append(style["lw"])
             ax.text(x0 + handle + pad, yc, label, transform=inches, fontsize=pt, va="center")
+        if c + per_col >= len(entries):
+            break  # the last column: nothing beside it to place
         longest = max(
             text_to_path.get_text_width_height_descent(t, prop, False)[0] for t, _ in column
         )
@@ -810,7 +820,9 @@ def _overlay(plt, b, w, h):
     and says so in the legend, instead of shrinking the others to a dot. The legend, titled with
     the dataset, is beside the top view: a trajectory fills its axes. A panel's lines are one
     collection (the reference first, beneath)."""
-    from matplotlib.collections import LineCollection
+    from matplotlib.collections import LineCollection, PathCollection
+    from matplotlib.markers import MarkerStyle
+    from matplotlib.transforms import IdentityTransform
 
     d = b["data"]
     colors = d.get("colors") or OKABE_ITO
@@ -845,11 +857,24 @@ def _overlay(plt, b, w, h):
                 ),
                 autolim=False,
             )
-        if ends:  # one scatter for the starts, one for the ends: not a line per marker
-            for k, marker in ((0, "o"), (-1, "s")):
-                pts = np.array([xyz[k, [0, j]] for xyz, _ in ends])
-                kw = {"marker": marker, "s": 16, "edgecolors": "white", "linewidths": 0.5}
-                ax.scatter(pts[:, 0], pts[:, 1], c=[c for _, c in ends], zorder=3, **kw)
+        for k, marker in ((0, "o"), (-1, "s")) if ends else ():
+            # one collection for the starts, one for the ends: what ax.scatter makes, without
+            # its handling of every other argument (a third of making the overlay's artists)
+            style = MarkerStyle(marker)
+            ax.add_collection(
+                PathCollection(
+                    [style.get_path().transformed(style.get_transform())],
+                    sizes=[16],
+                    facecolors=[c for _, c in ends],
+                    edgecolors="white",
+                    linewidths=0.5,
+                    offsets=np.array([xyz[k, [0, j]] for xyz, _ in ends]),
+                    offset_transform=ax.transData,
+                    transform=IdentityTransform(),
+                    zorder=3,
+                ),
+                autolim=False,
+            )
         ax.set_ylabel(label)
     # to scale: the top view's y range is its x range times its height over its width (never less
     # than the view's: th >= aw * ratio above), set here rather than by an equal aspect, which would
