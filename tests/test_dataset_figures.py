@@ -50,6 +50,26 @@ def test_thinned_runs_weigh_by_their_segments():
     assert df.order_statistics([1.0, np.nan, np.inf, 2.0])[0] == 2
 
 
+def test_thinned_runs_are_interpolated_as_one_call_per_run_would_bit_for_bit():
+    """box_stats interpolates every thinned run in one np.interp call: the same doubles as a call
+    per run onto its own ranks, so the quartiles and whiskers are those of the runs' segments."""
+    rng = np.random.default_rng(5)
+    parts = [df.order_statistics(rng.gamma(2.0, 0.1, n)) for n in (354, 1000, 60, 5000, 102, 7)]
+    per_run = np.concatenate(
+        [
+            q if len(q) == n else np.interp(np.arange(n), figures.thin(n, len(q)), q)
+            for n, q in parts
+        ]
+    )
+    q1, med, q3 = np.percentile(per_run, [25, 50, 75])
+    iqr = q3 - q1
+    s = df.box_stats(parts)
+    assert (s["q1"], s["med"], s["q3"]) == (q1, med, q3)
+    assert s["whislo"] == per_run[per_run >= q1 - 1.5 * iqr].min()
+    assert s["whishi"] == per_run[per_run <= q3 + 1.5 * iqr].max()
+    assert (s["n"], s["runs"]) == (len(per_run), 6) == (6523, 6)
+
+
 def test_the_median_run_is_the_lower_middle_ate():
     rows = [
         {"run": "r1", "ate_trans_rmse_m": "0.3"},
