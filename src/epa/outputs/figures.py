@@ -776,16 +776,16 @@ def _key(ax, left: float, top: float, entries, *, title=None, ncols: int = 1) ->
     pt = float(rc["legend.fontsize"])
     em = pt / 72  # inches
     prop = FontProperties(size=pt)
-    # a row: a label's height (one font size for DejaVu Sans, as matplotlib measures it) and the
-    # space between rows; the title's middle 0.46 of its size below the top, the first row's 11 pt
-    # below that (matplotlib's legend, measured at 8 pt)
+    # a row: a label's height (1.01 font sizes for DejaVu Sans, as matplotlib measures it) and the
+    # space between rows; the title's middle 0.46 of its size below the top, then half its height
+    # and the space between rows above the first row (matplotlib's legend, measured at 8/7 pt)
     pitch = (1.01 + rc["legend.labelspacing"]) * em
     x0, y = left + rc["legend.borderpad"] * em, top - rc["legend.borderpad"] * em
     if title:
         size = float(rc["font.size"])
         middle = y - 0.46 * size / 72
         ax.text(x0, middle, title, transform=inches, fontsize=size, va="center", ha="left")
-        y = middle - 11 / 72 + 0.5 * pitch
+        y = middle - 0.505 * size / 72 - 0.5 * rc["legend.labelspacing"] * em
     per_col = -(-len(entries) // max(ncols, 1))
     handle, pad = rc["legend.handlelength"] * em, rc["legend.handletextpad"] * em
     segments, colors, widths = [], [], []
@@ -808,7 +808,13 @@ def _key(ax, left: float, top: float, entries, *, title=None, ncols: int = 1) ->
         )
         x0 += handle + pad + longest / 72 + rc["legend.columnspacing"] * em
     if segments:
-        lc = LineCollection(segments, colors=colors, linewidths=widths, transform=inches)
+        lc = LineCollection(
+            segments,
+            colors=colors,
+            linewidths=widths,
+            capstyle=rc["lines.solid_capstyle"],  # as a legend's line handle
+            transform=inches,
+        )
         ax.add_collection(lc, autolim=False).set_clip_on(False)
 
 
