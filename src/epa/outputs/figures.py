@@ -838,8 +838,8 @@ def _overlay(plt, b, w, h):
     ratio = (hi[1] - lo[1]) / (hi[0] - lo[0])
     # the top view at least as tall as the view at this width (the equal aspect then widens y,
     # never cuts it: x is shared); a tall trajectory narrows both views instead. Both in steps of
-    # 0.05 in (the width rounded down, the height up), as the case figure's: datasets of one shape
-    # share a layout (kept figures are told apart by both).
+    # 0.05 in (the width rounded down, the height up), as the case figure's; a kept figure is
+    # resized to each (_top_over_side).
     narrow = np.floor(most / ratio / 0.05) * 0.05
     aw = min(aw, narrow if narrow > 0 else most / ratio)
     th = float(np.ceil(np.clip(aw * ratio, 1.2, most) / 0.05 - 1e-9) * 0.05)
@@ -851,7 +851,8 @@ def _overlay(plt, b, w, h):
         color = colors[line.get("color", k) % len(colors)]
         drawn.append((xyz, color, 0.9))
         entries.append((name, {"color": color, "lw": 0.9}))
-    ends = [(xyz, "0.55" if c == "0.75" else c) for xyz, c, _ in drawn if len(xyz)]
+    ends = [(ref, "0.55")] if len(ref) else []
+    ends += [(xyz, c) for xyz, c, _ in drawn[len(ends) :] if len(xyz)]
     for ax, j, label in ((ax_top, 1, "y [m]"), (ax_side, 2, "z [m]")):
         if drawn:
             ax.add_collection(
@@ -904,7 +905,7 @@ def _boxes(plt, b, w, h):
     """Boxes per algorithm at each segment length: translation beside rotation, from box statistics
     (``med``, ``q1``, ``q3``, ``whislo``, ``whishi``) computed over the pooled segments. Drawn as
     a few paths a panel (the whiskers and caps, the medians, each algorithm's boxes): a PDF writes
-    each path of a collection on its own, so 700 small ones cost more than the rest of the figure."""
+    each path of a collection on its own, 720 a panel for 10 algorithms at 6 lengths otherwise."""
     from matplotlib.collections import PathCollection
     from matplotlib.path import Path as MplPath
 
