@@ -818,6 +818,32 @@ def _key(ax, left: float, top: float, entries, *, title=None, ncols: int = 1) ->
         ax.add_collection(lc, autolim=False).set_clip_on(False)
 
 
+def _ends(ax, ends, j: int) -> None:
+    """The lines' starts (circles) and ends (squares) in x and coordinate ``j``: one collection
+    each, what ax.scatter makes, without its handling of every other argument (a third of making
+    the overlay's artists). ``ends``: ``(xyz, colour)`` per line."""
+    from matplotlib.collections import PathCollection
+    from matplotlib.markers import MarkerStyle
+    from matplotlib.transforms import IdentityTransform
+
+    for k, marker in ((0, "o"), (-1, "s")):
+        style = MarkerStyle(marker)
+        ax.add_collection(
+            PathCollection(
+                [style.get_path().transformed(style.get_transform())],
+                sizes=[16],
+                facecolors=[c for _, c in ends],
+                edgecolors="white",
+                linewidths=0.5,
+                offsets=np.array([xyz[k, [0, j]] for xyz, _ in ends]),
+                offset_transform=ax.transData,
+                transform=IdentityTransform(),
+                zorder=3,
+            ),
+            autolim=False,
+        )
+
+
 def _overlay(plt, b, w, h):
     """A dataset's trajectories: the reference and one line per algorithm, top view to scale (its
     height follows the data) over a side view stretched in z; start (circle) and end (square) marked.
@@ -826,9 +852,7 @@ def _overlay(plt, b, w, h):
     and says so in the legend, instead of shrinking the others to a dot. The legend, titled with
     the dataset, is beside the top view: a trajectory fills its axes. A panel's lines are one
     collection (the reference first, beneath)."""
-    from matplotlib.collections import LineCollection, PathCollection
-    from matplotlib.markers import MarkerStyle
-    from matplotlib.transforms import IdentityTransform
+    from matplotlib.collections import LineCollection
 
     d = b["data"]
     colors = d.get("colors") or OKABE_ITO
@@ -864,24 +888,8 @@ def _overlay(plt, b, w, h):
                 ),
                 autolim=False,
             )
-        for k, marker in ((0, "o"), (-1, "s")) if ends else ():
-            # one collection for the starts, one for the ends: what ax.scatter makes, without
-            # its handling of every other argument (a third of making the overlay's artists)
-            style = MarkerStyle(marker)
-            ax.add_collection(
-                PathCollection(
-                    [style.get_path().transformed(style.get_transform())],
-                    sizes=[16],
-                    facecolors=[c for _, c in ends],
-                    edgecolors="white",
-                    linewidths=0.5,
-                    offsets=np.array([xyz[k, [0, j]] for xyz, _ in ends]),
-                    offset_transform=ax.transData,
-                    transform=IdentityTransform(),
-                    zorder=3,
-                ),
-                autolim=False,
-            )
+        if ends:
+            _ends(ax, ends, j)
         ax.set_ylabel(label)
     # to scale: the top view's y range is its x range times its height over its width (never less
     # than the view's: th >= aw * ratio above), set here rather than by an equal aspect, which would
