@@ -9,7 +9,10 @@ docs/performance.md and the closing note, never in a timed test.
 2. In one process: the time to build each case figure's bundle and to draw each kind (median over
    the example's cases, after matplotlib is imported), and bytes per case folder.
 3. With ``--grid RESULTS`` (a grid's results folder, its cases' reports written) only: the grid
-   figures in one process, CPU and wall seconds, without and with the per-dataset figures
+   figures (two forked workers), CPU and wall seconds, without and with the per-dataset figures;
+   then one dataset's cost in one process once its figures' layouts are kept (what each further
+   dataset of a large grid costs a worker): reading its cases, and drawing its two figures as PNG
+   and PDF with their bundles, CPU seconds, best of 3 passes over every dataset
    (docs/performance.md, "The per-dataset figures").
 """
 
@@ -139,6 +142,47 @@ def grid_figures(results: Path, workers: int = 2, repeat: int = 2) -> dict:
     return {"five figures": out[False], "with the per-dataset figures": out[True]}
 
 
+def per_dataset(results: Path, repeat: int = 3) -> dict:
+    """CPU seconds a dataset costs in one process, its layouts kept: reading its cases' files into
+    its two bundles, and drawing them (PNG and PDF, bundles written); best of ``repeat`` passes."""
+    import resource
+
+    from epa.outputs import dataset_figures, figures, tables
+
+    def cpu():
+        r = resource.getrusage(resource.RUSAGE_SELF)
+        return r.ru_utime + r.ru_stime
+
+    figures.prepare("wide")
+    cells = dataset_figures.cells_by_dataset(
+        dataset_figures.read_summary(results / "summary.csv"), tables.has_result
+    )
+    read, draw = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp)
+        for name, b in dataset_figures.dataset_bundles(results, *cells[0]).items():
+            figures.render(b, out / name, style="wide")  # the layouts, made once
+        for _ in range(repeat):
+            t_read = t_draw = 0.0
+            for d, here in cells:
+                c = cpu()
+                bundles = dataset_figures.dataset_bundles(results, d, here)
+                t_read, c = t_read + cpu() - c, cpu()
+                for name, b in bundles.items():
+                    figures.write_bundle(out / "bundles" / f"{name}.json", b)
+                    figures.render(b, out / name, style="wide")
+                t_draw += cpu() - c
+            read.append(t_read / len(cells))
+            draw.append(t_draw / len(cells))
+    cases = sum(len(runs) for _, here in cells for _, _, runs in here) / len(cells)
+    return {
+        "datasets": len(cells),
+        "cases per dataset": cases,
+        "read s": round(min(read), 4),
+        "draw s": round(min(draw), 4),
+    }
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, help="working folder (default: a temporary one)")
@@ -146,6 +190,7 @@ def main():
     args = ap.parse_args()
     if args.grid:
         print("grid figures (wall s, CPU s):", grid_figures(args.grid))
+        print("one dataset, in one process (CPU s):", per_dataset(args.grid))
         return
     tmp = args.out or Path(tempfile.mkdtemp(prefix="epa-figbench-"))
     tmp.mkdir(parents=True, exist_ok=True)

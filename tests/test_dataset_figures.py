@@ -50,6 +50,26 @@ def test_thinned_runs_weigh_by_their_segments():
     assert df.order_statistics([1.0, np.nan, np.inf, 2.0])[0] == 2
 
 
+def test_thinned_runs_are_interpolated_as_one_call_per_run_would_bit_for_bit():
+    """box_stats interpolates every thinned run in one np.interp call: the same doubles as a call
+    per run onto its own ranks, so the quartiles and whiskers are those of the runs' segments."""
+    rng = np.random.default_rng(5)
+    parts = [df.order_statistics(rng.gamma(2.0, 0.1, n)) for n in (354, 1000, 60, 5000, 102, 7)]
+    per_run = np.concatenate(
+        [
+            q if len(q) == n else np.interp(np.arange(n), figures.thin(n, len(q)), q)
+            for n, q in parts
+        ]
+    )
+    q1, med, q3 = np.percentile(per_run, [25, 50, 75])
+    iqr = q3 - q1
+    s = df.box_stats(parts)
+    assert (s["q1"], s["med"], s["q3"]) == (q1, med, q3)
+    assert s["whislo"] == per_run[per_run >= q1 - 1.5 * iqr].min()
+    assert s["whishi"] == per_run[per_run <= q3 + 1.5 * iqr].max()
+    assert (s["n"], s["runs"]) == (len(per_run), 6) == (6523, 6)
+
+
 def test_the_median_run_is_the_lower_middle_ate():
     rows = [
         {"run": "r1", "ate_trans_rmse_m": "0.3"},
@@ -250,3 +270,70 @@ def test_a_bad_samples_file_is_one_line_naming_it(tmp_path, content):
         df.grid_bundles(tmp_path, df.read_summary(tmp_path / "summary.csv"), tables.has_result)
     line = err.value.one_line()
     assert str(path) in line and "not a grid samples file" in line and "\n" not in line
+
+
+def _overlay_bundle(dataset, xy_scale, k):
+    t = np.linspace(0.0, 6.0, 300)
+    ref = np.c_[xy_scale[0] * np.sin(t), xy_scale[1] * np.cos(t), 0.1 * t]
+    lines = [
+        {
+            "label": f"alg{a}",
+            "run": "run1",
+            "color": a,
+            "xyz": ref + 0.05 * (a + k) * np.sin(3 * t)[:, None],
+        }
+        for a in range(3)
+    ]
+    return figures.bundle(
+        "overlay",
+        "t",
+        {"dataset": dataset, "ref": ref, "lines": lines, "colors": figures.OKABE_ITO},
+    )
+
+
+def _boxes_bundle(dataset, n_alg, spread):
+    algs = [
+        {
+            "label": f"alg{a}",
+            "color": a,
+            "trans": [
+                df.box_stats([(5, np.array([1.0, 2.0, 3.0, 4.0, 5.0]) * spread**a * L)])
+                for L in (1, 2)
+            ],
+            "rot": [df.box_stats([(3, np.array([0.1, 0.2, 0.4]) * L)]) for L in (1, 2)],
+        }
+        for a in range(n_alg)
+    ]
+    data = {
+        "dataset": dataset,
+        "lengths": [8.0, 16.0],
+        "algorithms": algs,
+        "ylabels": ["t [m]", "r [deg]"],
+    }
+    return figures.bundle("boxes", "t", data)
+
+
+def test_a_reused_dataset_figure_gives_the_same_bytes_as_a_new_one(tmp_path):
+    """A worker draws dataset after dataset into one kept figure per layout (figures._KEPT),
+    resized for each overlay's shape (a wide one, then a tall one whose views are narrower): what
+    it writes must not depend on what it drew before, legends and log axes included."""
+    import matplotlib.pyplot as plt
+
+    def fresh():
+        for fig in figures._KEPT.values():
+            plt.close(fig)
+        figures._KEPT.clear()
+
+    first = [_overlay_bundle("wide", (4.0, 1.0), 0), _boxes_bundle("a", 3, 1.0)]
+    second = [_overlay_bundle("tall", (1.0, 6.0), 1), _boxes_bundle("b", 2, 1000.0)]
+    fresh()
+    for k, b in enumerate(first):
+        figures.render(b, tmp_path / "first" / str(k), style="wide")
+    assert len(figures._KEPT) == 2
+    reused = [
+        figures.render(b, tmp_path / "reused" / str(k), style="wide") for k, b in enumerate(second)
+    ]
+    for k, b in enumerate(second):
+        fresh()
+        for new, old in zip(figures.render(b, tmp_path / "new" / str(k), style="wide"), reused[k]):
+            assert new.read_bytes() == old.read_bytes(), old.name

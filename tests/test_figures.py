@@ -118,6 +118,58 @@ def test_a_reused_figure_gives_the_same_bytes_as_a_new_one(case, tmp_path):
             assert new.read_bytes() == old.read_bytes(), old.name
 
 
+def test_a_kept_font_subset_gives_the_bytes_matplotlib_writes(case, tmp_path, monkeypatch):
+    """A PDF's font subset is made once per set of glyphs in a process (figures._SUBSETS) and given
+    again: every PDF is the one matplotlib writes when it subsets the font itself."""
+    from matplotlib.backends import _backend_pdf_ps as pdf_ps
+
+    from epa.outputs import figures
+
+    figures.prepare()
+    if not hasattr(pdf_ps.get_glyphs_subset, "epa_kept"):
+        pytest.skip("matplotlib before 3.11 subsets fonts through another function: not patched")
+    bundles = {p.stem: figures.read_bundle(p) for p in sorted((case / "bundles").glob("*.json"))}
+    figures._SUBSETS.clear()
+    kept, made = {}, []
+    for rep in range(2):  # the second time, every subset is a kept one
+        kept[rep] = {
+            n: figures.render(b, tmp_path / f"kept{rep}" / n, formats=("pdf",))[0]
+            for n, b in bundles.items()
+        }
+        made.append(set(figures._SUBSETS))
+    assert made[0] and made[1] == made[0]
+    monkeypatch.setattr(pdf_ps, "get_glyphs_subset", pdf_ps.get_glyphs_subset.__wrapped__)
+    monkeypatch.setattr(pdf_ps, "font_as_file", pdf_ps.font_as_file.__wrapped__)
+    monkeypatch.setattr(figures, "_keep_font_subsets", lambda: None)
+    for name, b in bundles.items():
+        own = figures.render(b, tmp_path / "own" / name, formats=("pdf",))[0].read_bytes()
+        assert b"FontFile2" in own, name  # a TrueType font embedded
+        assert kept[0][name].read_bytes() == own == kept[1][name].read_bytes(), name
+
+
+def test_a_png_holds_the_pixels_matplotlib_writes(case, tmp_path, monkeypatch):
+    """figures._write_png encodes Agg's pixels itself (RGB, unfiltered rows): decoded, every case
+    figure is matplotlib's own PNG without its alpha channel, which is opaque, at the same dpi."""
+    import numpy as np
+    from PIL import Image
+
+    from epa.outputs import figures
+
+    bundles = {p.stem: figures.read_bundle(p) for p in sorted((case / "bundles").glob("*.json"))}
+    ours = {
+        n: figures.render(b, tmp_path / "ours" / n, formats=("png",))[0] for n, b in bundles.items()
+    }
+    monkeypatch.setattr(figures, "_write_png", lambda fig, path: fig.savefig(path, format="png"))
+    for name, b in bundles.items():
+        theirs = Image.open(figures.render(b, tmp_path / "theirs" / name, formats=("png",))[0])
+        mine = Image.open(ours[name])
+        assert (mine.mode, theirs.mode) == ("RGB", "RGBA") and mine.size == theirs.size, name
+        assert mine.info["dpi"] == theirs.info["dpi"] == pytest.approx((150, 150), abs=0.02)
+        pixels = np.asarray(theirs)
+        assert (pixels[..., 3] == 255).all(), name
+        assert np.array_equal(np.asarray(mine), pixels[..., :3]), name
+
+
 @pytest.mark.parametrize(
     "content,message",
     [

@@ -18,6 +18,7 @@ are no more), about 13 kB a case.
 from __future__ import annotations
 
 import csv
+import functools
 import json
 from pathlib import Path
 
@@ -104,14 +105,25 @@ def box_stats(parts) -> dict | None:
         is stored. Otherwise a run's segments between two stored ones are taken as evenly spread
         in value between them (each stored value keeps its rank).
     """
-    pooled = [
-        q if len(q) == n else np.interp(np.arange(n), figures.thin(n, len(q)), q)
-        for n, q in ((int(n), np.asarray(q, float)) for n, q in parts)
-        if n and len(q)
-    ]
-    if not pooled:
+    runs = [(n, q) for n, q in ((int(n), np.asarray(q, float)) for n, q in parts) if n and len(q)]
+    if not runs:
         return None
-    x = np.concatenate(pooled)
+    pooled = [q for n, q in runs if len(q) == n]
+    thinned = [(n, q) for n, q in runs if len(q) != n]
+    if thinned:
+        # one np.interp for every thinned run, each run's ranks shifted past the previous run's:
+        # ranks are integers (exact in float64) and each run's first and last are stored, so every
+        # value is the one a call per run gives, bit for bit, at a fraction of the calls' overhead
+        start = np.cumsum([0] + [n for n, _ in thinned[:-1]])
+        grids = [_ranks(n, len(q)) for n, q in thinned]
+        pooled.append(
+            np.interp(
+                np.concatenate([every + s for (every, _), s in zip(grids, start)]),
+                np.concatenate([stored + s for (_, stored), s in zip(grids, start)]),
+                np.concatenate([q for _, q in thinned]),
+            )
+        )
+    x = np.concatenate(pooled)  # the quartiles and whiskers below do not depend on the order
     q1, med, q3 = (float(v) for v in np.percentile(x, [25, 50, 75]))
     iqr = q3 - q1
     lo = x[x >= q1 - WHISKER * iqr]
@@ -123,8 +135,17 @@ def box_stats(parts) -> dict | None:
         "whislo": min(float(lo.min()), q1) if lo.size else q1,
         "whishi": max(float(hi.max()), q3) if hi.size else q3,
         "n": len(x),
-        "runs": len(pooled),
+        "runs": len(runs),
     }
+
+
+@functools.lru_cache(maxsize=1024)
+def _ranks(n: int, kept: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every rank of ``n`` segments and the ranks of the ``kept`` stored (:func:`order_statistics`):
+    the same few pairs recur over a grid's runs, and making them was a third of reading a dataset."""
+    every, stored = np.arange(n), figures.thin(n, kept)
+    every.flags.writeable = stored.flags.writeable = False
+    return every, stored
 
 
 # ----------------------------------------------------------------------------- grid bundles

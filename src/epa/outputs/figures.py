@@ -160,6 +160,8 @@ def _setup(style: str):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    _keep_font_subsets()
     from matplotlib.rcsetup import cycler  # what matplotlib.cycler is; the stubs declare it here
 
     w, h, pt = STYLES[style]
@@ -185,9 +187,54 @@ def _setup(style: str):
             # 1e4 and beyond as a power of ten above the axis: tick labels stay short enough for fixed margins
             # no mathtext: parsing it would cost more than drawing
             "axes.formatter.limits": (-3, 4),
+            # glyphs as drawn, not fitted to the pixel grid by FreeType's hinting: as sharp at
+            # 150 dpi, and a third less per label (Agg drew 1.7 ms a label, now 1.0)
+            "text.hinting": "no_hinting",
         }
     )
     return plt, w, h
+
+
+# A PDF embeds the subset of its font that its text uses, made by fontTools from the whole font file
+# each time: 0.05-0.07 s of a 0.15 s PDF. Figures of one grid use the same few characters, so the
+# subset made for one set of glyphs is kept (its bytes, for at most _MAX_SUBSETS sets) and given
+# again. matplotlib has no public hook for this: the patch wraps the two functions that make and
+# save a subset (3.11's signatures; an older matplotlib is left as it is), and a test compares the
+# PDF's bytes with those matplotlib writes alone.
+_SUBSETS: dict[tuple, tuple[bytes, dict]] = runtime.register("outputs.figures.subsets", {})
+_MAX_SUBSETS = 32
+
+
+def _keep_font_subsets() -> None:
+    from matplotlib.backends import _backend_pdf_ps as pdf_ps
+
+    make, save = pdf_ps.get_glyphs_subset, pdf_ps.font_as_file
+    if getattr(make, "epa_kept", False) or not hasattr(pdf_ps, "SubsetResults"):
+        return
+    from io import BytesIO
+
+    from fontTools.ttLib import TTFont  # type: ignore[import-untyped]
+
+    def kept(fontfile, glyphs):
+        key = (str(fontfile), getattr(fontfile, "face_index", 0), frozenset(glyphs))
+        if key not in _SUBSETS:
+            with make(fontfile, glyphs) as made:
+                subset = (save(made.font).getvalue(), dict(made.glyph_index_map))
+            if len(_SUBSETS) >= _MAX_SUBSETS:
+                del _SUBSETS[next(iter(_SUBSETS))]
+            _SUBSETS[key] = subset
+        data, index = _SUBSETS[key]
+        font = TTFont(BytesIO(data))
+        font.epa_bytes = data  # saved again, fontTools would write other (equivalent) bytes
+        return pdf_ps.SubsetResults(font, dict(index))._as_cm()
+
+    def saved(font):
+        data = getattr(font, "epa_bytes", None)
+        return save(font) if data is None else BytesIO(data)
+
+    kept.epa_kept = True  # type: ignore[attr-defined]
+    kept.__wrapped__, saved.__wrapped__ = make, save  # type: ignore[attr-defined]
+    pdf_ps.get_glyphs_subset, pdf_ps.font_as_file = kept, saved
 
 
 # A worker draws the same few layouts case after case. Creating axes and their tick objects is about
@@ -195,6 +242,7 @@ def _setup(style: str):
 # process) and the next figure of that layout reuses it, emptied of data: the same bytes as a new
 # one (a test compares them), at about half the cost.
 _KEPT: dict[tuple, object] = runtime.register("outputs.figures.kept", {})
+MAX_KEPT = 8  # layouts kept at once: a dataset's two, a case's four, the grid's few
 
 
 def _layout(plt, kind: str, size: tuple, make):
@@ -226,8 +274,16 @@ def _empty(fig) -> None:
             ax.set_title("", loc=loc)
         ax.set_xlabel("")
         ax.set_ylabel("")
-        ax.set_xscale("linear")  # default locators and formatters (a box plot leaves fixed ones)
-        ax.set_yscale("linear")
+        # default locators and formatters (a box plot leaves fixed ones, a log axis its own);
+        # resetting an axis already at its defaults cost a fifth of making a figure's artists
+        for axis, set_scale in ((ax.xaxis, ax.set_xscale), (ax.yaxis, ax.set_yscale)):
+            if axis.get_scale() != "linear" or not (
+                axis.isDefault_majloc
+                and axis.isDefault_minloc
+                and axis.isDefault_majfmt
+                and axis.isDefault_minfmt
+            ):
+                set_scale("linear")
         ax.set_aspect("auto", adjustable="box")
         ax.set_prop_cycle(None)
         ax.relim()
@@ -289,25 +345,64 @@ def render(
         except OSError as exc:
             raise EpaError(f"cannot write: {exc.strerror}", path=str(path)) from None
         tmp = path.with_name("." + path.name + ".tmp")
-        # no creation date: the same bundle gives the same bytes (re-runs and batching compare equal)
-        meta = {"CreationDate": None} if fmt == "pdf" else {}
-        # fixed margins, not bbox_inches="tight": that draws the figure twice (half the cost of a figure);
-        # fast PNG compression: a few ms less per figure, for 11 % more bytes
-        with plt.rc_context({"axes.unicode_minus": False} if b["kind"] in ASCII_MINUS else {}):
-            fig.savefig(
-                tmp,
-                format=fmt,
-                metadata=meta,
-                **({"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}),
-            )
+        # fixed margins, not bbox_inches="tight": that draws the figure twice (half the cost of a
+        # figure); fast PDF stream compression: 7-15 ms less a figure, for 8 % more bytes
+        rc = {"pdf.compression": 1}
+        if b["kind"] in ASCII_MINUS:
+            rc["axes.unicode_minus"] = False
+        with plt.rc_context(rc):
+            if fmt == "png":
+                _write_png(fig, tmp)
+            else:  # no creation date: the same bundle gives the same bytes (re-runs compare equal)
+                fig.savefig(tmp, format=fmt, metadata={"CreationDate": None})
         tmp.replace(path)
         out.append(path)
     key = getattr(fig, "_epa_layout", None)
     if key is None or key in _KEPT:
         plt.close(fig)
     else:
+        if len(_KEPT) >= MAX_KEPT:  # the layout kept longest goes: memory stays bounded
+            plt.close(_KEPT.pop(next(iter(_KEPT))))
         _KEPT[key] = fig
     return out
+
+
+def _write_png(fig, path) -> None:
+    """The figure as an opaque 8-bit RGB PNG at ``savefig.dpi``: Agg's pixels without their alpha
+    (the figure is opaque), every row unfiltered, zlib level 1. Pillow's RGBA PNG took 22 ms of a
+    figure's 0.1 s; this 10-13 ms, and its files are a quarter smaller (plots are mostly flat)."""
+    import io
+    import struct
+    import zlib
+
+    import matplotlib
+
+    dpi = matplotlib.rcParams["savefig.dpi"]
+    raw = io.BytesIO()
+    fig.savefig(raw, format="rgba", dpi=dpi)
+    width = int(fig.get_figwidth() * dpi)
+    rgba = np.frombuffer(raw.getbuffer(), np.uint8).reshape(-1, width, 4)
+    rows = np.zeros((len(rgba), 1 + 3 * width), np.uint8)  # each row: filter 0 (none), its pixels
+    rows[:, 1:].reshape(len(rgba), width, 3)[:] = rgba[..., :3]
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
+
+    per_metre = round(dpi / 0.0254)
+    software = f"Software\0Matplotlib version{matplotlib.__version__}, https://matplotlib.org/"
+    png = b"".join(
+        [
+            b"\x89PNG\r\n\x1a\n",
+            chunk(b"IHDR", struct.pack(">IIBBBBB", width, len(rgba), 8, 2, 0, 0, 0)),
+            chunk(b"tEXt", software.encode("latin-1")),
+            chunk(b"pHYs", struct.pack(">IIB", per_metre, per_metre, 1)),
+            chunk(b"IDAT", zlib.compress(rows.data, 1)),
+            chunk(b"IEND", b""),
+        ]
+    )
+    Path(path).write_bytes(png)
 
 
 def _no_ligatures(fig) -> None:
@@ -324,7 +419,8 @@ def _no_ligatures(fig) -> None:
 
 def _top_over_side(plt, kind, w, left, aw, bottom, side, gap, th, top):
     """A figure of a top view (``th`` in high) over a side view (``side`` in high) sharing x, both
-    ``aw`` in wide from ``left``: the case's trajectory and the dataset's overlay."""
+    ``aw`` in wide from ``left``: the case's trajectory and the dataset's overlay. Figures of other
+    heights and view widths share one kept figure, resized (datasets rarely share a shape)."""
     fh = bottom + side + gap + th + top
 
     def make():
@@ -334,9 +430,12 @@ def _top_over_side(plt, kind, w, left, aw, bottom, side, gap, th, top):
         ax_top.tick_params(labelbottom=False)
         return fig
 
-    # every number of the geometry: a kept figure of another width of view (an overlay's narrows
-    # with a tall trajectory) drew the next dataset into the previous one's axes
-    return _layout(plt, kind, (w, fh, left, aw, bottom, side, gap, th), make)
+    fig = _layout(plt, kind, (w, left, bottom, side, gap, top), make)
+    fig.set_size_inches(w, fh)
+    ax_top, ax_side = fig.axes[:2]
+    ax_top.set_position([left / w, (bottom + side + gap) / fh, aw / w, th / fh])
+    ax_side.set_position([left / w, bottom / fh, aw / w, side / fh])
+    return fig
 
 
 def _arr(x):
@@ -679,13 +778,102 @@ def _overlay_view(d: dict):
     return ref, lines, lo - pad, hi + pad
 
 
+def _key(ax, left: float, top: float, entries, *, title=None, ncols: int = 1) -> None:
+    """A legend drawn as plain artists on ``ax``, in figure inches, its top left corner at ``(left,
+    top)``: what matplotlib's legend draws (its default spacings in font sizes, no frame), filled
+    column by column, without its layout of nested boxes, which measured each label several times
+    and cost a 10-algorithm figure more than its lines (25-50 ms). ``entries``: ``(label, style)``,
+    a line's style ``{"color", "lw"}`` or a marker's ``{"color", "marker"}``."""
+    import matplotlib
+    from matplotlib.collections import LineCollection
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.lines import Line2D
+    from matplotlib.textpath import text_to_path
+
+    rc = matplotlib.rcParams
+    fig = ax.figure
+    inches = fig.dpi_scale_trans
+    pt = float(rc["legend.fontsize"])
+    em = pt / 72  # inches
+    prop = FontProperties(size=pt)
+    # a row: a label's height (1.01 font sizes for DejaVu Sans, as matplotlib measures it) and the
+    # space between rows; the title's middle 0.46 of its size below the top, then half its height
+    # and the space between rows above the first row (matplotlib's legend, measured at 8/7 pt)
+    pitch = (1.01 + rc["legend.labelspacing"]) * em
+    x0, y = left + rc["legend.borderpad"] * em, top - rc["legend.borderpad"] * em
+    if title:
+        size = float(rc["font.size"])
+        middle = y - 0.46 * size / 72
+        ax.text(x0, middle, title, transform=inches, fontsize=size, va="center", ha="left")
+        y = middle - 0.505 * size / 72 - 0.5 * rc["legend.labelspacing"] * em
+    per_col = -(-len(entries) // max(ncols, 1))
+    handle, pad = rc["legend.handlelength"] * em, rc["legend.handletextpad"] * em
+    segments, colors, widths = [], [], []
+    for c in range(0, len(entries), max(per_col, 1)):
+        column = entries[c : c + per_col]
+        for r, (label, style) in enumerate(column):
+            yc = y - (r + 0.5) * pitch
+            if "marker" in style:
+                mark = Line2D([x0 + handle / 2], [yc], transform=inches, ls="none", ms=4, **style)
+                ax.add_artist(mark).set_clip_on(False)
+            else:
+                segments.append([(x0, yc), (x0 + handle, yc)])
+                colors.append(style["color"])
+                widths.append(style["lw"])
+            ax.text(x0 + handle + pad, yc, label, transform=inches, fontsize=pt, va="center")
+        if c + per_col >= len(entries):
+            break  # the last column: nothing beside it to place
+        longest = max(
+            text_to_path.get_text_width_height_descent(t, prop, False)[0] for t, _ in column
+        )
+        x0 += handle + pad + longest / 72 + rc["legend.columnspacing"] * em
+    if segments:
+        lc = LineCollection(
+            segments,
+            colors=colors,
+            linewidths=widths,
+            capstyle=rc["lines.solid_capstyle"],  # as a legend's line handle
+            transform=inches,
+        )
+        ax.add_collection(lc, autolim=False).set_clip_on(False)
+
+
+def _ends(ax, ends, j: int) -> None:
+    """The lines' starts (circles) and ends (squares) in x and coordinate ``j``: one collection
+    each, what ax.scatter makes, without its handling of every other argument (a third of making
+    the overlay's artists). ``ends``: ``(xyz, colour)`` per line."""
+    from matplotlib.collections import PathCollection
+    from matplotlib.markers import MarkerStyle
+    from matplotlib.transforms import IdentityTransform
+
+    for k, marker in ((0, "o"), (-1, "s")):
+        style = MarkerStyle(marker)
+        ax.add_collection(
+            PathCollection(
+                [style.get_path().transformed(style.get_transform())],
+                sizes=[16],
+                facecolors=[c for _, c in ends],
+                edgecolors="white",
+                linewidths=0.5,
+                offsets=np.array([xyz[k, [0, j]] for xyz, _ in ends]),
+                offset_transform=ax.transData,
+                transform=IdentityTransform(),
+                zorder=3,
+            ),
+            autolim=False,
+        )
+
+
 def _overlay(plt, b, w, h):
     """A dataset's trajectories: the reference and one line per algorithm, top view to scale (its
     height follows the data) over a side view stretched in z; start (circle) and end (square) marked.
     The view holds the reference and every line that stays near it: a line that goes farther than
     half the reference's extent (a diverged run, kilometres away) is drawn cut at the view's edge
     and says so in the legend, instead of shrinking the others to a dot. The legend, titled with
-    the dataset, is beside the top view: a trajectory fills its axes."""
+    the dataset, is beside the top view: a trajectory fills its axes. A panel's lines are one
+    collection (the reference first, beneath)."""
+    from matplotlib.collections import LineCollection
+
     d = b["data"]
     colors = d.get("colors") or OKABE_ITO
     ref, lines, lo, hi = _overlay_view(d)
@@ -693,26 +881,35 @@ def _overlay(plt, b, w, h):
     aw, most = w - left - right, 3.6
     ratio = (hi[1] - lo[1]) / (hi[0] - lo[0])
     # the top view at least as tall as the view at this width (the equal aspect then widens y,
-    # never cuts it: x is shared); a tall trajectory narrows both views instead. In steps of 0.05 in
-    # (rounded up), as the case figure's: datasets of one shape share a layout.
-    aw = min(aw, most / ratio)
+    # never cuts it: x is shared); a tall trajectory narrows both views instead. Both in steps of
+    # 0.05 in (the width rounded down, the height up), as the case figure's; a kept figure is
+    # resized to each (_top_over_side).
+    narrow = np.floor(most / ratio / 0.05) * 0.05
+    aw = min(aw, narrow if narrow > 0 else most / ratio)
     th = float(np.ceil(np.clip(aw * ratio, 1.2, most) / 0.05 - 1e-9) * 0.05)
     fig = _top_over_side(plt, "overlay", w, left, aw, bottom, side, gap, th, top)
     ax_top, ax_side = fig.axes
+    drawn = [(ref, "0.75", 2.2)] if len(ref) else []
+    entries = [("reference", {"color": "0.75", "lw": 2.2})] if len(ref) else []
+    for name, xyz, _, k, line in lines:
+        color = colors[line.get("color", k) % len(colors)]
+        drawn.append((xyz, color, 0.9))
+        entries.append((name, {"color": color, "lw": 0.9}))
+    ends = [(ref, "0.55")] if len(ref) else []
+    ends += [(xyz, c) for xyz, c, _ in drawn[len(ends) :] if len(xyz)]
     for ax, j, label in ((ax_top, 1, "y [m]"), (ax_side, 2, "z [m]")):
-        if len(ref):
-            ax.plot(ref[:, 0], ref[:, j], color="0.75", lw=2.2, label="reference", zorder=1)
-        ends = [(ref, "0.55")] if len(ref) else []
-        for name, xyz, _, k, line in lines:
-            color = colors[line.get("color", k) % len(colors)]
-            ax.plot(xyz[:, 0], xyz[:, j], color=color, lw=0.9, label=name, zorder=2)
-            if len(xyz):
-                ends.append((xyz, color))
-        if ends:  # one scatter for the starts, one for the ends: not a line per marker
-            for k, marker in ((0, "o"), (-1, "s")):
-                pts = np.array([xyz[k, [0, j]] for xyz, _ in ends])
-                kw = {"marker": marker, "s": 16, "edgecolors": "white", "linewidths": 0.5}
-                ax.scatter(pts[:, 0], pts[:, 1], c=[c for _, c in ends], zorder=3, **kw)
+        if drawn:
+            ax.add_collection(
+                LineCollection(
+                    [xyz[:, [0, j]] for xyz, _, _ in drawn],
+                    colors=[c for _, c, _ in drawn],
+                    linewidths=[lw for _, _, lw in drawn],
+                    zorder=2,
+                ),
+                autolim=False,
+            )
+        if ends:
+            _ends(ax, ends, j)
         ax.set_ylabel(label)
     # to scale: the top view's y range is its x range times its height over its width (never less
     # than the view's: th >= aw * ratio above), set here rather than by an equal aspect, which would
@@ -722,19 +919,12 @@ def _overlay(plt, b, w, h):
     ax_top.set_ylim(0.5 * (lo[1] + hi[1]) - half, 0.5 * (lo[1] + hi[1]) + half)
     ax_side.set_ylim(lo[2], hi[2])
     ax_side.set_xlabel("x [m]")
-    handles, labels = ax_top.get_legend_handles_labels()
-    for marker, name in (("o", "start"), ("s", "end")):
-        (h_,) = ax_top.plot([], [], marker, color="0.3", ms=4, ls="none")
-        handles.append(h_)
-        labels.append(name)
-    ax_top.legend(
-        handles,
-        labels,
-        loc="upper left",
-        bbox_to_anchor=(1.03, 1.0),
-        borderaxespad=0,
-        title=d.get("dataset") or None,
-        alignment="left",
+    entries += [
+        ("start", {"color": "0.3", "marker": "o"}),
+        ("end", {"color": "0.3", "marker": "s"}),
+    ]
+    _key(
+        ax_top, left + aw * 1.03, bottom + side + gap + th, entries, title=d.get("dataset") or None
     )
     return fig
 
@@ -742,9 +932,10 @@ def _overlay(plt, b, w, h):
 def _boxes(plt, b, w, h):
     """Boxes per algorithm at each segment length: translation beside rotation, from box statistics
     (``med``, ``q1``, ``q3``, ``whislo``, ``whishi``) computed over the pooled segments. Drawn as
-    three collections a panel (boxes, whiskers and caps, medians): a line per whisker, cap and
-    median made the figure six times slower on 10 algorithms and 6 lengths."""
-    from matplotlib.collections import LineCollection, PolyCollection
+    a few paths a panel (the whiskers and caps, the medians, each algorithm's boxes): a PDF writes
+    each path of a collection on its own, 720 a panel for 10 algorithms at 6 lengths otherwise."""
+    from matplotlib.collections import PathCollection
+    from matplotlib.path import Path as MplPath
 
     d = b["data"]
     colors = d.get("colors") or OKABE_ITO
@@ -759,21 +950,29 @@ def _boxes(plt, b, w, h):
         )
         return fig
 
+    def strokes(segments, lw, zorder):
+        """Line segments as one path (each its move and line)."""
+        vertices = np.asarray(segments, float).reshape(-1, 2)
+        codes = np.tile([MplPath.MOVETO, MplPath.LINETO], len(segments))
+        path = MplPath(vertices, codes.astype(MplPath.code_type))
+        return PathCollection([path], facecolors="none", edgecolors="black", lw=lw, zorder=zorder)
+
     fig = _layout(plt, "boxes", (w, h, top), make)
     axes = fig.axes
     width = 0.8 / max(len(algs), 1)
     half, cap = 0.4 * width, 0.2 * width
+    entries = []
     for ax, key, ylabel in zip(axes, ("trans", "rot"), d["ylabels"]):
         boxes, faces, whiskers, medians = [], [], [], []
         for a, alg in enumerate(algs):
             color = colors[alg.get("color", a) % len(colors)]
+            mine = []
             for j, s in enumerate(alg[key]):
                 if s is None:
                     continue
                 x = j - 0.4 + width * (a + 0.5)
                 lo, q1, med, q3, hi = s["whislo"], s["q1"], s["med"], s["q3"], s["whishi"]
-                boxes.append([(x - half, q1), (x + half, q1), (x + half, q3), (x - half, q3)])
-                faces.append(color)
+                mine.append([(x - half, q1), (x + half, q1), (x + half, q3), (x - half, q3)])
                 whiskers += [
                     [(x, lo), (x, q1)],
                     [(x, q3), (x, hi)],
@@ -781,30 +980,31 @@ def _boxes(plt, b, w, h):
                     [(x - cap, hi), (x + cap, hi)],
                 ]
                 medians.append([(x - half, med), (x + half, med)])
+            if mine:  # an algorithm's boxes as one path: one colour
+                boxes.append(MplPath.make_compound_path_from_polys(np.array(mine, float)))
+                faces.append(color)
             if key == "trans":
-                ax.plot([], [], color=color, lw=4, label=alg["label"])
+                entries.append((alg["label"], {"color": color, "lw": 4}))
         if boxes:
-            ax.add_collection(LineCollection(whiskers, colors="black", lw=0.6, zorder=1))
+            ax.add_collection(strokes(whiskers, 0.6, 1))
             ax.add_collection(
-                PolyCollection(boxes, facecolors=faces, edgecolors="black", lw=0.5, alpha=0.8)
+                PathCollection(boxes, facecolors=faces, edgecolors="black", lw=0.5, alpha=0.8)
             )
-            ax.add_collection(LineCollection(medians, colors="black", lw=0.8, zorder=3))
+            ax.add_collection(strokes(medians, 0.8, 3))
             ax.autoscale_view()
             _log_if_spread(ax, np.array([seg[0][1] for seg in medians]), np.array(whiskers))
         ax.set_xticks(np.arange(len(lengths)), [f"{v:g}" for v in lengths])
         ax.set_xlim(-0.5, max(len(lengths), 1) - 0.5)
         ax.set_xlabel("segment length [m]")
         ax.set_ylabel(ylabel)
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(
-        handles,
-        labels,
-        loc="upper left",
-        bbox_to_anchor=(0.6 / w, 1.0),
-        ncols=min(len(labels), 5) or 1,
-        borderaxespad=0.1,
+    pad = 0.1 * float(plt.rcParams["legend.fontsize"]) / 72
+    _key(
+        axes[0],
+        0.6,
+        h - pad,
+        entries,
         title=d.get("dataset") or None,
-        alignment="left",
+        ncols=min(len(entries), 5) or 1,
     )
     return fig
 
