@@ -201,12 +201,23 @@ def _input_bytes(path) -> int:
 
 
 def _eval(args) -> None:
+    from epa.workflow.stages import load
+
+    runtime.one_case_alone()  # a second core for its stages, freed memory kept for reuse
+    # the two files are parsed in a thread while the settings are resolved and the stages imported
+    load.read_ahead_case(args.ref, args.est)
+    try:
+        _eval_case(args)
+    finally:  # a case stopped before its load stage: the reading ends here
+        load.forget_ahead()
+
+
+def _eval_case(args) -> None:
     import time
 
     from epa.artifacts.case import CaseFolder
     from epa.workflow import chain
 
-    runtime.one_case_alone()  # a second core for its stages, freed memory kept for reuse
     cfg, own = _eval_config(args)
     out = CaseFolder(args.out)
     chain.clear_arrays(out)

@@ -144,13 +144,23 @@ class TableAhead(runtime.Background[Table]):
     (:func:`epa.core.runtime.spare_thread`): reading the bytes, pyarrow's parse and numpy's copies
     release the GIL, so it runs beside the caller's own work (`epa eval`: the estimate's 15 MB parse
     beside the reference's). :meth:`result` waits for it and gives the table, or raises its error
-    as read_table would have raised it there."""
+    as read_table would have raised it there. ``after``: a table read first, in this order (so each
+    file gets the parser it would get read after it: :func:`parsers_for`)."""
 
-    def __init__(self, path: Path, c_parser_min_bytes: int = C_PARSER_MIN_BYTES) -> None:
+    def __init__(
+        self,
+        path: Path,
+        c_parser_min_bytes: int = C_PARSER_MIN_BYTES,
+        after: TableAhead | None = None,
+    ) -> None:
         self.path = path
-        super().__init__(
-            lambda: read_table(path, c_parser_min_bytes=c_parser_min_bytes), "epa-read-ahead"
-        )
+
+        def read() -> Table:
+            if after is not None:
+                after.join()
+            return read_table(path, c_parser_min_bytes=c_parser_min_bytes)
+
+        super().__init__(read, "epa-read-ahead")
 
 
 # whether pyarrow is installed (looked up once, 0.1 ms) and whether epa has imported it (only when a

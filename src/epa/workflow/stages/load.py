@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 
 from epa import readers
@@ -54,10 +55,53 @@ def read_ahead(path) -> text.TableAhead | None:
     return text.TableAhead(Path(path), c_parser_min_bytes())
 
 
-def load_reference(ref_path, cfg: dict, opts: dict | None = None) -> tuple[Trajectory, list[str]]:
+# (absolute path, mtime, size) -> the text file's table being read (read_ahead_case)
+_AHEAD: dict[tuple, text.TableAhead] = runtime.register("workflow.stages.load.ahead", {})
+
+
+def _file_key(path) -> tuple | None:
+    """What a text file read ahead is known by: None for anything but a regular file (a bag folder,
+    a pipe, a missing file: the reader reports those in its words, where it always did)."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return (os.path.abspath(path), st.st_mtime_ns, st.st_size) if stat.S_ISREG(st.st_mode) else None
+
+
+def read_ahead_case(ref_path, est_path) -> None:
+    """Start reading one case's text files in a thread, the reference then the estimate (so each gets
+    the parser it would get read in that order), while the command goes on (`epa eval`: resolving
+    its config, importing its stages: 0.1-0.2 s in which the parse, which mostly releases the GIL,
+    is done). The load stage of that case takes them (:func:`run`); :func:`forget_ahead` ends what
+    is left. Tables only: each file is read as a source of its settings only where it is taken."""
+    forget_ahead()
+    before = None
+    for path in (ref_path, est_path):
+        key = _file_key(path)
+        if key is not None and key not in _AHEAD and not bags.is_bag(path):
+            before = _AHEAD[key] = text.TableAhead(Path(path), c_parser_min_bytes(), after=before)
+
+
+def _take_ahead(path) -> text.TableAhead | None:
+    """The table of ``path`` read ahead, unless the file changed since (its reading is then dropped)."""
+    key = _file_key(path)
+    return _AHEAD.pop(key, None) if key is not None else None
+
+
+def forget_ahead() -> None:
+    """Wait for the tables read ahead and none taken, and drop them."""
+    while _AHEAD:
+        _AHEAD.popitem()[1].join()
+
+
+def load_reference(
+    ref_path, cfg: dict, opts: dict | None = None, *, table: text.TableAhead | None = None
+) -> tuple[Trajectory, list[str]]:
+    """``table``: the file's table already started (:class:`epa.readers.text.TableAhead`)."""
     notes: list[str] = []
     opts = readers.options(cfg, "reference") if opts is None else opts
-    return _read(ref_path, opts, notes=notes), notes
+    return _read(ref_path, opts, notes=notes, table=table), notes
 
 
 def compute(
@@ -127,10 +171,12 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         st = None
     source = st and (os.path.abspath(case.truth), st.st_mtime_ns, st.st_size, repr(ref_opts))
     parse_reference = bool(source) and source not in _LOADED
-    est_table = read_ahead(case.estimate) if parse_reference else None
+    ref_table, est_table = _take_ahead(case.truth), _take_ahead(case.estimate)
+    if est_table is None and parse_reference:
+        est_table = read_ahead(case.estimate)
     try:
         if parse_reference:
-            remember(_LOADED, source, load_reference(case.truth, cfg, ref_opts))
+            remember(_LOADED, source, load_reference(case.truth, cfg, ref_opts, table=ref_table))
         ref, est, info, timing = compute(
             case.truth,
             case.estimate,
@@ -140,9 +186,10 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
             est_opts=est_opts,
             est_table=est_table,
         )
-    finally:  # an error before the estimate's table was taken: its thread ends here, not later
-        if est_table is not None:
-            est_table.join()
+    finally:  # an error before a table was taken (or one not needed): its thread ends here
+        for table in (ref_table, est_table):
+            if table is not None:
+                table.join()
     if case.settings_record:  # what this case ran with beside the grid's settings
         info["settings"] = case.settings_record
     data.loaded, data.load_record, data.timing = (ref, est), info, timing
