@@ -13,8 +13,9 @@ from epa.artifacts.stage import Stage, Value
 from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
-from epa.readers import bags, text
+from epa.readers import text
 from epa.readers import timing as timing_files
+from epa.readers.detect import is_bag
 
 NAME = "load"
 
@@ -43,7 +44,7 @@ def read_ahead(path) -> text.TableAhead | None:
     runs one case alone (`epa eval`: :func:`epa.core.runtime.spare_thread`) and the file is large
     enough for pyarrow's parse, which releases the GIL (the 100k pair's load 0.15 -> 0.1 s wall);
     None otherwise. A bag is read by its own reader."""
-    if not runtime.spare_thread() or bags.is_bag(path):
+    if not runtime.spare_thread() or is_bag(path):
         return None
     try:
         size = os.stat(path).st_size
@@ -79,7 +80,7 @@ def read_ahead_case(ref_path, est_path) -> None:
     before = None
     for path in (ref_path, est_path):
         key = _file_key(path)
-        if key is not None and key not in _AHEAD and not bags.is_bag(path):
+        if key is not None and key not in _AHEAD and not is_bag(path):
             before = _AHEAD[key] = text.TableAhead(Path(path), c_parser_min_bytes(), after=before)
 
 
@@ -123,9 +124,9 @@ def compute(
     ref, ref_notes = load_reference(ref_path, cfg, ref_opts) if reference is None else reference
     # KITTI estimates rarely ship their own times file: they are index-aligned with the reference's.
     est_times = None
-    if not bags.is_bag(est_path):
+    if not is_bag(est_path):
         est_times = text.kitti_times_for(Path(est_path)) or (
-            None if bags.is_bag(ref_path) else text.kitti_times_for(Path(ref_path))
+            None if is_bag(ref_path) else text.kitti_times_for(Path(ref_path))
         )
     est_notes: list[str] = []
     est = _read(est_path, est_opts, notes=est_notes, kitti_times=est_times, table=est_table)
