@@ -30,6 +30,9 @@ BUILDERS = (
     (("simulate",), "epa.cli.tools", "add_simulate"),
 )
 COMMANDS = tuple(name for names, _, _ in BUILDERS for name in names)
+# The commands that the top-level usage line (printed with an error the command's parser leaves to
+# it, such as an unrecognised argument) lists after one of these: epica's own, as it always has.
+OWN_COMMANDS = ("eval", "traj", "fig", "config", "selftest", "stage", "simulate")
 
 
 def _parser(command: str | None = None) -> argparse.ArgumentParser:
@@ -39,7 +42,10 @@ def _parser(command: str | None = None) -> argparse.ArgumentParser:
 
     p = argparse.ArgumentParser(prog="epa", description="Trajectory evaluation for SLAM/VIO.")
     p.add_argument("--version", action="version", version=f"epica {__version__}")
-    sub = p.add_subparsers(dest="command", required=True)
+    listed = OWN_COMMANDS if command in OWN_COMMANDS else COMMANDS
+    # a command's own parser alone: the usage line lists the commands as before
+    metavar = "{" + ",".join(listed) + "}" if command in COMMANDS else None
+    sub = p.add_subparsers(dest="command", required=True, metavar=metavar)
     for names, module, function in BUILDERS:
         if command not in COMMANDS or command in names:
             getattr(importlib.import_module(module), function)(sub)
@@ -74,14 +80,28 @@ def main(argv=None) -> int:
     if argv is None:  # the `epa` command's own process, not a program calling main()
         _without_cloudpickle()
     argv = sys.argv[1:] if argv is None else list(argv)
-    args = _parser(argv[0] if argv else None).parse_args(argv)
-    logging.basicConfig(level=logging.WARNING, format="epa: %(levelname)s: %(message)s")
+    command = argv[0] if argv else None
+    if command == "eval":  # its files are read while its parser imports the metrics
+        from epa.cli import evaluate
+
+        done = evaluate.read_ahead(argv[1:])
+    else:
+        done = _nothing
     try:
-        status = args.func(args)  # an exit status (epa verify), or None when the command is done
-    except EpaError as exc:
-        print(f"epa: error: {exc.one_line()}", file=sys.stderr)
-        return 2
+        args = _parser(command).parse_args(argv)
+        logging.basicConfig(level=logging.WARNING, format="epa: %(levelname)s: %(message)s")
+        try:
+            status = args.func(args)  # an exit status (epa verify), or None when it is done
+        except EpaError as exc:
+            print(f"epa: error: {exc.one_line()}", file=sys.stderr)
+            return 2
+    finally:  # files read ahead that no stage took (a mistake, --help): their reading ends here
+        done()
     return 0 if status is None else status
+
+
+def _nothing() -> None:
+    pass
 
 
 def _without_cloudpickle() -> None:
