@@ -174,9 +174,11 @@ def _read(args, which: str, table=None):
 
 
 def _read_ahead(args) -> dict:
-    """{"ref"|"est": its table being read}: the two files of a text form, the reference then the
-    estimate, parsed in a thread (the parse releases the GIL) while the command imports its maths
-    and reads its settings; only regular files (anything else is read, and reported, as before)."""
+    """{"ref"|"est": its table being read}: the two files of a text form parsed in threads (the
+    parse releases the GIL) while the command imports its maths and reads its settings; only
+    regular files (anything else is read, and reported, as before). Each in a thread of its own
+    where both are parsed by pyarrow whatever is read first (two 15 MB files: 0.03 s less on two
+    free cores), else the reference then the estimate (each file's parser as in that order)."""
     import os
     import stat
 
@@ -184,15 +186,21 @@ def _read_ahead(args) -> dict:
 
     if args.form in ("bag", "bag2", "mcap"):
         return {}
-    tables: dict = {}
+    sizes = {}
     for which in ("ref", "est"):
-        path = Path(_path(args, which))
         try:
-            regular = stat.S_ISREG(os.stat(path).st_mode)
+            st = os.stat(_path(args, which))
         except (OSError, ValueError):
-            regular = False
-        if regular:
-            tables[which] = text.TableAhead(path, after=tables.get("ref"))
+            continue
+        if stat.S_ISREG(st.st_mode):
+            sizes[which] = st.st_size
+    alone = all(
+        "arrow" in text.parsers_for(size, text.C_PARSER_MIN_BYTES) for size in sizes.values()
+    )
+    tables: dict = {}
+    for which in sizes:
+        after = None if alone else tables.get("ref")
+        tables[which] = text.TableAhead(Path(_path(args, which)), after=after)
     return tables
 
 
