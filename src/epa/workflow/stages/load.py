@@ -88,7 +88,7 @@ def read_ahead_case(ref_path, est_path) -> None:
 
 
 def _take_ahead(path) -> text.TableAhead | None:
-    """The table of ``path`` read ahead, unless the file changed since (its reading is then dropped)."""
+    """The table of ``path`` read ahead; None where the file changed since (forget_ahead drops it)."""
     key = _file_key(path)
     return _AHEAD.pop(key, None) if key is not None else None
 
