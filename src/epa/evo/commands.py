@@ -174,11 +174,10 @@ def _read(args, which: str, table=None):
 
 
 def _read_ahead(args) -> dict:
-    """{"ref"|"est": its table being read}: the two files of a text form parsed in threads (the
-    parse releases the GIL) while the command imports its maths and reads its settings; only
-    regular files (anything else is read, and reported, as before). Each in a thread of its own
-    where both are parsed by pyarrow whatever is read first (two 15 MB files: 0.03 s less on two
-    free cores), else the reference then the estimate (each file's parser as in that order)."""
+    """{"ref"|"est": its table being read}: the two files of a text form parsed in threads
+    (:func:`epa.readers.text.tables_ahead`; the parse releases the GIL) while the command imports
+    its maths and reads its settings; only regular files (anything else is read, and reported, as
+    before)."""
     import os
     import stat
 
@@ -186,22 +185,15 @@ def _read_ahead(args) -> dict:
 
     if args.form in ("bag", "bag2", "mcap"):
         return {}
-    sizes = {}
+    paths = {}
     for which in ("ref", "est"):
         try:
-            st = os.stat(_path(args, which))
+            regular = stat.S_ISREG(os.stat(_path(args, which)).st_mode)
         except (OSError, ValueError):
             continue
-        if stat.S_ISREG(st.st_mode):
-            sizes[which] = st.st_size
-    alone = all(
-        "arrow" in text.parsers_for(size, text.C_PARSER_MIN_BYTES) for size in sizes.values()
-    )
-    tables: dict = {}
-    for which in sizes:
-        after = None if alone else tables.get("ref")
-        tables[which] = text.TableAhead(Path(_path(args, which)), after=after)
-    return tables
+        if regular:
+            paths[which] = Path(_path(args, which))
+    return dict(zip(paths, text.tables_ahead(list(paths.values()))))
 
 
 def read_source(

@@ -71,20 +71,21 @@ def _file_key(path) -> tuple | None:
 
 
 def read_ahead_case(ref_path, est_path) -> None:
-    """Start reading one case's text files in a thread, the reference then the estimate (so each gets
-    the parser it would get read in that order), while the command goes on (`epa eval`: resolving
-    its config, importing its stages: 0.1-0.2 s in which the parse, which mostly releases the GIL,
-    is done). The load stage of that case takes them (:func:`run`); :func:`forget_ahead` ends what
-    is left. Tables only: each file is read as a source of its settings only where it is taken.
-    Files already being read are not read again (`epa eval` starts before its parser is built)."""
+    """Start reading one case's text files in threads (:func:`epa.readers.text.tables_ahead`: side
+    by side, or the reference then the estimate), while the command goes on (`epa eval`: importing
+    the metrics, resolving its config, importing its stages: 0.1-0.2 s in which the parse, which
+    mostly releases the GIL, is done). The load stage of that case takes them (:func:`run`);
+    :func:`forget_ahead` ends what is left. Tables only: each file is read as a source of its
+    settings only where it is taken. Files already being read are not read again."""
     keys = [_file_key(path) for path in (ref_path, est_path)]
     if _AHEAD and all(key in _AHEAD for key in keys if key is not None):
         return
     forget_ahead()
-    before = None
+    files: dict[tuple, Path] = {}  # the text files, each once
     for path, key in zip((ref_path, est_path), keys):
-        if key is not None and key not in _AHEAD and not is_bag(path):
-            before = _AHEAD[key] = text.TableAhead(Path(path), c_parser_min_bytes(), after=before)
+        if key is not None and not is_bag(path):
+            files.setdefault(key, Path(path))
+    _AHEAD.update(zip(files, text.tables_ahead(list(files.values()), c_parser_min_bytes())))
 
 
 def _take_ahead(path) -> text.TableAhead | None:
