@@ -189,7 +189,7 @@ def _eval_imports(tmp_path, prelude: str = "") -> str:
         f" '--out', {str(tmp_path / 'out')!r}])\n"
         "heavy = ('matplotlib', 'pandas', 'scipy', 'rosbags', 'jsonschema', 'pyarrow', 'yaml',"
         " 'email')\n"
-        "others = ('epa.evo.commands', 'epa.rpg.command', 'epa.workflow.verify')\n"
+        "others = ('epa.evo.commands', 'epa.rpg.command', 'epa.workflow.verify', 'epa.readers.bags')\n"
         "print(status, sorted({n.split('.')[0] for n in sys.modules if n.split('.')[0] in heavy}),"
         " sorted(n for n in sys.modules if n in others))"
     )
@@ -204,6 +204,45 @@ def test_eval_imports_only_what_its_path_needs(tmp_path):
     importlib.metadata (the package versions are read from their dist-info folders), and none of the
     other commands' modules."""
     assert _eval_imports(tmp_path) == "0 [] []"
+
+
+def test_ape_imports_only_what_its_path_needs():
+    """`epa ape` builds only its own parser: neither eval's module nor the metric registry that its
+    --protocol choices import (every metric module), no other command's modules, and no bag reader
+    for two text files; it prints the same statistics block."""
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[1] / "example"
+    ref = example / "truth/drone_figure8.txt"
+    est = example / "algorithms/vo_drifty/drone_figure8/run1.txt"
+    code = (
+        "import sys\n"
+        "from epa.cli import main\n"
+        f"status = main.main(['ape', 'tum', {str(ref)!r}, {str(est)!r}, '-a'])\n"
+        "others = ('epa.cli.evaluate', 'epa.metrics.registry', 'epa.metrics.eth3d', 'epa.rpg.command',"
+        " 'epa.cli.tools', 'epa.readers.bags', 'epa.workflow.chain')\n"
+        "print(status, sorted(n for n in sys.modules if n in others))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    lines = out.stdout.strip().splitlines()
+    assert lines[-1] == "0 []"
+    assert lines[0] == "APE w.r.t. translation part (m)" and "rmse" in out.stdout
+
+
+def test_a_commands_own_parser_keeps_the_top_level_usage(capsys):
+    """A command builds only its own parser, yet an error the top level reports (an unrecognised
+    argument) prints the usage line it always printed: epica's own commands after one of them,
+    every command after another."""
+    own = "{eval,traj,fig,config,selftest,stage,simulate}"
+    every = (
+        "{eval,traj,fig,config,ape,rpe,res,rpg,verify,pack,tum-ate,tum-rpe,selftest,stage,simulate}"
+    )
+    for argv, listed in ((["config", "--bogus"], own), (["res", "x.zip", "--bogus"], every)):
+        with pytest.raises(SystemExit) as stop:
+            cli.main(argv)
+        err = capsys.readouterr().err
+        assert stop.value.code == 2 and "unrecognized arguments: --bogus" in err
+        assert " ".join(err.split()).startswith(f"usage: epa [-h] [--version] {listed} ...")
 
 
 def test_eval_of_large_files_reads_them_without_pandas(tmp_path):

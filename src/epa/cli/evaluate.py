@@ -3,6 +3,7 @@ laid out as a workflow case folder."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import logging
 import sys
@@ -20,6 +21,11 @@ EVAL_ALGORITHM = "estimate"  # the name `epa eval` gives its one estimate in `so
 def add_parser(sub) -> None:
     e = sub.add_parser("eval", help="evaluate one estimate against one reference")
     e.set_defaults(func=_eval)
+    _add_arguments(e, _protocols())
+
+
+def _add_arguments(e, protocols: tuple[str, ...] | None) -> None:
+    """eval's arguments; ``protocols``: the choices of --protocol (None: any, for read_ahead)."""
     e.add_argument("ref", help="reference trajectory file")
     e.add_argument("est", help="estimated trajectory file")
     e.add_argument(
@@ -70,7 +76,7 @@ def add_parser(sub) -> None:
     e.add_argument(
         "--protocol",
         action="append",
-        choices=_protocols(),
+        choices=protocols,
         help="also score by a benchmark's own protocol (metrics.<NAME>.enabled; repeatable;"
         " docs/protocols.md)",
     )
@@ -98,6 +104,36 @@ def _protocols() -> tuple[str, ...]:
     from epa.metrics import registry
 
     return registry.protocols()
+
+
+class _Silent(argparse.ArgumentParser):
+    """A parser that prints nothing and never exits: a mistake raises ValueError."""
+
+    def error(self, message):
+        raise ValueError(message)
+
+    def exit(self, status=0, message=None):
+        raise ValueError(message)
+
+
+def read_ahead(argv: list[str]) -> Callable[[], None]:
+    """Start reading the two files of ``epa eval ARGV`` (:func:`epa.workflow.stages.load.read_ahead_case`)
+    before eval's parser is built, which imports every metric module (its --protocol choices):
+    0.1-0.2 s in which the parse of large files, which mostly releases the GIL, is done. The
+    arguments are read as eval's parser reads them, its --protocol choices aside; any mistake is
+    left to that parser, which says what it is. Returns what ends the reading of files no stage
+    took (a parser's error, ``--help``)."""
+    from epa.workflow.stages import load
+
+    quiet = _Silent(prog="epa eval", add_help=False)
+    _add_arguments(quiet, protocols=None)
+    try:
+        args, _ = quiet.parse_known_args(argv)
+    except ValueError:
+        return load.forget_ahead
+    runtime.one_case_alone()  # (as _eval: the spare core reads them)
+    load.read_ahead_case(args.ref, args.est)
+    return load.forget_ahead
 
 
 def _add_eval_sources(e) -> None:
@@ -201,12 +237,23 @@ def _input_bytes(path) -> int:
 
 
 def _eval(args) -> None:
+    from epa.workflow.stages import load
+
+    runtime.one_case_alone()  # a second core for its stages, freed memory kept for reuse
+    # the two files are parsed in a thread while the settings are resolved and the stages imported
+    load.read_ahead_case(args.ref, args.est)
+    try:
+        _eval_case(args)
+    finally:  # a case stopped before its load stage: the reading ends here
+        load.forget_ahead()
+
+
+def _eval_case(args) -> None:
     import time
 
     from epa.artifacts.case import CaseFolder
     from epa.workflow import chain
 
-    runtime.one_case_alone()  # a second core for its stages, freed memory kept for reuse
     cfg, own = _eval_config(args)
     out = CaseFolder(args.out)
     chain.clear_arrays(out)

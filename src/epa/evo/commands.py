@@ -159,7 +159,8 @@ def _add_output_options(f) -> None:
     f.add_argument("--silent", action="store_true", help="do not print the statistics block")
 
 
-def _read(args, which: str):
+def _read(args, which: str, table=None):
+    """``table``: the file's table being read (:func:`_read_ahead`), or None."""
     bag = args.form in ("bag", "bag2", "mcap")
     return read_source(
         args.form,
@@ -168,7 +169,31 @@ def _read(args, which: str):
         reference=which == "ref",
         unsorted=args.unsorted,
         tf_rate=getattr(args, "tf_cache_lookup_frequency", TF_LOOKUP_HZ),
+        table=table,
     )
+
+
+def _read_ahead(args) -> dict:
+    """{"ref"|"est": its table being read}: the two files of a text form parsed in threads
+    (:func:`epa.readers.text.tables_ahead`; the parse releases the GIL) while the command imports
+    its maths and reads its settings; only regular files (anything else is read, and reported, as
+    before)."""
+    import os
+    import stat
+
+    from epa.readers import text
+
+    if args.form in ("bag", "bag2", "mcap"):
+        return {}
+    paths = {}
+    for which in ("ref", "est"):
+        try:
+            regular = stat.S_ISREG(os.stat(_path(args, which)).st_mode)
+        except (OSError, ValueError):
+            continue
+        if regular:
+            paths[which] = Path(_path(args, which))
+    return dict(zip(paths, text.tables_ahead(list(paths.values()))))
 
 
 def read_source(
@@ -179,9 +204,11 @@ def read_source(
     reference: bool = False,
     unsorted: str = "error",
     tf_rate: float = TF_LOOKUP_HZ,
+    table=None,
 ):
     """One side of an evo command: a file of ``form`` or a bag topic, or a TF id ``/tf:parent.child``
-    (optionally ``:/tf_static``) looked up at ``tf_rate`` Hz as evo does."""
+    (optionally ``:/tf_static``) looked up at ``tf_rate`` Hz as evo does. ``table``: a text file's
+    table already started (:class:`epa.readers.text.TableAhead`)."""
     from epa import readers
     from epa.workflow import settings
 
@@ -207,7 +234,7 @@ def read_source(
         )
         opts["kitti_printed"] = form == "kitti"  # evo computes on the printed rotation blocks
     try:
-        return readers.read(path, opts)
+        return readers.read(path, opts, table=table)
     except EpaError as exc:
         if "repeats" in str(exc):
             raise EpaError(
@@ -233,17 +260,23 @@ def run(args) -> None:
 
 def compute(args):
     """The :class:`epa.evo.protocol.EvoResult` of parsed ``epa ape|rpe`` arguments."""
-    from epa.evo import protocol as evo_protocol
+    tables = _read_ahead(args)
+    try:
+        from epa.evo import protocol as evo_protocol
 
-    names = {"pose_relation": "relation"}
-    fields = set(evo_protocol.EvoOptions.__dataclass_fields__)
-    values = {
-        names.get(k, k): v
-        for k, v in vars(args).items()
-        if names.get(k, k) in fields and v is not None
-    }
-    o = evo_protocol.EvoOptions(**values)
-    ref, est = _read(args, "ref"), _read(args, "est")
+        names = {"pose_relation": "relation"}
+        fields = set(evo_protocol.EvoOptions.__dataclass_fields__)
+        values = {
+            names.get(k, k): v
+            for k, v in vars(args).items()
+            if names.get(k, k) in fields and v is not None
+        }
+        o = evo_protocol.EvoOptions(**values)
+        ref = _read(args, "ref", tables.get("ref"))
+        est = _read(args, "est", tables.get("est"))
+    finally:  # a side that failed: the other's reading ends here
+        for table in tables.values():
+            table.join()
     fn = evo_protocol.ape if args.command == "ape" else evo_protocol.rpe
     return fn(ref, est, o, timed=args.form != "kitti")
 

@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 
 from epa.core.errors import EpaError
-from epa.evo import archive
 
 PLOT_MODES = ("xy", "xz", "yx", "yz", "zx", "zy", "xyz")  # evo's --plot_mode
 X_DIMENSIONS = ("index", "seconds", "distances")  # evo's --plot_x_dimension
@@ -78,6 +77,8 @@ def draw(result, *, plot_mode: str = "xyz", x_dimension: str = "seconds", show: 
 
 def _raw(plt, result, x_dimension: str):
     """The error over seconds (or distance, or index) from the start, with its statistics."""
+    from epa.evo import archive
+
     a = archive.arrays(result)
     err = a["error_array"]
     x, xlabel = np.arange(len(err)), "index"  # evo's fallback, also without stamps
@@ -115,6 +116,8 @@ def _map(plt, result, plot_mode: str):
 
     if plot_mode not in PLOT_MODES:
         raise EpaError(f"unknown --plot_mode {plot_mode!r}; choose one of {', '.join(PLOT_MODES)}")
+    from epa.evo import archive
+
     ref, est = archive.poses(result)
     err = np.asarray(result.errors, float)
     axes = [("xyz".index(c)) for c in plot_mode]

@@ -150,12 +150,12 @@ def pattern_roots(inputs: dict) -> dict[str, str]:
 
 def case_inputs(truth, estimate, timing=None) -> list[str]:
     """The files one case reads: each side's file or a ROS 2 bag folder's files, and a timing file."""
-    from epa.readers import bags
+    from epa.readers.detect import bag_files
 
     paths: set[str] = set()
     for p in (truth, estimate):
         try:
-            paths.update(str(f) for f in bags.bag_files(p))
+            paths.update(str(f) for f in bag_files(p))
         except OSError:  # a name the system refuses: recorded as given (and missing)
             paths.add(str(p))
     if timing:
@@ -605,14 +605,15 @@ def document_started(
 
     def read() -> None:
         try:
+            git = checkout_started(workflow_dir)  # (starting git here spares the caller 5-10 ms)
             found["env"] = environment()
             found["inputs"] = [file_record(p, roots) for p in paths]
+            found["git"] = git()
         except BaseException as exc:  # raised in the caller's thread, by finish
             failed.append(exc)
 
     reading = threading.Thread(target=read, name="epa-provenance", daemon=True)
     reading.start()
-    git = checkout_started(workflow_dir)
     extra, cfg = copy.deepcopy(extra or {}), copy.deepcopy(cfg)
     volatile = {
         "created_utc": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
@@ -631,7 +632,7 @@ def document_started(
         return {
             "format": FORMAT,
             "kind": kind,
-            "epica": {"version": __version__, **git()},
+            "epica": {"version": __version__, **found["git"]},
             **found["env"],
             **extra,
             "config": cfg,

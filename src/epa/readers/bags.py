@@ -20,6 +20,11 @@ from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
 
+# what is a bag is told by its name, without importing this module (readers.detect); here too
+from epa.readers.detect import BAG_SUFFIXES as BAG_SUFFIXES
+from epa.readers.detect import bag_files as bag_files
+from epa.readers.detect import is_bag as is_bag
+
 log = logging.getLogger(__name__)
 
 POSE_TYPES = (
@@ -30,27 +35,6 @@ POSE_TYPES = (
     "nav_msgs/msg/Path",
     "tf2_msgs/msg/TFMessage",
 )
-BAG_SUFFIXES = (".bag", ".mcap")
-
-
-def is_bag(path) -> bool:
-    """A ROS 1 bag, a bare MCAP file or a ROS 2 bag folder (judged by name, so a missing bag is still
-    reported as a missing bag)."""
-    path = Path(path)
-    try:
-        return path.suffix.lower() in BAG_SUFFIXES or (
-            path.is_dir() and (path / "metadata.yaml").is_file()
-        )
-    except OSError:  # an unusable path: the text reader reports it
-        return False
-
-
-def bag_files(path) -> list[Path]:
-    """The files a bag consists of (a folder's metadata and storage files; else the file itself)."""
-    path = Path(path)
-    if path.is_dir():
-        return sorted(p for p in path.iterdir() if p.is_file() and not p.name.startswith("."))
-    return [path]
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
-"""What a file is: not a text trajectory at all (told by its first bytes), or which text format
-(told by its header, its name and its number of columns)."""
+"""What a file is: a bag (told by its name), not a text trajectory at all (told by its first bytes),
+or which text format (told by its header, its name and its number of columns)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,29 @@ from pathlib import Path
 from epa.core.errors import EpaError
 from epa.readers.header import named_columns, position_columns
 from epa.readers.table import Table, is_number
+
+BAG_SUFFIXES = (".bag", ".mcap")
+
+
+def is_bag(path) -> bool:
+    """A ROS 1 bag, a bare MCAP file or a ROS 2 bag folder (judged by name, so a missing bag is still
+    reported as a missing bag)."""
+    path = Path(path)
+    try:
+        return path.suffix.lower() in BAG_SUFFIXES or (
+            path.is_dir() and (path / "metadata.yaml").is_file()
+        )
+    except OSError:  # an unusable path: the text reader reports it
+        return False
+
+
+def bag_files(path) -> list[Path]:
+    """The files a bag consists of (a folder's metadata and storage files; else the file itself)."""
+    path = Path(path)
+    if path.is_dir():
+        return sorted(p for p in path.iterdir() if p.is_file() and not p.name.startswith("."))
+    return [path]
+
 
 # Files that are not text trajectories, by their first bytes: say what they are.
 _MAGIC = {

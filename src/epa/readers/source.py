@@ -14,7 +14,8 @@ from pathlib import Path
 from epa.core import geometry
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
-from epa.readers import bags, text
+from epa.readers import text
+from epa.readers.detect import is_bag
 
 log = logging.getLogger(__name__)
 KEYS = (
@@ -87,7 +88,7 @@ def read_printed_quaternions(
     normalised), for the ETH3D protocol (its program rotates by them). None where a source prints no
     quaternions: a bag (its messages' quaternions are normalised on reading), a KITTI file (rotation
     blocks) or positions only. ``c_parser_min_bytes``: as :func:`read`'s."""
-    if bags.is_bag(path):
+    if is_bag(path):
         return None
     traj = text.read_trajectory(
         path,
@@ -115,7 +116,9 @@ def read(
     pandas' C parser (:func:`epa.readers.text.read_table`). ``table``: a text file's table already
     started (:class:`epa.readers.text.TableAhead`)."""
     path = Path(path)
-    if bags.is_bag(path):
+    if is_bag(path):
+        from epa.readers import bags  # (a bag only: a text file never compiles its reader)
+
         own: list[str] = []
         try:
             traj = bags.read_bag(

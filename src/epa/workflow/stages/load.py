@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 
 from epa import readers
@@ -12,8 +13,9 @@ from epa.artifacts.stage import Stage, Value
 from epa.core import runtime
 from epa.core.errors import EpaError
 from epa.core.trajectory import Trajectory
-from epa.readers import bags, text
+from epa.readers import text
 from epa.readers import timing as timing_files
+from epa.readers.detect import is_bag
 
 NAME = "load"
 
@@ -42,7 +44,7 @@ def read_ahead(path) -> text.TableAhead | None:
     runs one case alone (`epa eval`: :func:`epa.core.runtime.spare_thread`) and the file is large
     enough for pyarrow's parse, which releases the GIL (the 100k pair's load 0.15 -> 0.1 s wall);
     None otherwise. A bag is read by its own reader."""
-    if not runtime.spare_thread() or bags.is_bag(path):
+    if not runtime.spare_thread() or is_bag(path):
         return None
     try:
         size = os.stat(path).st_size
@@ -54,10 +56,57 @@ def read_ahead(path) -> text.TableAhead | None:
     return text.TableAhead(Path(path), c_parser_min_bytes())
 
 
-def load_reference(ref_path, cfg: dict, opts: dict | None = None) -> tuple[Trajectory, list[str]]:
+# (absolute path, mtime, size) -> the text file's table being read (read_ahead_case)
+_AHEAD: dict[tuple, text.TableAhead] = runtime.register("workflow.stages.load.ahead", {})
+
+
+def _file_key(path) -> tuple | None:
+    """What a text file read ahead is known by: None for anything but a regular file (a bag folder,
+    a pipe, a missing file: the reader reports those in its words, where it always did)."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return (os.path.abspath(path), st.st_mtime_ns, st.st_size) if stat.S_ISREG(st.st_mode) else None
+
+
+def read_ahead_case(ref_path, est_path) -> None:
+    """Start reading one case's text files in threads (:func:`epa.readers.text.tables_ahead`: side
+    by side, or the reference then the estimate), while the command goes on (`epa eval`: importing
+    the metrics, resolving its config, importing its stages: 0.1-0.2 s in which the parse, which
+    mostly releases the GIL, is done). The load stage of that case takes them (:func:`run`);
+    :func:`forget_ahead` ends what is left. Tables only: each file is read as a source of its
+    settings only where it is taken. Files already being read are not read again."""
+    keys = [_file_key(path) for path in (ref_path, est_path)]
+    if _AHEAD and all(key in _AHEAD for key in keys if key is not None):
+        return
+    forget_ahead()
+    files: dict[tuple, Path] = {}  # the text files, each once
+    for path, key in zip((ref_path, est_path), keys):
+        if key is not None and not is_bag(path):
+            files.setdefault(key, Path(path))
+    _AHEAD.update(zip(files, text.tables_ahead(list(files.values()), c_parser_min_bytes())))
+
+
+def _take_ahead(path) -> text.TableAhead | None:
+    """The table of ``path`` read ahead; None where the file changed since (forget_ahead drops it)."""
+    key = _file_key(path)
+    return _AHEAD.pop(key, None) if key is not None else None
+
+
+def forget_ahead() -> None:
+    """Wait for the tables read ahead and none taken, and drop them."""
+    while _AHEAD:
+        _AHEAD.popitem()[1].join()
+
+
+def load_reference(
+    ref_path, cfg: dict, opts: dict | None = None, *, table: text.TableAhead | None = None
+) -> tuple[Trajectory, list[str]]:
+    """``table``: the file's table already started (:class:`epa.readers.text.TableAhead`)."""
     notes: list[str] = []
     opts = readers.options(cfg, "reference") if opts is None else opts
-    return _read(ref_path, opts, notes=notes), notes
+    return _read(ref_path, opts, notes=notes, table=table), notes
 
 
 def compute(
@@ -79,9 +128,9 @@ def compute(
     ref, ref_notes = load_reference(ref_path, cfg, ref_opts) if reference is None else reference
     # KITTI estimates rarely ship their own times file: they are index-aligned with the reference's.
     est_times = None
-    if not bags.is_bag(est_path):
+    if not is_bag(est_path):
         est_times = text.kitti_times_for(Path(est_path)) or (
-            None if bags.is_bag(ref_path) else text.kitti_times_for(Path(ref_path))
+            None if is_bag(ref_path) else text.kitti_times_for(Path(ref_path))
         )
     est_notes: list[str] = []
     est = _read(est_path, est_opts, notes=est_notes, kitti_times=est_times, table=est_table)
@@ -127,10 +176,12 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
         st = None
     source = st and (os.path.abspath(case.truth), st.st_mtime_ns, st.st_size, repr(ref_opts))
     parse_reference = bool(source) and source not in _LOADED
-    est_table = read_ahead(case.estimate) if parse_reference else None
+    ref_table, est_table = _take_ahead(case.truth), _take_ahead(case.estimate)
+    if est_table is None and parse_reference:
+        est_table = read_ahead(case.estimate)
     try:
         if parse_reference:
-            remember(_LOADED, source, load_reference(case.truth, cfg, ref_opts))
+            remember(_LOADED, source, load_reference(case.truth, cfg, ref_opts, table=ref_table))
         ref, est, info, timing = compute(
             case.truth,
             case.estimate,
@@ -140,9 +191,10 @@ def run(data: CaseData, cfg: dict, write_arrays: bool) -> None:
             est_opts=est_opts,
             est_table=est_table,
         )
-    finally:  # an error before the estimate's table was taken: its thread ends here, not later
-        if est_table is not None:
-            est_table.join()
+    finally:  # an error before a table was taken (or one not needed): its thread ends here
+        for table in (ref_table, est_table):
+            if table is not None:
+                table.join()
     if case.settings_record:  # what this case ran with beside the grid's settings
         info["settings"] = case.settings_record
     data.loaded, data.load_record, data.timing = (ref, est), info, timing
