@@ -14,7 +14,7 @@ light (no Snakemake, matplotlib or pandas): :func:`evaluate`, :func:`read_result
 
 import logging
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 # A library prints nothing unless asked: each module logs to ``logging.getLogger(__name__)``, a
 # child of "epa", and only the command (epa.cli) and the workflow (epa.workflow.terminal) attach
