@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import re
 from concurrent.futures.process import BrokenProcessPool
 
 import numpy as np
@@ -173,7 +174,7 @@ def test_the_library_imports_no_workflow_glue():
     assert out.stdout.strip() == "[]"
 
 
-def test_every_rule_declares_log_benchmark_threads_and_resources():
+def test_every_rule_declares_log_threads_resources_and_its_timing():
     from pathlib import Path
 
     rules = Path(__file__).resolve().parents[1] / "rules"
@@ -189,6 +190,16 @@ def test_every_rule_declares_log_benchmark_threads_and_resources():
                 common = (rules / "common.smk").read_text()
                 assert declared == 0 and "stage_job(" in text
                 assert "timing_path=batch_timing(" in common
+                continue
+            if directive == "benchmark:":
+                # every rule writes its own wall and CPU seconds: the once-per-grid scripts' through
+                # grid_script, provenance's through write_provenance (a job in Snakemake's threads
+                # would sample the whole process)
+                common = (rules / "common.smk").read_text()
+                own = len(re.findall(r"^ +(?:grid_script|write_provenance)\(", text, re.M))
+                assert declared == 0 and own == rules_here, (smk.name, own, rules_here)
+                assert 'timing_path=f"{RESULTS}/benchmarks/{script}.tsv"' in common
+                assert 'epa_jobs.timed(f"{RESULTS}/benchmarks/provenance.tsv")' in common
                 continue
             assert declared == rules_here, (smk.name, directive)
 

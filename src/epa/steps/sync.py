@@ -604,15 +604,10 @@ def estimate_offset(
     fallback : float
         The offset returned when the estimate is not trusted.
     speed : callable
-        The signal: :func:`angular_speed` (rad/s), or :func:`linear_speed` (m/s) for a position-only
-        estimate; ``min_motion`` is in its unit.
+        :func:`angular_speed` (rad/s), or :func:`linear_speed` (m/s, ``min_motion``'s unit then).
     smooth_fft : bool
-        The correlation's transforms on a 5-smooth length over the supports (half the cost); False:
-        a power of two over the whole grid, as before 0.2 (evo's ``--step1`` keeps its bits).
-
-    Returns
-    -------
-    OffsetEstimate
+        Transforms on a 5-smooth length over the supports; False: a power of two over the whole
+        grid, as before 0.2 (evo's ``--step1`` keeps its bits). Returns an :class:`OffsetEstimate`.
     """
 
     signals = _speed_signals(ref, est, speed_interval, speed)
