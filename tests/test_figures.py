@@ -121,13 +121,20 @@ def test_a_reused_figure_gives_the_same_bytes_as_a_new_one(case, tmp_path):
 def test_a_kept_font_subset_gives_the_bytes_matplotlib_writes(case, tmp_path, monkeypatch):
     """A PDF's font subset is made once per set of glyphs in a process (figures._SUBSETS) and given
     again: every PDF is the one matplotlib writes when it subsets the font itself."""
+    import matplotlib
     from matplotlib.backends import _backend_pdf_ps as pdf_ps
 
     from epa.outputs import figures
 
     figures.prepare()
+    # the locked matplotlib is patched (a CI on it runs this comparison)
+    assert matplotlib.__version__.startswith(figures.PATCHED_MATPLOTLIB) == hasattr(
+        pdf_ps.get_glyphs_subset, "epa_kept"
+    )
     if not hasattr(pdf_ps.get_glyphs_subset, "epa_kept"):
-        pytest.skip("matplotlib before 3.11 subsets fonts through another function: not patched")
+        pytest.skip(
+            f"matplotlib {matplotlib.__version__} is not patched (only 3.11.x): nothing to compare"
+        )
     bundles = {p.stem: figures.read_bundle(p) for p in sorted((case / "bundles").glob("*.json"))}
     figures._SUBSETS.clear()
     kept, made = {}, []
