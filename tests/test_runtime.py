@@ -177,17 +177,19 @@ def test_keep_freed_memory_keeps_a_freed_large_array_for_reuse():
     """Without it glibc returns a 24 MB temporary to the system at once (the next one comes as
     fresh pages, zeroed by the kernel); with it the pages stay in the process for the next one
     (also where an older glibc caps the mmap threshold at 32 MiB)."""
-    out = {
-        mode: subprocess.run(
-            [sys.executable, "-c", _RSS_AFTER_FREE, mode],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.split()
-        for mode in ("keep", "default")
-    }
+    out = _each_mode(_RSS_AFTER_FREE, ("keep", "default"))
     assert out["keep"][0] == "True" and float(out["keep"][1]) > 20
     assert out["default"][0] == "False" and float(out["default"][1]) < 4
+
+
+def _each_mode(script: str, modes: tuple[str, ...]) -> dict[str, list[str]]:
+    """``script``'s printed words in a new Python per mode (its argument)."""
+    return {
+        mode: subprocess.run(
+            [sys.executable, "-c", script, mode], capture_output=True, text=True, check=True
+        ).stdout.split()
+        for mode in modes
+    }
 
 
 _THREAD_FREED = """
@@ -219,14 +221,6 @@ print(applied, rss_mb() - before)
 def test_one_arena_lets_the_main_thread_reuse_what_a_second_thread_freed():
     """Without it a thread's freed memory stays in that thread's own heap: the main thread's next
     24 MB temporary comes as 24 MB of fresh pages; with one_arena it reuses the freed pages."""
-    out = {
-        mode: subprocess.run(
-            [sys.executable, "-c", _THREAD_FREED, mode],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.split()
-        for mode in ("one", "default")
-    }
+    out = _each_mode(_THREAD_FREED, ("one", "default"))
     assert out["one"][0] == "True" and float(out["one"][1]) < 4
     assert out["default"][0] == "False" and float(out["default"][1]) > 20
