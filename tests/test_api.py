@@ -270,3 +270,11 @@ def test_the_building_blocks_refuse_in_one_line():
         epa.read_trajectory(TRUTH, topik="/odom")
     with pytest.raises(EpaError, match="unknown rpe unit 'f'"):
         epa.rpe(*epa.associate(ref, est), unit="f")
+
+
+def test_the_package_root_lists_the_api_it_reaches_lazily():
+    import epa
+    from epa import api
+
+    assert epa.__all__ == api.__all__
+    assert all(getattr(epa, name) is getattr(api, name) for name in epa.__all__)

@@ -24,23 +24,6 @@ def brute_segment_pairs(d, length, tol=0.5):
     return out
 
 
-def brute_ov_eval_assoc(t_ref, t_est, max_diff):
-    """ov_eval AlignUtils::perform_association, literally (greedy pointer, one-to-one)."""
-    ptr, out = 0, []
-    for i, te in enumerate(t_est):
-        best, best_idx = max_diff, -1
-        while ptr < len(t_ref) and t_ref[ptr] < te and abs(t_ref[ptr] - te) > max_diff:
-            ptr += 1
-        while ptr < len(t_ref) and abs(t_ref[ptr] - te) <= max_diff:
-            if abs(t_ref[ptr] - te) >= best:
-                break
-            best, best_idx = abs(t_ref[ptr] - te), ptr
-            ptr += 1
-        if best_idx != -1:
-            out.append((best_idx, i))
-    return out
-
-
 def test_segment_pairs_match_brute_force_on_euroc_grid(data):
     gt = text.read_trajectory(data / "rpng_open_vins/ov_data/euroc_mav/MH_01_easy.txt")
     files = sorted(
@@ -80,7 +63,9 @@ def test_segment_pairs_random_with_plateaus(steps, length):
 def test_ov_eval_association_matches_greedy(dr, de, max_diff):
     t_ref, t_est = np.cumsum(dr), np.cumsum(de)
     i_ref, i_est = sync.associate_ov_eval(t_ref, t_est, max_diff)
-    assert list(zip(i_ref.tolist(), i_est.tolist())) == brute_ov_eval_assoc(t_ref, t_est, max_diff)
+    # ov_eval's AlignUtils::perform_association, line by line (its greedy pointer, one-to-one)
+    literal = sync._associate_ov_eval_literal(t_ref, t_est, max_diff)
+    assert list(zip(i_ref.tolist(), i_est.tolist())) == list(zip(*(a.tolist() for a in literal)))
     assert len(set(i_ref.tolist())) == len(i_ref)
 
 

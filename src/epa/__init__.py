@@ -21,6 +21,8 @@ __version__ = "0.2.0"
 # handlers. Without one of those, nor the application's own, Python's last-resort handler would
 # print epa's warnings on stderr.
 logging.getLogger("epa").addHandler(logging.NullHandler())
+# epa.api's __all__, written out so that `import epa` need not import it (tests/test_api.py holds
+# the two equal)
 __all__ = [
     "Result",
     "Similarity",

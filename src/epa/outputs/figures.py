@@ -199,8 +199,8 @@ def _setup(style: str):
 # each time: 0.05-0.07 s of a 0.15 s PDF. Figures of one grid use the same few characters, so the
 # subset made for one set of glyphs is kept (its bytes, for at most _MAX_SUBSETS sets) and given
 # again. matplotlib has no public hook for this: the patch wraps the two functions that make and
-# save a subset (only on matplotlib 3.11, whose signatures it knows; another is left as it is), and a test compares the
-# PDF's bytes with those matplotlib writes alone.
+# save a subset (only on matplotlib 3.11, whose signatures it knows; another is left as it is),
+# and a test compares the PDF's bytes with those matplotlib writes alone.
 _SUBSETS: dict[tuple, tuple[bytes, dict]] = runtime.register("outputs.figures.subsets", {})
 _MAX_SUBSETS = 32
 PATCHED_MATPLOTLIB = "3.11."  # the series whose two functions the test compares against

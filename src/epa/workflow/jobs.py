@@ -327,8 +327,7 @@ def run_job(
         lines += [f"failed {k}: {r}" for k, r in failed.items()]
         files.write_text(log_path, "\n".join(lines) + "\n")
     if timing_path is not None:
-        wall = time.perf_counter() - wall0
-        files.write_text(timing_path, f"s\tcpu_time\n{wall:.4f}\t{cpu:.4f}\n")
+        write_timing(timing_path, time.perf_counter() - wall0, cpu)
     files.write_json(manifest, {"stage": stage, "cases": status})
     return status
 
@@ -356,6 +355,11 @@ def script_function(path, name: str):
     return getattr(module, name)
 
 
+def write_timing(timing_path, wall: float, cpu: float) -> None:
+    """A job's wall and CPU seconds as a Snakemake benchmark file (its ``s`` and ``cpu_time``)."""
+    files.write_text(timing_path, f"s\tcpu_time\n{wall:.4f}\t{cpu:.4f}\n")
+
+
 @contextmanager
 def timed(timing_path):
     """The wall seconds of what runs inside and the CPU seconds of this thread, as a Snakemake
@@ -363,8 +367,7 @@ def timed(timing_path):
     files.remove_temporaries(Path(timing_path).parent, [Path(timing_path).name])
     wall0, cpu0 = time.perf_counter(), time.thread_time()
     yield
-    wall, cpu = time.perf_counter() - wall0, time.thread_time() - cpu0
-    files.write_text(timing_path, f"s\tcpu_time\n{wall:.4f}\t{cpu:.4f}\n")
+    write_timing(timing_path, time.perf_counter() - wall0, time.thread_time() - cpu0)
 
 
 def _cpu_seconds() -> float:
@@ -394,6 +397,5 @@ def run_script(path, name: str, kwargs: dict, workers: int = 1, timing_path=None
         files.remove_temporaries(Path(timing_path).parent, [Path(timing_path).name])
     out, cpu = call(workers, _run_script_timed, str(path), name, dict(kwargs))
     if timing_path is not None:
-        wall = time.perf_counter() - wall0
-        files.write_text(timing_path, f"s\tcpu_time\n{wall:.4f}\t{cpu:.4f}\n")
+        write_timing(timing_path, time.perf_counter() - wall0, cpu)
     return out
